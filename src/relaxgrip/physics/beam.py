@@ -1,0 +1,248 @@
+"""The finger as a cantilever with temperature-dependent bending stiffness.
+
+The finger is clamped at ``x = 0`` and free at ``x = L``; a normal load
+``F`` acts at the contact position ``a``.  Its bending stiffness is a skeleton
+part (a slightly tapered elastomer lattice, weakly temperature dependent) plus
+the SMP beams, which follow the storage modulus::
+
+    EI(x, T) = EI_sk(x) (1 - beta (T - T_ref)) + EI_sk(x) r(x) E'(T) / E'(T_ref)
+
+with ``r(x)`` the SMP-to-skeleton ratio at room temperature (largest at the
+base, where the SMP beams sit).  Euler–Bernoulli small-deflection theory gives
+the profile ``z(x)``; a mild geometric stiffening
+``F = z_a / c_a (1 + gamma (z_a / L)^2)`` (the lever arm shortens as the
+finger bends) makes large deflections slightly stiffer.
+
+Lengths are m, forces N, EI in N m^2.  Functions take temperatures either as
+a scalar (uniform finger) or as an array on :func:`beam_grid` (a temperature
+field along the finger).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from relaxgrip.physics.smp import SMPParams, storage_modulus_pa
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "FingerParams",
+    "beam_grid",
+    "bending_stiffness_n_m2",
+    "contact_compliance_m_per_n",
+    "contact_deflection_m",
+    "deflection_area_m2",
+    "deflection_profile_m",
+    "local_stiffness_n_per_m",
+    "stiffening_factor",
+    "unit_profile_m_per_n",
+]
+
+
+@dataclass(frozen=True)
+class FingerParams:
+    """Geometry and stiffness of one finger.
+
+    Attributes
+    ----------
+    length_m : float
+        Finger length ``L`` (m).
+    n_grid : int
+        Quadrature points along the finger.
+    ei_skeleton_base_n_m2 : float
+        Skeleton bending stiffness at the base (N m^2).
+    skeleton_taper : float
+        Relative loss of skeleton stiffness from base to tip
+        (``EI_sk(x) = EI_base (1 - taper x / L)``).
+    skeleton_temp_coeff_per_k : float
+        Relative softening of the skeleton per kelvin above ``ref_temp_c``.
+    smp_ratio_base, smp_ratio_tip : float
+        SMP-to-skeleton stiffness ratio ``r(x)`` at the base and the tip at
+        ``ref_temp_c`` (linear in between).
+    stiffening : float
+        Geometric stiffening coefficient ``gamma``.
+    ref_temp_c : float
+        Reference (room) temperature (°C).
+    smp : SMPParams
+        The SMP's material constants.
+    """
+
+    length_m: float = 0.110
+    n_grid: int = 221
+    ei_skeleton_base_n_m2: float = 0.156
+    skeleton_taper: float = 0.21
+    skeleton_temp_coeff_per_k: float = 0.0015
+    smp_ratio_base: float = 0.80
+    smp_ratio_tip: float = 0.0
+    stiffening: float = 4.0
+    ref_temp_c: float = 25.0
+    smp: SMPParams = field(default_factory=SMPParams)
+
+    def __post_init__(self) -> None:
+        if self.length_m <= 0 or self.n_grid < 3:
+            raise ValueError("need length_m > 0 and n_grid >= 3")
+        if self.ei_skeleton_base_n_m2 <= 0 or not (0 <= self.skeleton_taper < 1):
+            raise ValueError("need ei_skeleton_base_n_m2 > 0 and 0 <= skeleton_taper < 1")
+        if self.smp_ratio_base < 0 or self.smp_ratio_tip < 0 or self.stiffening < 0:
+            raise ValueError("SMP ratios and stiffening must be >= 0")
+
+
+def beam_grid(finger: FingerParams) -> FloatArray:
+    """Quadrature points ``x`` along the finger, from base 0 to tip ``L`` (m)."""
+    return np.linspace(0.0, finger.length_m, finger.n_grid)
+
+
+def bending_stiffness_n_m2(temp_c: ArrayLike, finger: FingerParams) -> FloatArray:
+    """Bending stiffness ``EI(x, T)`` on :func:`beam_grid` (N m^2).
+
+    Parameters
+    ----------
+    temp_c : array_like
+        Temperature (°C): a scalar or an array of shape ``(n_grid,)``.
+    finger : FingerParams
+        Finger constants.
+
+    Returns
+    -------
+    ndarray, shape (n_grid,)
+        Bending stiffness along the finger.
+    """
+    x = beam_grid(finger)
+    t = np.broadcast_to(np.asarray(temp_c, dtype=np.float64), x.shape)
+    xi = x / finger.length_m
+    skeleton = finger.ei_skeleton_base_n_m2 * (1.0 - finger.skeleton_taper * xi)
+    ratio = finger.smp_ratio_base + (finger.smp_ratio_tip - finger.smp_ratio_base) * xi
+    e_ref = storage_modulus_pa(finger.ref_temp_c, finger.smp)
+    soft = 1.0 - finger.skeleton_temp_coeff_per_k * (t - finger.ref_temp_c)
+    return skeleton * (soft + ratio * storage_modulus_pa(t, finger.smp) / e_ref)
+
+
+def _cumtrapz(y: FloatArray, x: FloatArray) -> FloatArray:
+    out = np.zeros_like(y)
+    out[..., 1:] = np.cumsum(0.5 * (y[..., 1:] + y[..., :-1]) * np.diff(x), axis=-1)
+    return out
+
+
+def unit_profile_m_per_n(
+    contact_m: float, temp_c: ArrayLike, finger: FingerParams
+) -> tuple[FloatArray, FloatArray]:
+    """Small-deflection profile and slope per newton of load at ``contact_m``.
+
+    Parameters
+    ----------
+    contact_m : float
+        Contact position ``a`` along the finger (m), ``0 < a <= L``.
+    temp_c : array_like
+        Temperature (°C), scalar or on the grid.
+    finger : FingerParams
+        Finger constants.
+
+    Returns
+    -------
+    z : ndarray, shape (n_grid,)
+        Deflection per unit load ``z(x) / F`` on :func:`beam_grid` (m/N).
+    slope : ndarray, shape (n_grid,)
+        Slope per unit load ``z'(x) / F`` (rad/N).
+    """
+    if not (0.0 < contact_m <= finger.length_m):
+        raise ValueError(f"contact position {contact_m} m is outside the finger (0, L]")
+    x = beam_grid(finger)
+    curvature = np.clip(contact_m - x, 0.0, None) / bending_stiffness_n_m2(temp_c, finger)
+    slope = _cumtrapz(curvature, x)
+    return _cumtrapz(slope, x), slope
+
+
+def contact_compliance_m_per_n(contact_m: float, temp_c: ArrayLike, finger: FingerParams) -> float:
+    """Linear compliance at the contact point ``c_a = z(a) / F`` (m/N)."""
+    z, _ = unit_profile_m_per_n(contact_m, temp_c, finger)
+    return float(np.interp(contact_m, beam_grid(finger), z))
+
+
+def stiffening_factor(deflection_m: ArrayLike, finger: FingerParams) -> FloatArray:
+    """Geometric stiffening ``1 + gamma (z_a / L)^2`` at a contact deflection ``z_a``."""
+    z = np.asarray(deflection_m, dtype=np.float64)
+    return 1.0 + finger.stiffening * (z / finger.length_m) ** 2
+
+
+def contact_deflection_m(
+    force_n: ArrayLike, compliance_m_per_n: float, finger: FingerParams
+) -> FloatArray:
+    """Deflection at the contact point under ``force_n``, with geometric stiffening.
+
+    Solves ``F = z / c_a (1 + gamma (z / L)^2)`` for ``z``: the cubic
+    ``z^3 + p z - q = 0`` with ``p = L^2 / gamma``, ``q = p c_a F`` has one
+    real root (Cardano).
+
+    Parameters
+    ----------
+    force_n : array_like
+        Load at the contact point (N).
+    compliance_m_per_n : float
+        Linear compliance ``c_a`` (m/N).
+    finger : FingerParams
+        Finger constants.
+
+    Returns
+    -------
+    ndarray
+        Contact deflection (m), same shape as ``force_n``; odd in the force.
+    """
+    f = np.asarray(force_n, dtype=np.float64)
+    linear = compliance_m_per_n * f
+    if finger.stiffening == 0.0:
+        return linear
+    p = finger.length_m**2 / finger.stiffening
+    q = p * linear
+    root = np.sqrt(0.25 * q * q + p**3 / 27.0)
+    return np.cbrt(0.5 * q + root) + np.cbrt(0.5 * q - root)
+
+
+def deflection_profile_m(
+    force_n: float, contact_m: float, temp_c: ArrayLike, finger: FingerParams
+) -> FloatArray:
+    """Deflection profile ``z(x)`` on :func:`beam_grid` under a load at ``contact_m`` (m).
+
+    Parameters
+    ----------
+    force_n : float
+        Normal load (N).
+    contact_m : float
+        Contact position ``a`` (m).
+    temp_c : array_like
+        Temperature (°C), scalar or on the grid.
+    finger : FingerParams
+        Finger constants.
+
+    Returns
+    -------
+    ndarray, shape (n_grid,)
+        Deflection along the finger (m).
+    """
+    z_unit, _ = unit_profile_m_per_n(contact_m, temp_c, finger)
+    c_a = float(np.interp(contact_m, beam_grid(finger), z_unit))
+    z_a = float(contact_deflection_m(force_n, c_a, finger))
+    return z_unit * (z_a / c_a)
+
+
+def local_stiffness_n_per_m(
+    force_n: float,
+    temp_c: ArrayLike,
+    finger: FingerParams,
+    contact_m: float = 0.080,
+    at_m: float = 0.080,
+) -> float:
+    """Local stiffness ``k = F / z(at)``, the paper's ``k80`` by default (N/m)."""
+    z = deflection_profile_m(force_n, contact_m, temp_c, finger)
+    return force_n / float(np.interp(at_m, beam_grid(finger), z))
+
+
+def deflection_area_m2(
+    force_n: float, temp_c: ArrayLike, finger: FingerParams, contact_m: float = 0.080
+) -> float:
+    """Global deformation ``A_z = int_0^L z(x) dx`` (m^2)."""
+    z = deflection_profile_m(force_n, contact_m, temp_c, finger)
+    return float(_cumtrapz(z, beam_grid(finger))[-1])
