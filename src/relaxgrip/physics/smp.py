@@ -65,10 +65,10 @@ class SMPParams:
     e_glassy_pa: float = 1.2e9
     e_rubbery_pa: float = 12e6
     transition_width_k: float = 7.0
-    wlf_c1: float = 2.0
+    wlf_c1: float = 1.5
     wlf_c2_k: float = 40.0
-    relax_fraction_glassy: float = 0.20
-    relax_fraction_rubbery: float = 0.60
+    relax_fraction_glassy: float = 0.32
+    relax_fraction_rubbery: float = 0.66
     relax_onset_c: float = 60.0
     relax_onset_width_k: float = 4.0
 

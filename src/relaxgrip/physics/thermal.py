@@ -28,6 +28,7 @@ FloatArray = NDArray[np.float64]
 __all__ = [
     "HeatParams",
     "discrete_heat_system",
+    "duty_for_mean_temp",
     "heat_matrices",
     "heat_step",
     "node_positions_m",
@@ -187,3 +188,14 @@ def steady_state_c(duty: float, params: HeatParams, ambient_c: float) -> FloatAr
         raise ValueError(f"heater duty must be in [0, 1], got {duty}")
     a, b = heat_matrices(params)
     return np.linalg.solve(a, -b @ np.array([duty, ambient_c]))
+
+
+def duty_for_mean_temp(mean_c: float, params: HeatParams, ambient_c: float) -> float:
+    """Constant duty whose steady state has the given mean finger temperature.
+
+    The steady state is affine in the duty, so this is exact; the result is
+    clipped to [0, 1] (below ambient, or beyond full power, no duty gets there).
+    """
+    cold = float(np.mean(steady_state_c(0.0, params, ambient_c)))
+    hot = float(np.mean(steady_state_c(1.0, params, ambient_c)))
+    return float(np.clip((mean_c - cold) / (hot - cold), 0.0, 1.0))

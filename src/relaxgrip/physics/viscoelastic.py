@@ -27,10 +27,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from relaxgrip.physics.smp import SMPParams, relaxation_fraction, shift_factor
+
 FloatArray = NDArray[np.float64]
 
 __all__ = [
     "PronySeries",
+    "RelaxationParams",
+    "finger_prony",
     "branch_update",
     "dominant_mode",
     "phi1",
@@ -268,3 +272,61 @@ class PronySeries:
     def dominant_mode(self, x0_m: float, horizon_s: float) -> tuple[float, float]:
         """Effective ``(K, tau)`` of a step ``x0_m`` over ``horizon_s`` (Eq. 8)."""
         return dominant_mode(np.asarray(self.k_n_per_m) * x0_m, self.tau_s, horizon_s)
+
+
+@dataclass(frozen=True)
+class RelaxationParams:
+    """How the finger's relaxing stiffness is spread over Maxwell branches.
+
+    Attributes
+    ----------
+    branch_weights : tuple of float
+        Share of the relaxing stiffness in each branch (sums to 1).
+    tau_ref_s : tuple of float
+        Branch relaxation times at Tg (s); at temperature ``T`` they are
+        ``tau_ref_s * a_T(T)``.
+    """
+
+    branch_weights: tuple[float, ...] = (0.25, 0.30, 0.45)
+    tau_ref_s: tuple[float, ...] = (1.2, 12.0, 120.0)
+
+    def __post_init__(self) -> None:
+        if len(self.branch_weights) != len(self.tau_ref_s) or not self.tau_ref_s:
+            raise ValueError("branch_weights and tau_ref_s need the same, non-zero length")
+        if abs(sum(self.branch_weights) - 1.0) > 1e-9 or min(self.branch_weights) < 0:
+            raise ValueError("branch_weights must be >= 0 and sum to 1")
+        if min(self.tau_ref_s) <= 0:
+            raise ValueError("relaxation times must be > 0")
+
+
+def finger_prony(
+    k_inst_n_per_m: float, temp_c: float, relax: RelaxationParams, smp: SMPParams
+) -> PronySeries:
+    """Temperature-dependent Prony series of a finger contact (Eqs. 1–5).
+
+    The instantaneous stiffness ``k_inst`` (from the beam model at this
+    temperature) is split into an equilibrium spring and the branches by the
+    relaxing share ``g(T)`` (:func:`relaxgrip.physics.smp.relaxation_fraction`);
+    branch times follow the shift factor ``a_T(T)``.
+
+    Parameters
+    ----------
+    k_inst_n_per_m : float
+        Instantaneous contact stiffness ``k_e + sum k_i`` (N/m).
+    temp_c : float
+        Finger temperature (°C).
+    relax : RelaxationParams
+        Branch weights and reference times.
+    smp : SMPParams
+        Material constants.
+
+    Returns
+    -------
+    PronySeries
+        ``k_e(T)``, ``k_i(T)``, ``tau_i(T)``.
+    """
+    g = float(relaxation_fraction(temp_c, smp))
+    a_t = float(shift_factor(temp_c, smp))
+    k_branches = tuple(k_inst_n_per_m * g * w for w in relax.branch_weights)
+    taus = tuple(t * a_t for t in relax.tau_ref_s)
+    return PronySeries(k_inst_n_per_m * (1.0 - g), k_branches, taus)

@@ -1,0 +1,551 @@
+"""Least-squares fits of measured force-relaxation curves (paper Eqs. 4 and 9–10).
+
+Two models are fitted to the force recorded while a displacement is held:
+
+* the reduced model ``F(t) = F_inst - K (1 - e^{-t/tau})`` (Eqs. 9–10), and
+* the Prony series ``F(t) = F_eq + sum_i k_i e^{-t/tau_i}`` (Eq. 4 in force
+  units, see :func:`relaxgrip.physics.viscoelastic.prony_force`).
+
+Both are sums of decaying exponentials plus a constant, so for fixed
+relaxation times the amplitudes are a linear least-squares problem.  The fits
+use variable projection (Golub & Pereyra): the amplitudes are eliminated
+exactly and only ``log tau`` is searched, globally (a dense grid for one term,
+a multi-start continuation for ``N`` terms) and then locally by
+:func:`scipy.optimize.least_squares` with the exact variable-projection
+Jacobian.  The result is the least-squares optimum over relaxation times in
+``[tau_lo, tau_hi]``: ``tau_lo`` is the shortest sampling interval of the
+data and ``tau_hi`` ten times the record length (shorter or longer modes
+cannot be told apart from a jump or from a constant plus a linear drift).
+
+Amplitudes are not constrained in sign: a negative ``k_i`` is a rising mode.
+On relaxation data every amplitude of the optimum is usually positive, but
+forcing the sign would turn a true optimum into a constrained one.
+
+Two objectives are available, see :func:`quadrature_weights`:
+``weighting="time"`` minimises the trapezoidal ``int (F_model - F)^2 dt``,
+the norm of the paper's NRMSE (§V-B), so that densely sampled stretches of a
+record do not dominate; ``weighting="sample"`` is the plain sum of squares.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal, get_args
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import least_squares
+
+from relaxgrip.errors import InputError
+from relaxgrip.physics.viscoelastic import prony_force, reduced_force
+
+FloatArray = NDArray[np.float64]
+Weighting = Literal["time", "sample"]
+
+__all__ = [
+    "WEIGHTINGS",
+    "PronyFit",
+    "ReducedFit",
+    "Weighting",
+    "find_hold_start",
+    "fit_prony",
+    "fit_reduced",
+    "quadrature_weights",
+]
+
+WEIGHTINGS: tuple[str, ...] = get_args(Weighting)
+
+# Relaxation-time search range: [shortest sampling interval, _TAU_HI_FACTOR x record length].
+_TAU_HI_FACTOR = 10.0
+# Grid density of the one-term global search and of the multi-start seeds (points per decade).
+_GRID_PER_DECADE = 8
+_SEEDS_PER_DECADE = 2
+# How many candidate solutions survive each level of the N-term continuation.
+_BEAM_WIDTH = 3
+# Seeds whose new tau lies within this factor of an existing one are skipped: the two
+# basis columns would be nearly collinear and the start carries no new information.
+_MIN_SEED_RATIO = 1.5
+_LSQ_TOL = 1e-12
+_MAX_NFEV = 400
+
+
+@dataclass(frozen=True)
+class ReducedFit:
+    """Least-squares fit of the reduced model ``F_inst - K (1 - e^{-t/tau})`` (Eqs. 9–10).
+
+    Attributes
+    ----------
+    f_inst_n : float
+        Instantaneous force at ``t = 0`` (N).
+    k_n : float
+        Relaxation magnitude ``K`` (N); positive for a decaying force.
+    tau_s : float
+        Relaxation time ``tau`` (s).
+    objective : float
+        Minimised objective: ``int (F_model - F)^2 dt`` (N² s) for
+        ``weighting="time"``, ``sum (F_model - F)^2`` (N²) for ``"sample"``.
+    weighting : str
+        The weighting the fit minimised, ``"time"`` or ``"sample"``.
+    """
+
+    f_inst_n: float
+    k_n: float
+    tau_s: float
+    objective: float
+    weighting: str
+
+    def predict(self, t_s: ArrayLike) -> FloatArray:
+        """Evaluate the fitted model.
+
+        Parameters
+        ----------
+        t_s : array_like
+            Times since the hold start (s).
+
+        Returns
+        -------
+        ndarray
+            Model force (N), same shape as ``t_s``.
+        """
+        return reduced_force(t_s, self.f_inst_n, self.k_n, self.tau_s)
+
+
+@dataclass(frozen=True)
+class PronyFit:
+    """Least-squares fit of the Prony series ``F_eq + sum_i k_i e^{-t/tau_i}`` (Eq. 4).
+
+    Attributes
+    ----------
+    f_eq_n : float
+        Equilibrium (fully relaxed) force ``F_eq`` (N).
+    k_n : tuple of float
+        Branch amplitudes ``k_i`` (N), in the order of ``tau_s``.
+    tau_s : tuple of float
+        Relaxation times ``tau_i`` (s), ascending.
+    objective : float
+        Minimised objective, see :attr:`ReducedFit.objective`.
+    weighting : str
+        The weighting the fit minimised, ``"time"`` or ``"sample"``.
+    """
+
+    f_eq_n: float
+    k_n: tuple[float, ...]
+    tau_s: tuple[float, ...]
+    objective: float
+    weighting: str
+
+    @property
+    def f_inst_n(self) -> float:
+        """Instantaneous force ``F_eq + sum_i k_i`` at ``t = 0`` (N)."""
+        return self.f_eq_n + math.fsum(self.k_n)
+
+    def predict(self, t_s: ArrayLike) -> FloatArray:
+        """Evaluate the fitted series.
+
+        Parameters
+        ----------
+        t_s : array_like
+            Times since the hold start (s).
+
+        Returns
+        -------
+        ndarray
+            Model force (N), same shape as ``t_s``.
+        """
+        return prony_force(t_s, self.f_eq_n, self.k_n, self.tau_s)
+
+
+def quadrature_weights(t_s: ArrayLike, weighting: str = "time") -> FloatArray:
+    """Weights ``w`` such that ``sum_i w_i g(t_i)^2`` is the fit objective.
+
+    Parameters
+    ----------
+    t_s : array_like, shape (n,)
+        Strictly increasing sample times (s).
+    weighting : {"time", "sample"}
+        ``"time"``: trapezoidal quadrature weights, so ``sum w g^2`` is the
+        trapezoid rule for ``int g^2 dt`` on the (possibly non-uniform) grid.
+        ``"sample"``: all ones, the plain sum of squares.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Non-negative weights (s for ``"time"``, dimensionless for ``"sample"``).
+
+    Raises
+    ------
+    ValueError
+        If ``weighting`` is unknown or ``t_s`` is not a 1-D array of at least
+        two strictly increasing finite times.
+    """
+    t = _as_times(t_s)
+    if weighting == "sample":
+        return np.ones_like(t)
+    if weighting != "time":
+        raise ValueError(f"weighting must be one of {', '.join(WEIGHTINGS)}, got {weighting!r}")
+    dt = np.diff(t)
+    w = np.zeros_like(t)
+    w[:-1] += 0.5 * dt
+    w[1:] += 0.5 * dt
+    return w
+
+
+def find_hold_start(
+    t_s: ArrayLike,
+    displacement: ArrayLike,
+    *,
+    rel_tol: float = 1e-3,
+    noise_factor: float = 5.0,
+    min_samples: int = 10,
+    min_duration_s: float = 1.0,
+) -> int:
+    """Index of the first sample of the hold phase of a step-and-hold record.
+
+    The plateau is the median of the last quarter of the samples.  The hold
+    starts at the first sample after the *last* sample that lies outside the
+    band ``|x - plateau| <= rel_tol |step| + noise_factor sigma``, where
+    ``step`` is the plateau minus the initial displacement and ``sigma`` a
+    robust noise estimate (scaled median absolute deviation of the first
+    differences on the plateau).  Taking the last excursion, not the first
+    entry into the band, puts the start after a ramp overshoot and its
+    settling.
+
+    Parameters
+    ----------
+    t_s : array_like, shape (n,)
+        Strictly increasing sample times (s).
+    displacement : array_like, shape (n,)
+        Displacement at ``t_s``, any length unit.
+    rel_tol : float
+        Settling tolerance relative to the step height.
+    noise_factor : float
+        Multiple of the noise estimate added to the tolerance.
+    min_samples : int
+        Fewest samples the hold phase may have.
+    min_duration_s : float
+        Shortest duration the hold phase may have (s).
+
+    Returns
+    -------
+    int
+        Index into ``t_s`` of the first sample of the hold.
+
+    Raises
+    ------
+    relaxgrip.errors.InputError
+        If the record has no hold phase: no displacement step (the plateau
+        equals the starting displacement, e.g. both are zero), the
+        displacement never settles, or the settled part is shorter than
+        ``min_samples`` samples or ``min_duration_s`` seconds.
+    ValueError
+        If the arrays are malformed (not 1-D, different lengths, non-finite,
+        time not strictly increasing).
+    """
+    t = _as_times(t_s)
+    x = np.asarray(displacement, dtype=np.float64)
+    if x.shape != t.shape:
+        raise ValueError(f"displacement has shape {x.shape}, t_s has shape {t.shape}")
+    if not np.all(np.isfinite(x)):
+        raise ValueError("displacement contains non-finite values")
+    n = t.size
+    if n < min_samples:
+        raise InputError(f"no hold phase: only {n} samples, need at least {min_samples}")
+
+    tail = x[-max(min_samples, n // 4) :]
+    plateau = float(np.median(tail))
+    d_tail = np.diff(tail)
+    # MAD of first differences: insensitive to a slow drift, sqrt(2) undoes the differencing.
+    sigma = 1.4826 * float(np.median(np.abs(d_tail - np.median(d_tail)))) / math.sqrt(2.0)
+    step = plateau - float(x[0])
+    noise_band = noise_factor * sigma
+    # Below this the step is lost in rounding of the recorded values.
+    resolution = 64.0 * np.finfo(np.float64).eps * max(float(np.max(np.abs(x))), 1e-300)
+    if abs(step) <= max(noise_band, resolution):
+        raise InputError(
+            f"no hold phase: the displacement ends at {plateau:.6g}, where it started "
+            f"({x[0]:.6g}); there is no step to hold"
+        )
+    band = rel_tol * abs(step) + noise_band
+    outside = np.flatnonzero(np.abs(x - plateau) > band)
+    start = int(outside[-1]) + 1 if outside.size else 0
+    n_hold = n - start
+    if n_hold == 0:
+        raise InputError(
+            f"no hold phase: the displacement never settles (last sample {x[-1]:.6g}, "
+            f"plateau {plateau:.6g} ± {band:.3g})"
+        )
+    hold_s = float(t[-1] - t[start])
+    if n_hold < min_samples or hold_s < min_duration_s:
+        raise InputError(
+            f"no hold phase: the displacement settles at {plateau:.6g} only for the last "
+            f"{n_hold} samples ({hold_s:.3g} s); need at least {min_samples} samples "
+            f"and {min_duration_s:g} s"
+        )
+    return start
+
+
+def fit_reduced(t_s: ArrayLike, f_n: ArrayLike, weighting: str = "time") -> ReducedFit:
+    """Least-squares fit of the reduced relaxation model (Eqs. 9–10).
+
+    ``F_inst - K (1 - e^{-t/tau}) = (F_inst - K) + K e^{-t/tau}`` is a one-term
+    Prony series; its ``log tau`` is searched on a dense grid over the whole
+    admissible range (the variable-projection objective of one term is cheap
+    to evaluate everywhere), and every local minimum of the grid is refined.
+
+    Parameters
+    ----------
+    t_s : array_like, shape (n,)
+        Strictly increasing times since the hold start (s).
+    f_n : array_like, shape (n,)
+        Measured force (N).
+    weighting : {"time", "sample"}
+        Objective, see :func:`quadrature_weights`.
+
+    Returns
+    -------
+    ReducedFit
+        The optimum; ``K`` is unconstrained in sign, ``tau`` lies in
+        ``[tau_lo, tau_hi]`` (see the module notes).
+
+    Raises
+    ------
+    relaxgrip.errors.InputError
+        If there are fewer samples than the 3 parameters or the force is
+        constant (``K`` and ``tau`` are then undetermined).
+    ValueError
+        If the arrays are malformed or ``weighting`` is unknown.
+    """
+    problem = _Problem.build(t_s, f_n, n_params=3, weighting=weighting)
+    best = problem.best_one_term()
+    f_eq, k = (float(c) for c in best.coef)
+    return ReducedFit(
+        f_inst_n=f_eq + k,
+        k_n=k,
+        tau_s=float(np.exp(best.log_tau[0])),
+        objective=best.objective,
+        weighting=weighting,
+    )
+
+
+def fit_prony(
+    t_s: ArrayLike, f_n: ArrayLike, n_terms: int = 3, weighting: str = "time"
+) -> PronyFit:
+    """Least-squares fit of an ``n_terms`` Prony series (Eq. 4).
+
+    Global search by continuation: the best one-term solutions (dense grid)
+    are extended by one relaxation time at a time, each new time seeded at
+    every point of a log-spaced grid spanning ``[tau_lo, tau_hi]``; every
+    seed, plus ``n_terms`` times log-spaced over the record, is refined by a
+    local variable-projection solve, and the best few survive to the next
+    level.  This finds the global optimum on relaxation data, whose modes are
+    spread over decades, and on every synthetic case in the test-suite.
+
+    Parameters
+    ----------
+    t_s : array_like, shape (n,)
+        Strictly increasing times since the hold start (s).
+    f_n : array_like, shape (n,)
+        Measured force (N).
+    n_terms : int
+        Number of exponential terms, ``>= 1``.
+    weighting : {"time", "sample"}
+        Objective, see :func:`quadrature_weights`.
+
+    Returns
+    -------
+    PronyFit
+        The optimum, relaxation times ascending; amplitudes are unconstrained
+        in sign, relaxation times lie in ``[tau_lo, tau_hi]``.
+
+    Raises
+    ------
+    relaxgrip.errors.InputError
+        If there are fewer samples than the ``2 n_terms + 1`` parameters or
+        the force is constant.
+    ValueError
+        If ``n_terms < 1``, the arrays are malformed or ``weighting`` is unknown.
+    """
+    if isinstance(n_terms, bool) or not isinstance(n_terms, int | np.integer) or n_terms < 1:
+        raise ValueError(f"n_terms must be an integer >= 1, got {n_terms!r}")
+    problem = _Problem.build(t_s, f_n, n_params=2 * int(n_terms) + 1, weighting=weighting)
+    best = problem.best_n_terms(int(n_terms))
+    order = np.argsort(best.log_tau)
+    return PronyFit(
+        f_eq_n=float(best.coef[0]),
+        k_n=tuple(float(k) for k in best.coef[1:][order]),
+        tau_s=tuple(float(tau) for tau in np.exp(best.log_tau[order])),
+        objective=best.objective,
+        weighting=weighting,
+    )
+
+
+def _as_times(t_s: ArrayLike) -> FloatArray:
+    """Validate a 1-D array of at least two strictly increasing finite times."""
+    t = np.asarray(t_s, dtype=np.float64)
+    if t.ndim != 1 or t.size < 2:
+        raise ValueError(f"t_s must be a 1-D array of at least 2 times, got shape {t.shape}")
+    if not np.all(np.isfinite(t)):
+        raise ValueError("t_s contains non-finite values")
+    if np.any(np.diff(t) <= 0):
+        raise ValueError("t_s must be strictly increasing")
+    return t
+
+
+@dataclass(frozen=True)
+class _Solution:
+    """Relaxation times with their optimal amplitudes and objective."""
+
+    log_tau: FloatArray
+    coef: FloatArray
+    objective: float
+
+
+@dataclass(frozen=True)
+class _Projection:
+    """Variable projection at fixed ``log tau``: amplitudes, residual, Jacobian."""
+
+    coef: FloatArray
+    resid: FloatArray
+    jac: FloatArray
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """A weighted exponential-sum least-squares problem ``min ||sqrt(w) (A c - f)||``."""
+
+    t_s: FloatArray
+    sqrt_w: FloatArray
+    target: FloatArray
+    log_tau_lo: float
+    log_tau_hi: float
+
+    @classmethod
+    def build(cls, t_s: ArrayLike, f_n: ArrayLike, n_params: int, weighting: str) -> _Problem:
+        t = _as_times(t_s)
+        f = np.asarray(f_n, dtype=np.float64)
+        if f.shape != t.shape:
+            raise ValueError(f"f_n has shape {f.shape}, t_s has shape {t.shape}")
+        if not np.all(np.isfinite(f)):
+            raise ValueError("f_n contains non-finite values")
+        if t.size < n_params:
+            raise InputError(
+                f"cannot fit {n_params} parameters to {t.size} samples: need at least {n_params}"
+            )
+        if np.ptp(f) == 0.0:
+            raise InputError("the force is constant: there is no relaxation to fit")
+        sqrt_w = np.sqrt(quadrature_weights(t, weighting))
+        return cls(
+            t_s=t,
+            sqrt_w=sqrt_w,
+            target=sqrt_w * f,
+            log_tau_lo=math.log(float(np.min(np.diff(t)))),
+            log_tau_hi=math.log(_TAU_HI_FACTOR * float(t[-1] - t[0])),
+        )
+
+    def log_grid(self, per_decade: int) -> FloatArray:
+        """Log-spaced relaxation times over the admissible range (natural log)."""
+        decades = (self.log_tau_hi - self.log_tau_lo) / math.log(10.0)
+        return np.linspace(self.log_tau_lo, self.log_tau_hi, max(2, math.ceil(decades * per_decade)))
+
+    def project(self, log_tau: FloatArray) -> _Projection:
+        """Eliminate the amplitudes at fixed ``log tau`` (Golub–Pereyra).
+
+        Returns the optimal amplitudes ``c``, the weighted residual
+        ``r = A c - b`` and its exact derivative with respect to ``log tau``:
+        ``dr/dθ_j = P⊥ D_j c - (A⁺)ᵀ D_jᵀ r``, where ``D_j = dA/dθ_j`` is
+        non-zero only in column ``j + 1``.
+        """
+        tau = np.exp(log_tau)
+        decay = np.exp(-self.t_s[:, None] / tau)
+        a = np.column_stack([self.sqrt_w, self.sqrt_w[:, None] * decay])
+        # dA/dθ_j for θ_j = log tau_j: d/dθ e^{-t e^{-θ}} = (t / tau) e^{-t / tau}.
+        d = self.sqrt_w[:, None] * decay * (self.t_s[:, None] / tau)
+        u, s, vt = np.linalg.svd(a, full_matrices=False)
+        rank = int(np.sum(s > s[0] * a.shape[0] * np.finfo(np.float64).eps))
+        u, s, vt = u[:, :rank], s[:rank], vt[:rank]
+        coef = vt.T @ ((u.T @ self.target) / s)
+        resid = a @ coef - self.target
+        dc = d * coef[1:]
+        first = dc - u @ (u.T @ dc)
+        # (A⁺)ᵀ e_{j+1} = U S⁻¹ Vᵀ e_{j+1}, scaled by the scalar d_jᵀ r.
+        second = (u / s) @ vt[:, 1:] * (d.T @ resid)
+        return _Projection(coef=coef, resid=resid, jac=first - second)
+
+    def evaluate(self, log_tau: FloatArray) -> _Solution:
+        """Objective and amplitudes at fixed relaxation times."""
+        p = self.project(log_tau)
+        return _Solution(log_tau=log_tau, coef=p.coef, objective=float(p.resid @ p.resid))
+
+    def refine(self, log_tau0: FloatArray) -> _Solution:
+        """Local variable-projection solve from ``log_tau0`` (bounded trust region)."""
+        lo, hi = self.log_tau_lo, self.log_tau_hi
+        # trf needs a strictly feasible start.
+        margin = 1e-9 * (hi - lo)
+        x0 = np.clip(log_tau0, lo + margin, hi - margin)
+        cache: dict[bytes, _Projection] = {}
+
+        def projection(x: FloatArray) -> _Projection:
+            key = x.tobytes()
+            if key not in cache:
+                cache.clear()
+                cache[key] = self.project(x)
+            return cache[key]
+
+        fun: Callable[[FloatArray], FloatArray] = lambda x: projection(x).resid  # noqa: E731
+        jac: Callable[[FloatArray], FloatArray] = lambda x: projection(x).jac  # noqa: E731
+        res = least_squares(
+            fun,
+            x0,
+            jac=jac,
+            bounds=(lo, hi),
+            method="trf",
+            ftol=_LSQ_TOL,
+            xtol=_LSQ_TOL,
+            gtol=_LSQ_TOL,
+            max_nfev=_MAX_NFEV,
+        )
+        start, end = self.evaluate(x0), self.evaluate(np.asarray(res.x, dtype=np.float64))
+        return end if end.objective <= start.objective else start
+
+    def best_one_term(self, keep: int = 1) -> _Solution:
+        """Global one-term optimum: dense grid, refine every grid-local minimum."""
+        return self._one_term_candidates(keep)[0]
+
+    def _one_term_candidates(self, keep: int) -> list[_Solution]:
+        grid = self.log_grid(_GRID_PER_DECADE)
+        values = np.array([self.evaluate(np.array([g])).objective for g in grid])
+        is_min = np.ones(grid.size, dtype=bool)
+        is_min[1:] &= values[1:] <= values[:-1]
+        is_min[:-1] &= values[:-1] <= values[1:]
+        refined = [self.refine(np.array([g])) for g in grid[is_min]]
+        return _distinct_best(refined, keep)
+
+    def best_n_terms(self, n_terms: int) -> _Solution:
+        """Global ``n_terms`` optimum by multi-start continuation (see :func:`fit_prony`)."""
+        beam = self._one_term_candidates(_BEAM_WIDTH)
+        seeds = self.log_grid(_SEEDS_PER_DECADE)
+        for level in range(2, n_terms + 1):
+            span = np.linspace(self.log_tau_lo, math.log(float(self.t_s[-1] - self.t_s[0])), level)
+            starts = [span]
+            for sol in beam:
+                starts.extend(
+                    np.sort(np.append(sol.log_tau, g))
+                    for g in seeds
+                    if np.min(np.abs(sol.log_tau - g)) > math.log(_MIN_SEED_RATIO)
+                )
+            beam = _distinct_best([self.refine(s) for s in starts], _BEAM_WIDTH)
+        return beam[0]
+
+
+def _distinct_best(solutions: list[_Solution], keep: int) -> list[_Solution]:
+    """The ``keep`` lowest-objective solutions with distinct relaxation-time sets."""
+    chosen: list[_Solution] = []
+    for sol in sorted(solutions, key=lambda s: s.objective):
+        key = np.sort(sol.log_tau)
+        if all(not np.allclose(key, np.sort(c.log_tau), atol=1e-3) for c in chosen):
+            chosen.append(sol)
+        if len(chosen) == keep:
+            break
+    return chosen

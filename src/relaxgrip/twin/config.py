@@ -1,0 +1,146 @@
+"""Configuration of the digital twin: frozen dataclasses, derived values as properties."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from relaxgrip.errors import InputError
+from relaxgrip.physics.beam import FingerParams
+from relaxgrip.physics.contact import AdhesionParams
+from relaxgrip.physics.thermal import HeatParams
+from relaxgrip.physics.viscoelastic import RelaxationParams
+from relaxgrip.twin.objects import ObjectSpec, get_object
+from relaxgrip.validate import check_positive, check_temp_c
+
+__all__ = ["TWIN_VERSION", "MotorParams", "ScatterParams", "TwinConfig"]
+
+#: Bumped whenever the twin's behaviour changes; every result records it.
+TWIN_VERSION = "relaxgrip-twin-v1"
+
+
+@dataclass(frozen=True)
+class MotorParams:
+    """The closing motor of the parallel gripper.
+
+    Attributes
+    ----------
+    max_velocity_mm_s : float
+        Velocity limit (mm/s).
+    lag_s : float
+        First-order velocity lag (s).
+    open_aperture_mm : float
+        Aperture between the finger contact faces at motor position 0 (mm).
+    stroke_mm : float
+        Closing travel available (mm).
+    encoder_resolution_mm : float
+        Encoder quantum (mm).
+    """
+
+    max_velocity_mm_s: float = 20.0
+    lag_s: float = 0.05
+    open_aperture_mm: float = 150.0
+    stroke_mm: float = 148.0
+    encoder_resolution_mm: float = 0.005
+
+
+@dataclass(frozen=True)
+class ScatterParams:
+    """Run-to-run variability, drawn once per :meth:`GripperTwin.reset`.
+
+    Standard deviations; ``*_rel`` are log-normal sigmas of a factor.
+
+    Attributes
+    ----------
+    contact_position_m : float
+        Placement of the object along the finger (m).
+    stiffness_rel : float
+        Instantaneous stiffness of each finger.
+    relax_fraction_rel : float
+        Relaxing share of each finger's stiffness (material scatter).
+    relax_fraction_rel_rubbery : float
+        Extra relaxing-share scatter in the rubbery state (grows with the
+        relaxation onset), where the SMP's network state varies most.
+    tau_rel : float
+        Relaxation times of each finger.
+    tg_k : float
+        Glass-transition temperature of the batch (K).
+    ambient_k : float
+        Ambient temperature (K).
+    """
+
+    contact_position_m: float = 0.002
+    stiffness_rel: float = 0.02
+    relax_fraction_rel: float = 0.08
+    relax_fraction_rel_rubbery: float = 0.22
+    tau_rel: float = 0.05
+    tg_k: float = 0.3
+    ambient_k: float = 0.5
+
+    def scaled(self, factor: float) -> ScatterParams:
+        """All standard deviations multiplied by ``factor`` (0 gives a nominal twin)."""
+        return ScatterParams(*(factor * v for v in self.__dict__.values()))
+
+
+@dataclass(frozen=True)
+class TwinConfig:
+    """Everything that defines a twin, apart from its seed.
+
+    Attributes
+    ----------
+    finger : FingerParams
+        Beam geometry and the SMP (both fingers share the design).
+    heat : HeatParams
+        Finger heat model.
+    relax : RelaxationParams
+        Maxwell branches of the finger.
+    adhesion : AdhesionParams
+        Switchable adhesion pads.
+    motor : MotorParams
+        Closing motor.
+    scatter : ScatterParams
+        Run-to-run variability.
+    object_name : str or None
+        Object between the fingers (see :data:`relaxgrip.twin.objects.CATALOGUE`).
+    contact_position_m : float
+        Nominal contact position along the finger (m).
+    marker_position_m : float
+        Where the ArUco marker sits along the finger (m).
+    ambient_c : float
+        Air temperature (°C).
+    initial_temp_c : float or None
+        Mean finger temperature at reset (°C); the fingers start in the steady
+        heated profile of that mean.  ``None``: at ambient.
+    max_step_s : float
+        Longest physics step (s); the integrators are exact, so this only
+        bounds how coarsely motor motion and contact are sampled.
+    """
+
+    finger: FingerParams = field(default_factory=FingerParams)
+    heat: HeatParams = field(default_factory=HeatParams)
+    relax: RelaxationParams = field(default_factory=RelaxationParams)
+    adhesion: AdhesionParams = field(default_factory=AdhesionParams)
+    motor: MotorParams = field(default_factory=MotorParams)
+    scatter: ScatterParams = field(default_factory=ScatterParams)
+    object_name: str | None = "force_ball"
+    contact_position_m: float = 0.080
+    marker_position_m: float = 0.060
+    ambient_c: float = 25.0
+    initial_temp_c: float | None = None
+    max_step_s: float = 1.0 / 30.0
+
+    def __post_init__(self) -> None:
+        if self.object_name is not None:
+            get_object(self.object_name)
+        check_temp_c(self.ambient_c, "ambient temperature")
+        if self.initial_temp_c is not None:
+            check_temp_c(self.initial_temp_c, "initial finger temperature")
+        check_positive(self.max_step_s, "max_step_s")
+        for name in ("contact_position_m", "marker_position_m"):
+            value = getattr(self, name)
+            if not 0.0 < value <= self.finger.length_m:
+                raise InputError(f"{name} {value} m is outside the finger (0, {self.finger.length_m}]")
+
+    @property
+    def object(self) -> ObjectSpec | None:
+        """The object's catalogue entry, if any."""
+        return None if self.object_name is None else get_object(self.object_name)

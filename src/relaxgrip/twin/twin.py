@@ -1,0 +1,348 @@
+"""The digital twin of the two-finger SMP gripper.
+
+A thin stateful shell around :mod:`relaxgrip.physics`: it holds the motor,
+the two fingers' temperature fields and Maxwell branch forces, and the
+object, and advances them with the exact integrators of the physics layer.
+It implements :class:`relaxgrip.backend.Gripper` on an injected clock: each
+``observe``/``act`` first integrates the physics up to ``clock.now()``, so the
+same code runs in virtual time (as fast as the CPU allows) or in wall-clock
+time.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from relaxgrip.backend import BackendInfo, Command, Observation, Truth
+from relaxgrip.clock import Clock, VirtualClock
+from relaxgrip.physics.beam import FingerParams, beam_grid, bending_stiffness_n_m2, unit_profile_m_per_n
+from relaxgrip.physics.contact import adhesion_pulloff_n, friction_capacity_n, series_contact
+from relaxgrip.physics.smp import relaxation_fraction, shift_factor
+from relaxgrip.physics.thermal import (
+    discrete_heat_system,
+    duty_for_mean_temp,
+    node_positions_m,
+    steady_state_c,
+)
+from relaxgrip.physics.viscoelastic import phi1
+from relaxgrip.twin.config import TWIN_VERSION, TwinConfig
+from relaxgrip.twin.objects import ObjectSpec
+
+FloatArray = NDArray[np.float64]
+
+__all__ = ["GripperTwin", "TwinMaterial"]
+
+#: A temperature change (K) that triggers a new stiffness evaluation.
+_REFRESH_K = 0.02
+#: Plastic set (m) from which an object counts as visibly crushed.
+_CRUSHED_M = 0.001
+
+
+@dataclass(frozen=True)
+class TwinMaterial:
+    """Per-run draw of the twin's scatter (what one seed fixes).
+
+    Attributes
+    ----------
+    finger : tuple of FingerParams
+        Each finger's beam (with the batch's Tg).
+    stiffness_scale, relax_scale, tau_scale : tuple of float
+        Per-finger factors on instantaneous stiffness, relaxing share and
+        relaxation times.
+    relax_scale_rubbery : tuple of float
+        Per-finger factor on the extra relaxing share above the onset.
+    contact_position_m : float
+        Where the object touches the fingers in this run (m).
+    ambient_c : float
+        Ambient temperature of this run (°C).
+    """
+
+    finger: tuple[FingerParams, FingerParams]
+    stiffness_scale: tuple[float, float]
+    relax_scale: tuple[float, float]
+    relax_scale_rubbery: tuple[float, float]
+    tau_scale: tuple[float, float]
+    contact_position_m: float
+    ambient_c: float
+
+    @classmethod
+    def draw(cls, config: TwinConfig, rng: np.random.Generator) -> TwinMaterial:
+        """Draw one run's scatter from ``rng``."""
+        sc = config.scatter
+        smp = config.finger.smp
+        batch = replace(config.finger, smp=replace(smp, tg_c=smp.tg_c + sc.tg_k * rng.standard_normal()))
+
+        def pair(sigma: float) -> tuple[float, float]:
+            a, b = np.exp(sigma * rng.standard_normal(2))
+            return float(a), float(b)
+
+        contact = config.contact_position_m + sc.contact_position_m * rng.standard_normal()
+        contact = float(np.clip(contact, 0.2 * config.finger.length_m, config.finger.length_m))
+        return cls(
+            finger=(batch, batch),
+            stiffness_scale=pair(sc.stiffness_rel),
+            relax_scale=pair(sc.relax_fraction_rel),
+            relax_scale_rubbery=pair(sc.relax_fraction_rel_rubbery),
+            tau_scale=pair(sc.tau_rel),
+            contact_position_m=contact,
+            ambient_c=config.ambient_c + sc.ambient_k * rng.standard_normal(),
+        )
+
+
+class _FingerStiffness:
+    """A finger's temperature-dependent contact parameters at one temperature field."""
+
+    __slots__ = ("k_e", "k_i", "marker_ratio", "slope_ratio", "contact_slope_ratio", "tau",
+                 "temp_eff_c", "temps_c")
+
+    def __init__(self, temps_c: FloatArray, finger: FingerParams, nodes_m: FloatArray,
+                 contact_m: float, marker_m: float, config: TwinConfig, stiffness_scale: float,
+                 relax_scale: float, relax_scale_rubbery: float, tau_scale: float) -> None:
+        x = beam_grid(finger)
+        field_c = np.interp(x, nodes_m, temps_c)
+        z, slope = unit_profile_m_per_n(contact_m, field_c, finger)
+        c_a = float(np.interp(contact_m, x, z))
+        # The branches feel the temperature where the finger bends: weight the
+        # field by each section's share of the contact compliance.
+        weight = np.clip(contact_m - x, 0.0, None) ** 2 / bending_stiffness_n_m2(field_c, finger)
+        temp_eff = float(np.sum(weight * field_c) / np.sum(weight))
+        smp = finger.smp
+        g_lo = smp.relax_fraction_glassy * relax_scale
+        g_extra = (float(relaxation_fraction(temp_eff, smp)) - smp.relax_fraction_glassy)
+        g = min(0.95, g_lo + g_extra * relax_scale * relax_scale_rubbery)
+        k_inst = stiffness_scale / c_a
+        w = np.asarray(config.relax.branch_weights)
+        self.k_e = k_inst * (1.0 - g)
+        self.k_i = k_inst * g * w
+        self.tau = np.asarray(config.relax.tau_ref_s) * float(shift_factor(temp_eff, smp)) * tau_scale
+        self.marker_ratio = float(np.interp(marker_m, x, z)) / c_a
+        self.slope_ratio = float(np.interp(marker_m, x, slope)) / c_a
+        self.contact_slope_ratio = float(np.interp(contact_m, x, slope)) / c_a
+        self.temp_eff_c = temp_eff
+        self.temps_c = temps_c.copy()
+
+
+class GripperTwin:
+    """Seeded, stepped digital twin of the two-finger gripper.
+
+    Parameters
+    ----------
+    config : TwinConfig
+        Physics, geometry and scatter.
+    seed : int
+        Seed of the run-to-run scatter; the same seed gives the same run, bit
+        for bit.
+    clock : Clock, optional
+        Time source; a fresh :class:`~relaxgrip.clock.VirtualClock` by default.
+    """
+
+    def __init__(self, config: TwinConfig | None = None, seed: int = 0,
+                 clock: Clock | None = None) -> None:
+        self.config = config if config is not None else TwinConfig()
+        self.clock: Clock = clock if clock is not None else VirtualClock()
+        self._nodes_m = node_positions_m(self.config.heat)
+        self.reset(seed)
+
+    # -- Gripper protocol -------------------------------------------------
+    @property
+    def info(self) -> BackendInfo:
+        """Name and version of this backend."""
+        return BackendInfo(name="twin", version=TWIN_VERSION, has_truth=True)
+
+    def reset(self, seed: int | None = None) -> Observation:
+        """Draw a new run (``seed`` or the previous one) and return to the open state."""
+        if seed is not None:
+            self.seed = int(seed)
+        cfg = self.config
+        self.material = TwinMaterial.draw(cfg, np.random.default_rng(self.seed))
+        self._t = self.clock.now()
+        self._command = Command()
+        self._motor_mm = 0.0
+        self._motor_v = 0.0
+        self._arm_mm = 0.0
+        self._object: ObjectSpec | None = cfg.object
+        self._object_height_mm = 0.0
+        self._engaged = self._object is not None
+        self._plastic_m = 0.0
+        self._slipping = False
+        self._force_n = 0.0
+        ambient = self.material.ambient_c
+        if cfg.initial_temp_c is None:
+            start = np.full(cfg.heat.n_nodes, ambient)
+        else:
+            duty = duty_for_mean_temp(cfg.initial_temp_c, cfg.heat, ambient)
+            start = steady_state_c(duty, cfg.heat, ambient)
+            start += cfg.initial_temp_c - float(np.mean(start))
+        self._temps = np.vstack([start, start])
+        self._x = np.zeros(2)
+        self._branches = np.zeros((2, len(cfg.relax.tau_ref_s)))
+        self._stiff = [self._evaluate(j) for j in range(2)]
+        self._step_cache: tuple[float, FloatArray, FloatArray] | None = None
+        return self.observe()
+
+    def observe(self) -> Observation:
+        """Integrate to the clock's time and report the state."""
+        self._advance_to(self.clock.now())
+        res = self.config.motor.encoder_resolution_mm
+        return Observation(
+            t_s=self._t,
+            motor_position_mm=round(self._motor_mm / res) * res,
+            arm_height_mm=self._arm_mm,
+            heater_duty=self._command.heater_duty,
+            truth=self.truth(),
+        )
+
+    def act(self, command: Command) -> None:
+        """Integrate to the clock's time under the old command, then latch ``command``."""
+        self._advance_to(self.clock.now())
+        self._command = command
+
+    def close(self) -> None:
+        """Stop the motor and switch the heaters off."""
+        self._advance_to(self.clock.now())
+        self._command = Command()
+
+    # -- state ------------------------------------------------------------
+    @property
+    def time_s(self) -> float:
+        """Time up to which the physics has been integrated (s)."""
+        return self._t
+
+    @property
+    def contact_force_n(self) -> float:
+        """Current true contact force (N)."""
+        return self._force_n
+
+    @property
+    def aperture_m(self) -> float:
+        """Distance between the undeflected finger contact faces (m)."""
+        return (self.config.motor.open_aperture_mm - self._motor_mm) * 1e-3
+
+    def set_object(self, name: str | None) -> None:
+        """Place another catalogue object between the (open) fingers."""
+        from relaxgrip.twin.objects import get_object
+
+        self._object = None if name is None else get_object(name)
+        self._engaged = self._object is not None
+        self._object_height_mm = 0.0
+        self._plastic_m = 0.0
+
+    def truth(self) -> Truth:
+        """Ground truth at the integrated time."""
+        s = self._stiff
+        obj = self._object
+        return Truth(
+            contact_force_n=self._force_n,
+            finger_deflection_m=(float(self._x[0]), float(self._x[1])),
+            marker_deflection_m=(self._x[0] * s[0].marker_ratio, self._x[1] * s[1].marker_ratio),
+            marker_slope_rad=(self._x[0] * s[0].slope_ratio, self._x[1] * s[1].slope_ratio),
+            contact_position_m=self.material.contact_position_m,
+            finger_temps_c=(tuple(self._temps[0].tolist()), tuple(self._temps[1].tolist())),
+            finger_effective_temp_c=(s[0].temp_eff_c, s[1].temp_eff_c),
+            aperture_m=self.aperture_m,
+            object_name=None if obj is None else obj.name,
+            object_lifted=self._engaged and self._object_height_mm > 0.0,
+            object_slipping=self._slipping,
+            object_crushed=self._plastic_m > _CRUSHED_M,
+            object_plastic_m=self._plastic_m,
+        )
+
+    # -- integration --------------------------------------------------------
+    def _evaluate(self, j: int) -> _FingerStiffness:
+        m = self.material
+        return _FingerStiffness(
+            self._temps[j], m.finger[j], self._nodes_m, m.contact_position_m,
+            self.config.marker_position_m, self.config, m.stiffness_scale[j],
+            m.relax_scale[j], m.relax_scale_rubbery[j], m.tau_scale[j],
+        )
+
+    def _advance_to(self, t_s: float) -> None:
+        remaining = t_s - self._t
+        if remaining <= 0.0:
+            return
+        n = max(1, math.ceil(remaining / self.config.max_step_s - 1e-9))
+        dt = remaining / n
+        for _ in range(n):
+            self._step(dt)
+        self._t = t_s
+
+    def _step(self, dt: float) -> None:
+        cfg = self.config
+        cmd = self._command
+        # Motor: first-order velocity lag, integrated exactly over the step.
+        mp = cfg.motor
+        v_cmd = min(max(cmd.motor_velocity_mm_s, -mp.max_velocity_mm_s), mp.max_velocity_mm_s)
+        e = math.exp(-dt / mp.lag_s)
+        pos = self._motor_mm + v_cmd * dt + (self._motor_v - v_cmd) * mp.lag_s * (1.0 - e)
+        self._motor_v = v_cmd + (self._motor_v - v_cmd) * e
+        if not 0.0 <= pos <= mp.stroke_mm:
+            pos = min(max(pos, 0.0), mp.stroke_mm)
+            self._motor_v = 0.0
+        self._motor_mm = pos
+        self._arm_mm = max(0.0, self._arm_mm + cmd.arm_velocity_mm_s * dt)
+
+        # Heat: exact zero-order hold for both fingers.
+        if self._step_cache is None or self._step_cache[0] != dt:
+            ad, bd = discrete_heat_system(cfg.heat, dt)
+            self._step_cache = (dt, ad, bd)
+        _, ad, bd = self._step_cache
+        duty = cmd.heater_duty
+        ambient = self.material.ambient_c
+        self._temps = self._temps @ ad.T + np.array(
+            [[duty[0], ambient], [duty[1], ambient]]) @ bd.T
+        for j in range(2):
+            if np.max(np.abs(self._temps[j] - self._stiff[j].temps_c)) > _REFRESH_K:
+                self._stiff[j] = self._evaluate(j)
+
+        # Fingers: exact Maxwell update (Eq. 2) made implicit in the new
+        # deflection, F_j = K_j X_j + c_j, then the series contact solve.
+        s0, s1 = self._stiff
+        k_i = np.vstack([s0.k_i, s1.k_i])
+        h = dt / np.vstack([s0.tau, s1.tau])
+        decay = np.exp(-h)
+        gain = k_i * phi1(h)
+        gain_sum = gain.sum(axis=1)
+        length = cfg.finger.length_m
+        stiffen = 1.0 + cfg.finger.stiffening * (self._x / length) ** 2
+        k_eff = stiffen * (np.array([s0.k_e, s1.k_e]) + gain_sum)
+        memory = (self._branches * decay).sum(axis=1)
+        offset = stiffen * (memory - gain_sum * self._x)
+
+        obj = self._object
+        if obj is not None and self._engaged:
+            delta = obj.width_m - self._plastic_m - self.aperture_m
+            sol = series_contact(delta, k_eff, offset, obj.stiffness_n_per_m, obj.yield_force_n)
+            self._plastic_m += sol.plastic_m
+            x_new = sol.finger_deflection_m
+            force = sol.force_n
+        else:
+            x_new = -offset / k_eff
+            force = 0.0
+        self._branches = self._branches * decay + gain * (x_new - self._x)[:, None]
+        self._x = x_new
+        self._force_n = force
+        if obj is not None and self._engaged:
+            self._lift(obj, force)
+
+    def _lift(self, obj: ObjectSpec, force_n: float) -> None:
+        """Carry the object with the arm if friction and adhesion hold its weight."""
+        if self._arm_mm <= self._object_height_mm:
+            self._slipping = False
+            return
+        tilt = float(np.mean(self._x * np.array([s.contact_slope_ratio for s in self._stiff])))
+        pad_c = float(np.mean(self._temps[:, -2:]))
+        capacity = float(friction_capacity_n(force_n, obj.friction_coeff, tilt))
+        capacity += float(adhesion_pulloff_n(pad_c, obj.surface == "flat", self.config.adhesion))
+        if force_n > 0.0 and capacity >= obj.weight_n:
+            self._object_height_mm = self._arm_mm
+            self._slipping = False
+            return
+        self._slipping = True
+        if self._object_height_mm > 0.0:
+            self._object_height_mm = 0.0  # it falls back to the table
+        if (self._arm_mm - self._object_height_mm) * 1e-3 > obj.grip_length_m:
+            self._engaged = False  # the fingers have slid off it

@@ -1,0 +1,46 @@
+"""``check_*`` validators for values that come from outside: return the cleaned value
+or raise :class:`relaxgrip.errors.InputError` with a one-line message."""
+
+from __future__ import annotations
+
+import math
+
+from relaxgrip.errors import InputError
+
+ABSOLUTE_ZERO_C = -273.15
+
+__all__ = ["check_duty", "check_finite", "check_positive", "check_temp_c"]
+
+
+def check_finite(value: float, name: str) -> float:
+    """Return ``value`` as a float if it is finite."""
+    v = float(value)
+    if not math.isfinite(v):
+        raise InputError(f"{name} must be a finite number, got {value}")
+    return v
+
+
+def check_positive(value: float, name: str) -> float:
+    """Return ``value`` if it is finite and > 0."""
+    v = check_finite(value, name)
+    if v <= 0:
+        raise InputError(f"{name} must be > 0, got {value}")
+    return v
+
+
+def check_temp_c(value: float, name: str = "temperature") -> float:
+    """Return a temperature in °C if it is physical (above absolute zero)."""
+    v = check_finite(value, name)
+    if v <= ABSOLUTE_ZERO_C:
+        raise InputError(
+            f"{name} {v} °C is {v - ABSOLUTE_ZERO_C:.2f} K: below absolute zero"
+        )
+    return v
+
+
+def check_duty(value: float, name: str = "heater duty") -> float:
+    """Return a PWM duty if it lies in [0, 1]."""
+    v = check_finite(value, name)
+    if not 0.0 <= v <= 1.0:
+        raise InputError(f"{name} {value} is outside 0-1")
+    return v
