@@ -51,10 +51,10 @@ class TruthThermostat:
         assert obs.truth is not None, "the truth thermostat needs the twin"
         out = []
         for j, temps in enumerate(obs.truth.finger_temps_c):
-            err = self.setpoint_c - float(np.mean(temps))
-            self._integral[j] = float(np.clip(self._integral[j] + err * dt_s, -50.0, 50.0))
+            err = self.setpoint_c - sum(temps) / len(temps)
+            self._integral[j] = min(max(self._integral[j] + err * dt_s, -50.0), 50.0)
             u = self.feedforward + self.kp * err + self.ki * self._integral[j]
-            out.append(float(np.clip(u, 0.0, 1.0)))
+            out.append(min(max(u, 0.0), 1.0))
         return out[0], out[1]
 
 
@@ -198,7 +198,7 @@ def run_fixed_aperture_hold(
         assert truth is not None
         t[k] = obs.t_s - t0
         force[k] = truth.contact_force_n
-        temp[k] = float(np.mean(truth.finger_temps_c))
+        temp[k] = sum(map(sum, truth.finger_temps_c)) / (2 * len(truth.finger_temps_c[0]))
         twin.act(Command(0.0, thermostat.duty(obs, dt)))
         clock.advance(dt)
     return HoldTrace(temp_c, target_n, seed, t, force, temp)

@@ -14,7 +14,10 @@ contact face) plus any adhesion carries the object's weight.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -33,15 +36,14 @@ __all__ = [
 ]
 
 
-@dataclass(frozen=True)
-class SeriesContact:
+class SeriesContact(NamedTuple):
     """Solution of one contact step.
 
     Attributes
     ----------
     force_n : float
         Contact force through the chain (N), ``>= 0``.
-    finger_deflection_m : ndarray, shape (n_fingers,)
+    finger_deflection_m : tuple of float
         Deflection of each finger at its contact point (m).
     object_compression_m : float
         Elastic compression of the object (m).
@@ -50,28 +52,31 @@ class SeriesContact:
     """
 
     force_n: float
-    finger_deflection_m: FloatArray
+    finger_deflection_m: tuple[float, ...]
     object_compression_m: float
     plastic_m: float
 
 
 def series_contact(
     delta_m: float,
-    finger_stiffness_n_per_m: ArrayLike,
-    finger_offset_n: ArrayLike,
+    finger_stiffness_n_per_m: Sequence[float],
+    finger_offset_n: Sequence[float],
     object_stiffness_n_per_m: float,
-    object_yield_n: float = float("inf"),
+    object_yield_n: float = math.inf,
 ) -> SeriesContact:
     """Solve the finger–object–finger chain for one step.
+
+    Runs on plain floats: it sits in the twin's inner loop with one or two
+    fingers, where NumPy's per-call overhead would dominate.
 
     Parameters
     ----------
     delta_m : float
         Interpenetration to be shared (m): object width (less any permanent
         set) minus the aperture.  ``<= 0`` means the chain is open.
-    finger_stiffness_n_per_m : array_like, shape (n_fingers,)
+    finger_stiffness_n_per_m : sequence of float
         Incremental stiffness ``K_j`` of each finger over the step (N/m), > 0.
-    finger_offset_n : array_like, shape (n_fingers,)
+    finger_offset_n : sequence of float
         Offset ``c_j`` of each finger's step relation ``F = K_j X_j + c_j`` (N).
     object_stiffness_n_per_m : float
         Object stiffness (N/m), > 0.
@@ -84,22 +89,23 @@ def series_contact(
         Force, deflections and compression; with no contact the force is 0
         and each finger sits where its own relation gives zero force.
     """
-    k = np.asarray(finger_stiffness_n_per_m, dtype=np.float64)
-    c = np.asarray(finger_offset_n, dtype=np.float64)
-    if np.any(k <= 0) or object_stiffness_n_per_m <= 0:
+    if min(finger_stiffness_n_per_m) <= 0 or object_stiffness_n_per_m <= 0:
         raise ValueError("stiffnesses must be > 0")
-    compliance = float(np.sum(1.0 / k)) + 1.0 / object_stiffness_n_per_m
-    force = (delta_m + float(np.sum(c / k))) / compliance
+    pairs = tuple(zip(finger_stiffness_n_per_m, finger_offset_n, strict=True))
+    compliance = sum(1.0 / k for k, _ in pairs) + 1.0 / object_stiffness_n_per_m
+    force = (delta_m + sum(c / k for k, c in pairs)) / compliance
     if force <= 0.0:
-        return SeriesContact(0.0, -c / k, 0.0, 0.0)
+        return SeriesContact(0.0, tuple(-c / k for k, c in pairs), 0.0, 0.0)
     plastic = 0.0
     if force > object_yield_n:
         force = object_yield_n
-        x_fingers = (force - c) / k
+        x_fingers = tuple((force - c) / k for k, c in pairs)
         elastic = force / object_stiffness_n_per_m
-        plastic = max(0.0, delta_m - float(np.sum(x_fingers)) - elastic)
+        plastic = max(0.0, delta_m - sum(x_fingers) - elastic)
         return SeriesContact(force, x_fingers, elastic, plastic)
-    return SeriesContact(force, (force - c) / k, force / object_stiffness_n_per_m, 0.0)
+    return SeriesContact(
+        force, tuple((force - c) / k for k, c in pairs), force / object_stiffness_n_per_m, 0.0
+    )
 
 
 def friction_capacity_n(

@@ -113,6 +113,8 @@ class TwinConfig:
     max_step_s : float
         Longest physics step (s); the integrators are exact, so this only
         bounds how coarsely motor motion and contact are sampled.
+    thermal_step_s : float
+        Step of the heat model (s), driven by the mean heater duty over it.
     """
 
     finger: FingerParams = field(default_factory=FingerParams)
@@ -127,6 +129,7 @@ class TwinConfig:
     ambient_c: float = 25.0
     initial_temp_c: float | None = None
     max_step_s: float = 1.0 / 30.0
+    thermal_step_s: float = 0.1
 
     def __post_init__(self) -> None:
         if self.object_name is not None:
@@ -135,6 +138,7 @@ class TwinConfig:
         if self.initial_temp_c is not None:
             check_temp_c(self.initial_temp_c, "initial finger temperature")
         check_positive(self.max_step_s, "max_step_s")
+        check_positive(self.thermal_step_s, "thermal_step_s")
         for name in ("contact_position_m", "marker_position_m"):
             value = getattr(self, name)
             if not 0.0 < value <= self.finger.length_m:

@@ -96,8 +96,8 @@ class TwinMaterial:
 class _FingerStiffness:
     """A finger's temperature-dependent contact parameters at one temperature field."""
 
-    __slots__ = ("k_e", "k_i", "marker_ratio", "slope_ratio", "contact_slope_ratio", "tau",
-                 "temp_eff_c", "temps_c")
+    __slots__ = ("_coeffs", "contact_slope_ratio", "k_e", "k_i", "marker_ratio", "slope_ratio",
+                 "tau", "temp_eff_c", "temps_c")
 
     def __init__(self, temps_c: FloatArray, finger: FingerParams, nodes_m: FloatArray,
                  contact_m: float, marker_m: float, config: TwinConfig, stiffness_scale: float,
@@ -119,11 +119,21 @@ class _FingerStiffness:
         self.k_e = k_inst * (1.0 - g)
         self.k_i = k_inst * g * w
         self.tau = np.asarray(config.relax.tau_ref_s) * float(shift_factor(temp_eff, smp)) * tau_scale
+        self._coeffs: tuple[float, tuple[float, ...], tuple[float, ...], float] | None = None
         self.marker_ratio = float(np.interp(marker_m, x, z)) / c_a
         self.slope_ratio = float(np.interp(marker_m, x, slope)) / c_a
         self.contact_slope_ratio = float(np.interp(contact_m, x, slope)) / c_a
         self.temp_eff_c = temp_eff
         self.temps_c = temps_c.copy()
+
+    def step_coefficients(self, dt_s: float) -> tuple[tuple[float, ...], tuple[float, ...], float]:
+        """Branch decay ``e^{-dt/tau_i}``, gains ``k_i phi1(dt/tau_i)`` and their sum over ``dt_s``."""
+        if self._coeffs is None or self._coeffs[0] != dt_s:
+            h = dt_s / self.tau
+            gain = self.k_i * phi1(h)
+            decay = tuple(np.exp(-h).tolist())
+            self._coeffs = (dt_s, decay, tuple(gain.tolist()), float(gain.sum()))
+        return self._coeffs[1], self._coeffs[2], self._coeffs[3]
 
 
 class GripperTwin:
@@ -178,10 +188,14 @@ class GripperTwin:
             start = steady_state_c(duty, cfg.heat, ambient)
             start += cfg.initial_temp_c - float(np.mean(start))
         self._temps = np.vstack([start, start])
-        self._x = np.zeros(2)
-        self._branches = np.zeros((2, len(cfg.relax.tau_ref_s)))
-        self._stiff = [self._evaluate(j) for j in range(2)]
+        self._x = [0.0, 0.0]
+        n_branches = len(cfg.relax.tau_ref_s)
+        self._branches = [[0.0] * n_branches, [0.0] * n_branches]
+        self._stiff = [self._evaluate(0), self._evaluate(1)]
+        self._stiff_temps = self._temps.copy()
         self._step_cache: tuple[float, FloatArray, FloatArray] | None = None
+        self._heat_dt = 0.0
+        self._heat_duty = [0.0, 0.0]
         return self.observe()
 
     def observe(self) -> Observation:
@@ -237,7 +251,7 @@ class GripperTwin:
         obj = self._object
         return Truth(
             contact_force_n=self._force_n,
-            finger_deflection_m=(float(self._x[0]), float(self._x[1])),
+            finger_deflection_m=(self._x[0], self._x[1]),
             marker_deflection_m=(self._x[0] * s[0].marker_ratio, self._x[1] * s[1].marker_ratio),
             marker_slope_rad=(self._x[0] * s[0].slope_ratio, self._x[1] * s[1].slope_ratio),
             contact_position_m=self.material.contact_position_m,
@@ -285,32 +299,30 @@ class GripperTwin:
         self._motor_mm = pos
         self._arm_mm = max(0.0, self._arm_mm + cmd.arm_velocity_mm_s * dt)
 
-        # Heat: exact zero-order hold for both fingers.
-        if self._step_cache is None or self._step_cache[0] != dt:
-            ad, bd = discrete_heat_system(cfg.heat, dt)
-            self._step_cache = (dt, ad, bd)
-        _, ad, bd = self._step_cache
-        duty = cmd.heater_duty
-        ambient = self.material.ambient_c
-        self._temps = self._temps @ ad.T + np.array(
-            [[duty[0], ambient], [duty[1], ambient]]) @ bd.T
-        for j in range(2):
-            if np.max(np.abs(self._temps[j] - self._stiff[j].temps_c)) > _REFRESH_K:
-                self._stiff[j] = self._evaluate(j)
+        # Heat: the film sees the PWM's mean power, and the finger's thermal
+        # time constants are seconds, so the heat model advances in steps of
+        # ``thermal_step_s`` under the mean duty of that interval.
+        self._heat_dt += dt
+        self._heat_duty[0] += cmd.heater_duty[0] * dt
+        self._heat_duty[1] += cmd.heater_duty[1] * dt
+        if self._heat_dt >= cfg.thermal_step_s - 1e-12:
+            self._advance_heat()
 
         # Fingers: exact Maxwell update (Eq. 2) made implicit in the new
         # deflection, F_j = K_j X_j + c_j, then the series contact solve.
-        s0, s1 = self._stiff
-        k_i = np.vstack([s0.k_i, s1.k_i])
-        h = dt / np.vstack([s0.tau, s1.tau])
-        decay = np.exp(-h)
-        gain = k_i * phi1(h)
-        gain_sum = gain.sum(axis=1)
-        length = cfg.finger.length_m
-        stiffen = 1.0 + cfg.finger.stiffening * (self._x / length) ** 2
-        k_eff = stiffen * (np.array([s0.k_e, s1.k_e]) + gain_sum)
-        memory = (self._branches * decay).sum(axis=1)
-        offset = stiffen * (memory - gain_sum * self._x)
+        # Plain floats: two fingers of a few branches, where NumPy calls cost more.
+        inv_len2 = cfg.finger.stiffening / cfg.finger.length_m**2
+        k_eff: list[float] = []
+        offset: list[float] = []
+        coeffs = []
+        for j in range(2):
+            decay, gain, gain_sum = self._stiff[j].step_coefficients(dt)
+            x = self._x[j]
+            stiffen = 1.0 + inv_len2 * x * x
+            memory = sum(f * d for f, d in zip(self._branches[j], decay, strict=True))
+            k_eff.append(stiffen * (self._stiff[j].k_e + gain_sum))
+            offset.append(stiffen * (memory - gain_sum * x))
+            coeffs.append((decay, gain))
 
         obj = self._object
         if obj is not None and self._engaged:
@@ -320,20 +332,42 @@ class GripperTwin:
             x_new = sol.finger_deflection_m
             force = sol.force_n
         else:
-            x_new = -offset / k_eff
+            x_new = (-offset[0] / k_eff[0], -offset[1] / k_eff[1])
             force = 0.0
-        self._branches = self._branches * decay + gain * (x_new - self._x)[:, None]
-        self._x = x_new
+        for j in range(2):
+            decay, gain = coeffs[j]
+            dx = x_new[j] - self._x[j]
+            self._branches[j] = [f * d + g * dx
+                                 for f, d, g in zip(self._branches[j], decay, gain, strict=True)]
+        self._x = [x_new[0], x_new[1]]
         self._force_n = force
         if obj is not None and self._engaged:
             self._lift(obj, force)
+
+    def _advance_heat(self) -> None:
+        dt = self._heat_dt
+        if dt <= 0.0:
+            return
+        if self._step_cache is None or self._step_cache[0] != dt:
+            ad, bd = discrete_heat_system(self.config.heat, dt)
+            self._step_cache = (dt, ad.T.copy(), bd.T.copy())
+        _, ad_t, bd_t = self._step_cache
+        ambient = self.material.ambient_c
+        inputs = np.array([[self._heat_duty[0] / dt, ambient], [self._heat_duty[1] / dt, ambient]])
+        self._temps = self._temps @ ad_t + inputs @ bd_t
+        self._heat_dt = 0.0
+        self._heat_duty = [0.0, 0.0]
+        if np.abs(self._temps - self._stiff_temps).max() > _REFRESH_K:
+            self._stiff = [self._evaluate(0), self._evaluate(1)]
+            self._stiff_temps = self._temps.copy()
 
     def _lift(self, obj: ObjectSpec, force_n: float) -> None:
         """Carry the object with the arm if friction and adhesion hold its weight."""
         if self._arm_mm <= self._object_height_mm:
             self._slipping = False
             return
-        tilt = float(np.mean(self._x * np.array([s.contact_slope_ratio for s in self._stiff])))
+        s0, s1 = self._stiff
+        tilt = 0.5 * (self._x[0] * s0.contact_slope_ratio + self._x[1] * s1.contact_slope_ratio)
         pad_c = float(np.mean(self._temps[:, -2:]))
         capacity = float(friction_capacity_n(force_n, obj.friction_coeff, tilt))
         capacity += float(adhesion_pulloff_n(pad_c, obj.surface == "flat", self.config.adhesion))

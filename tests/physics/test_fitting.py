@@ -1,0 +1,298 @@
+"""Relaxation fits are true least-squares optima, and the hold phase is found."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from relaxgrip.errors import InputError
+from relaxgrip.physics.fitting import (
+    find_hold_start,
+    fit_prony,
+    fit_reduced,
+    quadrature_weights,
+)
+from relaxgrip.physics.viscoelastic import prony_force, reduced_force
+
+DATA_DIR = Path(__file__).resolve().parents[3] / "shared" / "data" / "vhb4910-relaxation"
+REAL_FILES = sorted(DATA_DIR.glob("*.csv")) if DATA_DIR.is_dir() else []
+
+# The sampling of the measured records: 50 Hz for 10 s, 5 Hz to 60 s, 1 Hz to 600 s.
+T_S = np.concatenate(
+    [np.arange(0.0, 10.0, 0.02), np.arange(10.0, 60.0, 0.2), np.arange(60.0, 600.5, 1.0)]
+)
+
+
+def time_objective(f_model: np.ndarray, f_n: np.ndarray) -> float:
+    """The documented time-weighted objective, computed independently of the module."""
+    return float(np.trapezoid((f_model - f_n) ** 2, T_S))
+
+
+def relaxing_force(rng: np.random.Generator, noise_n: float = 2e-3) -> np.ndarray:
+    """A four-mode curve with noise: no 1- or 3-term model fits it exactly."""
+    clean = prony_force(T_S, 0.8, (0.3, 0.35, 0.25, 0.2), (0.7, 6.0, 45.0, 350.0))
+    return clean + noise_n * rng.standard_normal(T_S.size)
+
+
+def brute_force_min(f_n: np.ndarray, n_terms: int, grid_s: np.ndarray) -> float:
+    """Smallest time-weighted objective over every ``n_terms`` subset of ``grid_s``.
+
+    The amplitudes are the exact linear least-squares solution for each set of times.
+    """
+    sqrt_w = np.sqrt(quadrature_weights(T_S, "time"))
+    best = math.inf
+    for taus in itertools.combinations(grid_s, n_terms):
+        basis = np.column_stack([np.ones_like(T_S), np.exp(-T_S[:, None] / np.array(taus))])
+        coef = np.linalg.lstsq(sqrt_w[:, None] * basis, sqrt_w * f_n, rcond=None)[0]
+        best = min(best, time_objective(basis @ coef, f_n))
+    return best
+
+
+# --- recovery of known parameters -------------------------------------------------------
+
+
+@pytest.mark.parametrize("weighting", ["time", "sample"])
+def test_recovers_reduced_model(weighting: str) -> None:
+    f_n = reduced_force(T_S, 2.4, 0.9, 37.0)
+    fit = fit_reduced(T_S, f_n, weighting=weighting)
+    assert fit.f_inst_n == pytest.approx(2.4, rel=1e-7)
+    assert fit.k_n == pytest.approx(0.9, rel=1e-7)
+    assert fit.tau_s == pytest.approx(37.0, rel=1e-7)
+    assert fit.objective == pytest.approx(0.0, abs=1e-18)
+    assert fit.weighting == weighting
+
+
+@pytest.mark.parametrize("weighting", ["time", "sample"])
+def test_recovers_three_term_prony(weighting: str) -> None:
+    k_n, tau_s = (0.45, 0.3, 0.25), (1.5, 20.0, 180.0)
+    f_n = prony_force(T_S, 0.6, k_n, tau_s)
+    fit = fit_prony(T_S, f_n, n_terms=3, weighting=weighting)
+    assert fit.f_eq_n == pytest.approx(0.6, rel=1e-6)
+    assert fit.k_n == pytest.approx(k_n, rel=1e-6)
+    assert fit.tau_s == pytest.approx(tau_s, rel=1e-6)
+    assert fit.f_inst_n == pytest.approx(0.6 + sum(k_n), rel=1e-9)
+    np.testing.assert_allclose(fit.predict(T_S), f_n, atol=1e-9)
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    f_inst_n=st.floats(0.5, 5.0),
+    k_share=st.floats(0.05, 0.9),
+    tau_s=st.floats(0.2, 200.0),
+)
+def test_reduced_recovery_property(f_inst_n: float, k_share: float, tau_s: float) -> None:
+    k_n = k_share * f_inst_n
+    fit = fit_reduced(T_S, reduced_force(T_S, f_inst_n, k_n, tau_s))
+    assert fit.f_inst_n == pytest.approx(f_inst_n, rel=1e-6)
+    assert fit.k_n == pytest.approx(k_n, rel=1e-6)
+    assert fit.tau_s == pytest.approx(tau_s, rel=1e-6)
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    f_eq_n=st.floats(0.0, 2.0),
+    k_n=st.tuples(st.floats(0.1, 1.0), st.floats(0.1, 1.0), st.floats(0.1, 1.0)),
+    tau1_s=st.floats(0.3, 3.0),
+    ratios=st.tuples(st.floats(6.0, 15.0), st.floats(6.0, 15.0)),
+)
+def test_prony_recovery_property(
+    f_eq_n: float,
+    k_n: tuple[float, float, float],
+    tau1_s: float,
+    ratios: tuple[float, float],
+) -> None:
+    # Modes a decade apart inside the record: identifiable from noiseless data.
+    tau_s = (tau1_s, tau1_s * ratios[0], tau1_s * ratios[0] * ratios[1])
+    fit = fit_prony(T_S, prony_force(T_S, f_eq_n, k_n, tau_s), n_terms=3)
+    assert fit.tau_s == pytest.approx(tau_s, rel=1e-4)
+    assert fit.k_n == pytest.approx(k_n, rel=1e-4, abs=1e-6)
+    assert fit.f_eq_n == pytest.approx(f_eq_n, rel=1e-4, abs=1e-6)
+
+
+# --- optimality ---------------------------------------------------------------------------
+
+
+def test_reduced_fit_is_the_global_optimum() -> None:
+    rng = np.random.default_rng(7)
+    f_n = relaxing_force(rng)
+    fit = fit_reduced(T_S, f_n)
+    # The reported objective is the trapezoidal int (F_model - F)^2 dt.
+    assert fit.objective == pytest.approx(time_objective(fit.predict(T_S), f_n), rel=1e-10)
+    # Dense brute force over tau (amplitudes exact for each tau) never does better...
+    dense_tau_s = np.geomspace(0.02, 6000.0, 2000)
+    assert fit.objective <= brute_force_min(f_n, 1, dense_tau_s) * (1 + 1e-12)
+    # ...and neither does any perturbation of all three parameters.
+    for scale in (1e-2, 1e-4):
+        for _ in range(200):
+            p = np.array([fit.f_inst_n, fit.k_n, fit.tau_s]) * (1 + scale * rng.standard_normal(3))
+            f_model = reduced_force(T_S, p[0], p[1], p[2])
+            assert time_objective(f_model, f_n) >= fit.objective * (1 - 1e-12)
+
+
+@pytest.mark.parametrize("n_terms", [2, 3])
+def test_prony_fit_is_the_global_optimum(n_terms: int) -> None:
+    rng = np.random.default_rng(11)
+    f_n = relaxing_force(rng)
+    fit = fit_prony(T_S, f_n, n_terms=n_terms)
+    assert fit.objective == pytest.approx(time_objective(fit.predict(T_S), f_n), rel=1e-10)
+    assert list(fit.tau_s) == sorted(fit.tau_s)
+    assert all(math.isfinite(tau) and tau > 0 for tau in fit.tau_s)
+    grid_s = np.geomspace(0.05, 3000.0, 40 if n_terms == 2 else 22)
+    assert fit.objective <= brute_force_min(f_n, n_terms, grid_s) * (1 + 1e-12)
+    params = np.array([fit.f_eq_n, *fit.k_n, *fit.tau_s])
+    for scale in (1e-2, 1e-4):
+        for _ in range(200):
+            p = params * (1 + scale * rng.standard_normal(params.size))
+            f_model = prony_force(T_S, p[0], p[1 : n_terms + 1], p[n_terms + 1 :])
+            assert time_objective(f_model, f_n) >= fit.objective * (1 - 1e-12)
+
+
+def test_more_terms_never_fit_worse() -> None:
+    f_n = relaxing_force(np.random.default_rng(3))
+    objectives = [fit_reduced(T_S, f_n).objective] + [
+        fit_prony(T_S, f_n, n_terms=n).objective for n in (1, 2, 3, 4)
+    ]
+    # One Prony term is the reduced model reparametrised: same optimum.
+    assert objectives[1] == pytest.approx(objectives[0], rel=1e-9)
+    assert all(b <= a * (1 + 1e-12) for a, b in itertools.pairwise(objectives[1:]))
+
+
+def test_time_weighting_is_not_dominated_by_dense_samples() -> None:
+    # A curve whose first 10 s (500 samples at 50 Hz) disagree with the 1 Hz tail (540 samples):
+    # per sample the head weighs as much as the tail, per second it is 1/60 of the record.
+    f_n = reduced_force(T_S, 2.0, 1.0, 80.0) + np.where(T_S < 10.0, 0.05, 0.0)
+    by_time = fit_reduced(T_S, f_n, weighting="time")
+    by_sample = fit_reduced(T_S, f_n, weighting="sample")
+    tail = T_S >= 10.0
+    tail_err = [float(np.sqrt(np.mean((f.predict(T_S) - f_n)[tail] ** 2))) for f in (by_time, by_sample)]
+    assert tail_err[0] < tail_err[1]
+
+
+# --- degenerate input ---------------------------------------------------------------------
+
+
+def test_constant_force_is_rejected() -> None:
+    with pytest.raises(InputError, match="constant"):
+        fit_reduced(T_S, np.full_like(T_S, 1.5))
+    with pytest.raises(InputError, match="constant"):
+        fit_prony(T_S, np.full_like(T_S, 1.5))
+
+
+def test_too_few_samples_are_rejected() -> None:
+    t, f = T_S[:6], reduced_force(T_S[:6], 2.0, 1.0, 0.05)
+    with pytest.raises(InputError, match="7 parameters to 6 samples"):
+        fit_prony(t, f, n_terms=3)
+    with pytest.raises(InputError, match="3 parameters to 2 samples"):
+        fit_reduced(t[:2], f[:2])
+
+
+@pytest.mark.parametrize(
+    ("t_s", "f_n", "kwargs", "match"),
+    [
+        (T_S, T_S[:-1], {}, "shape"),
+        (T_S[::-1], T_S, {}, "strictly increasing"),
+        (T_S, np.where(T_S > 5, np.nan, 1.0), {}, "non-finite"),
+        (T_S, np.exp(-T_S), {"weighting": "log"}, "weighting"),
+        (T_S, np.exp(-T_S), {"n_terms": 0}, "n_terms"),
+    ],
+)
+def test_malformed_arrays_raise_value_error(t_s, f_n, kwargs, match) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(ValueError, match=match):
+        fit_prony(t_s, f_n, **kwargs)
+
+
+def test_quadrature_weights_are_the_trapezoid_rule() -> None:
+    w = quadrature_weights(T_S, "time")
+    g = np.sin(T_S / 7.0) ** 2
+    assert float(w @ g) == pytest.approx(float(np.trapezoid(g, T_S)), rel=1e-13)
+    assert float(w.sum()) == pytest.approx(float(T_S[-1] - T_S[0]), rel=1e-13)
+    np.testing.assert_array_equal(quadrature_weights(T_S, "sample"), np.ones_like(T_S))
+
+
+# --- hold-phase detection -------------------------------------------------------------
+
+
+def ramp_overshoot_plateau(
+    plateau_mm: float = 40.0,
+    overshoot_mm: float = 0.7,
+    settle_s: float = 0.1,
+    hold_s: float = 60.0,
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """20 mm/s ramp, exponentially settling overshoot, plateau; returns t, x, ramp end."""
+    t = np.arange(0.0, plateau_mm / 20.0 + hold_s, 0.02)
+    ramp_end_s = plateau_mm / 20.0
+    x = np.where(
+        t < ramp_end_s,
+        20.0 * t,
+        plateau_mm + overshoot_mm * np.exp(-(t - ramp_end_s) / settle_s),
+    )
+    return t, x, ramp_end_s
+
+
+def test_hold_start_after_overshoot() -> None:
+    t, x, ramp_end_s = ramp_overshoot_plateau()
+    start = find_hold_start(t, x, rel_tol=1e-3)
+    # Inside the band 1e-3 * 40 mm once 0.7 e^{-s/0.1} <= 0.04, i.e. s >= 0.1 ln(17.5).
+    settled_s = ramp_end_s + 0.1 * math.log(0.7 / 0.04)
+    assert t[start - 1] < settled_s <= t[start]
+
+
+def test_hold_start_with_measurement_noise() -> None:
+    t, x, ramp_end_s = ramp_overshoot_plateau()
+    rng = np.random.default_rng(5)
+    sigma_mm = 2e-3
+    start = find_hold_start(t, x + sigma_mm * rng.standard_normal(t.size), rel_tol=1e-3)
+    # The band widens by about 5 sigma: 0.7 e^{-s/0.1} <= 0.04 + 0.01.
+    expected_s = ramp_end_s + 0.1 * math.log(0.7 / 0.05)
+    assert abs(t[start] - expected_s) < 0.05
+
+
+def test_hold_start_with_undershoot_and_offset_origin() -> None:
+    t, x, ramp_end_s = ramp_overshoot_plateau(overshoot_mm=-0.5)
+    start = find_hold_start(t, x + 100.0)
+    # The band is relative to the 40 mm step, not to the 140 mm absolute displacement.
+    assert t[start] == pytest.approx(ramp_end_s + 0.1 * math.log(0.5 / 0.04), abs=0.021)
+
+
+@pytest.mark.skipif(not REAL_FILES, reason=f"VHB4910 data not found in {DATA_DIR}")
+@pytest.mark.parametrize("path", REAL_FILES, ids=lambda p: p.name)
+def test_hold_start_on_measured_records(path: Path) -> None:
+    t, x, _ = np.loadtxt(path, delimiter=",", skiprows=1, unpack=True)
+    start = find_hold_start(t, x)
+    plateau = x[-1]
+    peak = int(np.argmax(x))
+    # After the overshoot peak, within a second of it, and settled for good from there on.
+    assert start > peak
+    assert t[start] - t[peak] < 1.0
+    assert np.all(np.abs(x[start:] - plateau) <= 1e-3 * abs(plateau))
+    assert abs(x[start - 1] - plateau) > 1e-3 * abs(plateau)
+
+
+@pytest.mark.parametrize(
+    ("make", "match"),
+    [
+        (lambda t: 20.0 * t, "never settles"),
+        (lambda t: np.zeros_like(t), "no step"),
+        (lambda t: np.where((t > 1) & (t < 5), 40.0, 0.0), "no step"),
+        (lambda t: np.where(t < t[-1] - 0.5, 20.0 * t, 40.0), "only for the last"),
+        (lambda t: np.full_like(t, 40.0), "no step"),
+    ],
+    ids=["ramp", "zero", "returns-to-start", "short-hold", "constant"],
+)
+def test_no_hold_phase_raises(make, match: str) -> None:  # type: ignore[no-untyped-def]
+    t = np.arange(0.0, 10.0, 0.02)
+    with pytest.raises(InputError, match=match):
+        find_hold_start(t, make(t))
+
+
+def test_hold_needs_ten_samples() -> None:
+    t = np.concatenate([np.arange(0.0, 2.0, 0.02), 2.0 + np.arange(1, 6) * 1.0])
+    x = np.where(t < 2.0, 20.0 * t, 40.0)
+    with pytest.raises(InputError, match="5 samples"):
+        find_hold_start(t, x)
