@@ -1,1 +1,1 @@
-"""placeholder, replaced in this change."""
+"""``relaxgrip bench``: placeholder until written."""

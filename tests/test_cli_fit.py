@@ -1,0 +1,167 @@
+"""``relaxgrip fit-relaxation`` end to end, as a subprocess, on measured and broken records."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from relaxgrip.physics.viscoelastic import prony_force
+
+# The repository is cloned with the shared data folder beside it: <repo>/../shared.
+DATA_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "vhb4910-relaxation"
+REAL_FILES = sorted(DATA_DIR.glob("*.csv")) if DATA_DIR.is_dir() else []
+needs_data = pytest.mark.skipif(not REAL_FILES, reason=f"VHB4910 data not found in {DATA_DIR}")
+
+HEADER = "time_s,displacement_mm,force_n"
+
+
+def run_cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "relaxgrip", "fit-relaxation", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+
+
+def synthetic_rows() -> list[tuple[float, float, float]]:
+    """A 2 s ramp to 40 mm at 50 Hz, then a 120 s hold (50 Hz to 10 s, 5 Hz after)."""
+    t_ramp = np.arange(0.0, 2.0, 0.02)
+    t_hold = np.concatenate([np.arange(0.0, 10.0, 0.02), np.arange(10.0, 120.0, 0.2)])
+    force_hold = prony_force(t_hold, 0.5, (0.4, 0.3), (2.0, 30.0))
+    rows = [(t, 20.0 * t, 0.6 * t) for t in t_ramp]
+    rows += [(2.0 + t, 40.0, f) for t, f in zip(t_hold, force_hold, strict=True)]
+    return rows
+
+
+def write_csv(path: Path, rows: list[tuple[float, float, float]], header: str = HEADER) -> Path:
+    lines = [header, *(",".join(f"{v:.6f}" for v in row) for row in rows)]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+@pytest.fixture
+def good_csv(tmp_path: Path) -> Path:
+    return write_csv(tmp_path / "good.csv", synthetic_rows())
+
+
+@needs_data
+@pytest.mark.parametrize("path", REAL_FILES, ids=lambda p: p.name)
+def test_fits_measured_vhb4910_record(path: Path) -> None:
+    proc = run_cli(path, "--json")
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)  # exactly one JSON document on stdout
+    assert set(out) == {"file", "hold_start_s", "window_s", "weighting", "reduced", "prony"}
+    assert out["file"] == str(path)
+    assert out["weighting"] == "time"
+    assert out["hold_start_s"] > 0
+    assert out["window_s"] > 1000  # the whole ~30 min hold
+    assert set(out["reduced"]) == {"f_inst_n", "k_n", "tau_s", "nrmse", "auc_rel"}
+    assert set(out["prony"]) == {"f_eq_n", "terms", "nrmse", "auc_rel"}
+    terms = out["prony"]["terms"]
+    assert len(terms) == 3
+    assert all(set(term) == {"k_n", "tau_s"} for term in terms)
+    taus = [term["tau_s"] for term in terms]
+    assert taus == sorted(taus)
+    assert all(tau > 0 for tau in taus)
+    # Acceptance criterion: a 3-term Prony series fits every measured curve to NRMSE < 1 %.
+    assert out["prony"]["nrmse"] < 0.01
+    assert out["reduced"]["nrmse"] > out["prony"]["nrmse"]
+
+
+def test_table_output(good_csv: Path) -> None:
+    proc = run_cli(good_csv, "--terms", "2")
+    assert proc.returncode == 0, proc.stderr
+    assert "NRMSE" in proc.stdout
+    assert "AUC_rel" in proc.stdout
+    assert "Prony (2 terms)" in proc.stdout
+
+
+def test_window_and_weighting_options(good_csv: Path) -> None:
+    proc = run_cli(good_csv, "--json", "--window-s", "40", "--terms", "2", "--weighting", "sample")
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert out["window_s"] == pytest.approx(40.0)
+    assert out["weighting"] == "sample"
+    assert out["hold_start_s"] == pytest.approx(2.0)
+    # Noiseless two-mode data: recovered to the 6 printed decimals of the CSV.
+    terms = out["prony"]["terms"]
+    assert [term["tau_s"] for term in terms] == pytest.approx([2.0, 30.0], rel=1e-3)
+    assert out["prony"]["nrmse"] < 1e-4
+
+
+def test_plot_writes_png(good_csv: Path, tmp_path: Path) -> None:
+    png = tmp_path / "fit.png"
+    proc = run_cli(good_csv, "--json", "--plot", png)
+    assert proc.returncode == 0, proc.stderr
+    json.loads(proc.stdout)  # --plot does not add anything to the JSON output
+    assert png.read_bytes().startswith(b"\x89PNG\r\n\x1a\n")
+    assert png.stat().st_size > 1000
+
+
+def bad_case(tmp_path: Path, name: str) -> list[str | Path]:
+    """Arguments for one bad invocation; files are written to ``tmp_path``."""
+    rows = synthetic_rows()
+    csv = tmp_path / f"{name}.csv"
+    if name == "missing-file":
+        return [tmp_path / "nope.csv"]
+    if name == "missing-column":
+        write_csv(csv, [(t, f, f) for t, _, f in rows], header="time_s,force_n,load")
+    elif name == "nan":
+        rows[150] = (rows[150][0], rows[150][1], float("nan"))
+        write_csv(csv, rows)
+    elif name == "non-monotonic-time":
+        rows[200], rows[201] = rows[201], rows[200]
+        write_csv(csv, rows)
+    elif name == "no-hold":
+        write_csv(csv, [(t, 20.0 * t, f) for t, _, f in rows])
+    elif name == "not-a-csv":
+        csv.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\xff\xfe")
+    elif name == "too-few-rows":
+        write_csv(csv, rows[:5])
+    else:
+        write_csv(csv, rows)
+    flags: dict[str, list[str | Path]] = {
+        "terms-0": ["--terms", "0"],
+        "window-negative": ["--window-s", "-1"],
+        "window-too-short": ["--window-s", "0.05"],
+        "weighting-unknown": ["--weighting", "log"],
+        "plot-missing-dir": ["--plot", tmp_path / "no" / "such" / "dir.png"],
+        "plot-bad-extension": ["--plot", tmp_path / "fit.bmp"],
+    }
+    return [csv, "--json", *flags.get(name, [])]
+
+
+@pytest.mark.parametrize(
+    ("name", "expected"),
+    [
+        ("missing-file", "no such file"),
+        ("missing-column", "missing column(s) displacement_mm"),
+        ("nan", "line 152: force_n is 'nan'"),
+        ("non-monotonic-time", "line 203: time_s 4 does not increase"),
+        ("no-hold", "no hold phase"),
+        ("not-a-csv", "not a text CSV"),
+        ("too-few-rows", "only 5 data rows"),
+        ("terms-0", "--terms must be >= 1"),
+        ("window-negative", "--window-s must be > 0"),
+        ("window-too-short", "needs at least 10"),
+        ("weighting-unknown", "--weighting must be one of time, sample"),
+        ("plot-missing-dir", "does not exist"),
+        ("plot-bad-extension", "unsupported plot format"),
+    ],
+)
+def test_bad_input_is_one_error_line(tmp_path: Path, name: str, expected: str) -> None:
+    proc = run_cli(*bad_case(tmp_path, name))
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    assert "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("error: ")
+    assert expected in lines[0]
