@@ -1,1 +1,48 @@
-"""``relaxgrip bench``: placeholder until written."""
+"""``relaxgrip bench``: speed and latency benchmarks (medians of repeated runs)."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from relaxgrip.bench import BENCHMARKS, run_benchmarks
+from relaxgrip.cli._app import app, console, emit_json
+from relaxgrip.errors import InputError
+
+
+@app.command("bench")
+def bench(
+    names: Annotated[
+        list[str] | None, typer.Argument(help=f"Benchmarks to run: {', '.join(BENCHMARKS)}.")
+    ] = None,
+    repeat: Annotated[int, typer.Option("--repeat", help="Timed runs per benchmark.")] = 5,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Measure how fast the twin and the pipeline run (all benchmarks by default)."""
+    chosen = names or list(BENCHMARKS)
+    unknown = [n for n in chosen if n not in BENCHMARKS]
+    if unknown:
+        raise InputError(f"unknown benchmark {unknown[0]!r}; known: {', '.join(BENCHMARKS)}")
+    if repeat < 1:
+        raise InputError(f"--repeat must be >= 1, got {repeat}")
+    report = run_benchmarks(chosen, repeat)
+    if json_out:
+        emit_json(report)
+        return
+    table = Table(title=f"relaxgrip bench ({report['twin_version']}, median of {repeat} runs)")
+    for col in ("benchmark", "median", "min", "max", "× real time", "notes"):
+        table.add_column(col, justify="left" if col in ("benchmark", "notes") else "right")
+    for r in report["benchmarks"]:
+        rt = r["realtime_factor"]
+        extra = {k: v for k, v in r.items() if k not in {
+            "name", "description", "runs", "median_s", "min_s", "max_s", "simulated_s",
+            "realtime_factor"}}
+        table.add_row(
+            r["name"], f"{r['median_s'] * 1e3:.1f} ms", f"{r['min_s'] * 1e3:.1f} ms",
+            f"{r['max_s'] * 1e3:.1f} ms", "" if rt is None else f"{rt:,.0f}×",
+            ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
+                      for k, v in extra.items()),
+        )
+    console.print(table)

@@ -16,7 +16,8 @@ from relaxgrip.experiments.relaxation_fit import (
     load_relaxation_csv,
 )
 from relaxgrip.physics.fitting import WEIGHTINGS
-from relaxgrip.plots.relaxation_fit import check_plot_path, plot_relaxation_fit
+from relaxgrip.plots.common import check_plot_path
+from relaxgrip.plots.relaxation_fit import plot_relaxation_fit
 
 __all__ = ["fit_relaxation_command"]
 

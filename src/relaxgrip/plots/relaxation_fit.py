@@ -6,42 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from relaxgrip.errors import InputError
 from relaxgrip.experiments.relaxation_fit import RelaxationFitResult
+from relaxgrip.plots.common import check_plot_path, new_figure, save_figure
 
-__all__ = ["PLOT_FORMATS", "check_plot_path", "plot_relaxation_fit"]
-
-PLOT_FORMATS: tuple[str, ...] = (".png", ".pdf", ".svg")
-
-
-def check_plot_path(path: str | Path) -> Path:
-    """Check that a figure can be written to ``path``.
-
-    Parameters
-    ----------
-    path : str or pathlib.Path
-        Output file; its extension selects the format.
-
-    Returns
-    -------
-    pathlib.Path
-        ``path`` as a :class:`~pathlib.Path`.
-
-    Raises
-    ------
-    relaxgrip.errors.InputError
-        If the extension is not one of :data:`PLOT_FORMATS` or the parent
-        directory does not exist (it is not created).
-    """
-    path = Path(path)
-    if path.suffix.lower() not in PLOT_FORMATS:
-        raise InputError(
-            f"{path}: unsupported plot format {path.suffix or '(none)'!r}; "
-            f"use one of {', '.join(PLOT_FORMATS)}"
-        )
-    if not path.parent.is_dir():
-        raise InputError(f"{path}: directory {path.parent} does not exist")
-    return path
+__all__ = ["plot_relaxation_fit"]
 
 
 def plot_relaxation_fit(result: RelaxationFitResult, path: str | Path) -> Path:
@@ -66,14 +34,10 @@ def plot_relaxation_fit(result: RelaxationFitResult, path: str | Path) -> Path:
     Raises
     ------
     relaxgrip.errors.InputError
-        See :func:`check_plot_path`.
+        If the format is unsupported or the directory does not exist, see
+        :func:`relaxgrip.plots.common.check_plot_path`.
     """
     path = check_plot_path(path)
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib.figure import Figure
-
     shown = result.time_s > 0
     t = result.time_s[shown]
     f = result.force_n[shown]
@@ -94,7 +58,7 @@ def plot_relaxation_fit(result: RelaxationFitResult, path: str | Path) -> Path:
         ),
     )
 
-    fig = Figure(figsize=(8.0, 6.0), layout="constrained")
+    fig = new_figure(8.0, 6.0)
     ax_f, ax_r = fig.subplots(2, 1, sharex=True, height_ratios=(3, 1))
     ax_f.plot(t, f, ".", color="0.4", markersize=2, label="measured")
     for model_n, color, label in curves:
@@ -113,5 +77,4 @@ def plot_relaxation_fit(result: RelaxationFitResult, path: str | Path) -> Path:
     ax_f.legend(loc="best", fontsize="small")
     ax_r.set_xlabel("time since hold start (s)")
     ax_r.set_ylabel("model − measured (N)")
-    fig.savefig(path)
-    return path
+    return save_figure(fig, path)

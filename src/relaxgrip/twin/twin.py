@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from relaxgrip.backend import BackendInfo, Command, Observation, Truth
 from relaxgrip.clock import Clock, VirtualClock
+from relaxgrip.errors import InputError
 from relaxgrip.physics.beam import FingerParams, beam_grid, bending_stiffness_n_m2, unit_profile_m_per_n
 from relaxgrip.physics.contact import adhesion_pulloff_n, friction_capacity_n, series_contact
 from relaxgrip.physics.smp import relaxation_fraction, shift_factor
@@ -166,6 +167,8 @@ class GripperTwin:
     def reset(self, seed: int | None = None) -> Observation:
         """Draw a new run (``seed`` or the previous one) and return to the open state."""
         if seed is not None:
+            if int(seed) < 0:
+                raise InputError(f"seed must be a non-negative integer, got {seed}")
             self.seed = int(seed)
         cfg = self.config
         self.material = TwinMaterial.draw(cfg, np.random.default_rng(self.seed))
