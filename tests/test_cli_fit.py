@@ -1,15 +1,23 @@
-"""``relaxgrip fit-relaxation`` end to end, as a subprocess, on measured and broken records."""
+"""``relaxgrip fit-relaxation`` end to end, on measured and on broken records.
+
+The acceptance cases run ``python -m relaxgrip`` as a subprocess; further
+error cases call :func:`relaxgrip.cli.main` in-process, which takes exactly
+the same path from ``InputError`` to one ``error:`` line and exit code 2.
+"""
 
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from relaxgrip.cli import main
 from relaxgrip.physics.viscoelastic import prony_force
 
 # The repository is cloned with the shared data folder beside it: <repo>/../shared.
@@ -18,9 +26,11 @@ REAL_FILES = sorted(DATA_DIR.glob("*.csv")) if DATA_DIR.is_dir() else []
 needs_data = pytest.mark.skipif(not REAL_FILES, reason=f"VHB4910 data not found in {DATA_DIR}")
 
 HEADER = "time_s,displacement_mm,force_n"
+Row = tuple[float, float, float]
 
 
 def run_cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
+    """``python -m relaxgrip fit-relaxation ARGS`` in a fresh interpreter."""
     return subprocess.run(
         [sys.executable, "-m", "relaxgrip", "fit-relaxation", *map(str, args)],
         capture_output=True,
@@ -30,7 +40,29 @@ def run_cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
     )
 
 
-def synthetic_rows() -> list[tuple[float, float, float]]:
+def run_main(
+    args: list[str | Path], monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> tuple[int, str, str]:
+    """``relaxgrip fit-relaxation ARGS`` in-process: exit code, stdout, stderr."""
+    monkeypatch.setattr(sys, "argv", ["relaxgrip", "fit-relaxation", *map(str, args)])
+    with pytest.raises(SystemExit) as exit_info:
+        main()
+    out, err = capsys.readouterr()
+    code = exit_info.value.code
+    return (code if isinstance(code, int) else 1), out, err
+
+
+def assert_one_error_line(code: int, out: str, err: str, expected: str) -> None:
+    assert code == 2
+    assert out == ""
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("error: ")
+    assert expected in lines[0]
+
+
+def synthetic_rows() -> list[Row]:
     """A 2 s ramp to 40 mm at 50 Hz, then a 120 s hold (50 Hz to 10 s, 5 Hz after)."""
     t_ramp = np.arange(0.0, 2.0, 0.02)
     t_hold = np.concatenate([np.arange(0.0, 10.0, 0.02), np.arange(10.0, 120.0, 0.2)])
@@ -40,7 +72,7 @@ def synthetic_rows() -> list[tuple[float, float, float]]:
     return rows
 
 
-def write_csv(path: Path, rows: list[tuple[float, float, float]], header: str = HEADER) -> Path:
+def write_csv(path: Path, rows: list[Row], header: str = HEADER) -> Path:
     lines = [header, *(",".join(f"{v:.6f}" for v in row) for row in rows)]
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     return path
@@ -51,11 +83,25 @@ def good_csv(tmp_path: Path) -> Path:
     return write_csv(tmp_path / "good.csv", synthetic_rows())
 
 
+# --- measured records (acceptance) ----------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def real_runs() -> dict[Path, subprocess.CompletedProcess[str]]:
+    """``--json`` runs on every measured record, concurrently (each is a separate process)."""
+    with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
+        runs = pool.map(lambda path: run_cli(path, "--json"), REAL_FILES)
+        return dict(zip(REAL_FILES, runs, strict=True))
+
+
 @needs_data
 @pytest.mark.parametrize("path", REAL_FILES, ids=lambda p: p.name)
-def test_fits_measured_vhb4910_record(path: Path) -> None:
-    proc = run_cli(path, "--json")
+def test_fits_measured_vhb4910_record(
+    path: Path, real_runs: dict[Path, subprocess.CompletedProcess[str]]
+) -> None:
+    proc = real_runs[path]
     assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == ""
     out = json.loads(proc.stdout)  # exactly one JSON document on stdout
     assert set(out) == {"file", "hold_start_s", "window_s", "weighting", "reduced", "prony"}
     assert out["file"] == str(path)
@@ -75,34 +121,45 @@ def test_fits_measured_vhb4910_record(path: Path) -> None:
     assert out["reduced"]["nrmse"] > out["prony"]["nrmse"]
 
 
-def test_table_output(good_csv: Path) -> None:
-    proc = run_cli(good_csv, "--terms", "2")
-    assert proc.returncode == 0, proc.stderr
-    assert "NRMSE" in proc.stdout
-    assert "AUC_rel" in proc.stdout
-    assert "Prony (2 terms)" in proc.stdout
-
-
-def test_window_and_weighting_options(good_csv: Path) -> None:
-    proc = run_cli(good_csv, "--json", "--window-s", "40", "--terms", "2", "--weighting", "sample")
-    assert proc.returncode == 0, proc.stderr
-    out = json.loads(proc.stdout)
-    assert out["window_s"] == pytest.approx(40.0)
-    assert out["weighting"] == "sample"
-    assert out["hold_start_s"] == pytest.approx(2.0)
-    # Noiseless two-mode data: recovered to the 6 printed decimals of the CSV.
-    terms = out["prony"]["terms"]
-    assert [term["tau_s"] for term in terms] == pytest.approx([2.0, 30.0], rel=1e-3)
-    assert out["prony"]["nrmse"] < 1e-4
+# --- options --------------------------------------------------------------------------
 
 
 def test_plot_writes_png(good_csv: Path, tmp_path: Path) -> None:
     png = tmp_path / "fit.png"
     proc = run_cli(good_csv, "--json", "--plot", png)
     assert proc.returncode == 0, proc.stderr
-    json.loads(proc.stdout)  # --plot does not add anything to the JSON output
+    json.loads(proc.stdout)  # --plot adds nothing to standard output
     assert png.read_bytes().startswith(b"\x89PNG\r\n\x1a\n")
     assert png.stat().st_size > 1000
+
+
+def test_table_output(
+    good_csv: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, out, err = run_main([good_csv, "--terms", "2"], monkeypatch, capsys)
+    assert (code, err) == (0, "")
+    for text in ("NRMSE", "AUC_rel", "reduced", "Prony (2 terms)", "F_inst", "τ2"):
+        assert text in out
+
+
+def test_window_and_weighting_options(
+    good_csv: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args: list[str | Path] = [good_csv, "--json", "--window-s", "40", "--terms", "2"]
+    code, out, err = run_main([*args, "--weighting", "sample"], monkeypatch, capsys)
+    assert (code, err) == (0, "")
+    result = json.loads(out)
+    assert result["window_s"] == pytest.approx(40.0)
+    assert result["weighting"] == "sample"
+    assert result["hold_start_s"] == pytest.approx(2.0)
+    # Noiseless two-mode data, printed to 6 decimals: recovered to that precision.
+    terms = result["prony"]["terms"]
+    assert [term["tau_s"] for term in terms] == pytest.approx([2.0, 30.0], rel=1e-3)
+    assert [term["k_n"] for term in terms] == pytest.approx([0.4, 0.3], rel=1e-3)
+    assert result["prony"]["nrmse"] < 1e-4
+
+
+# --- bad input ------------------------------------------------------------------------
 
 
 def bad_case(tmp_path: Path, name: str) -> list[str | Path]:
@@ -110,7 +167,7 @@ def bad_case(tmp_path: Path, name: str) -> list[str | Path]:
     rows = synthetic_rows()
     csv = tmp_path / f"{name}.csv"
     if name == "missing-file":
-        return [tmp_path / "nope.csv"]
+        return [tmp_path / "nope.csv", "--json"]
     if name == "missing-column":
         write_csv(csv, [(t, f, f) for t, _, f in rows], header="time_s,force_n,load")
     elif name == "nan":
@@ -125,6 +182,10 @@ def bad_case(tmp_path: Path, name: str) -> list[str | Path]:
         csv.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\xff\xfe")
     elif name == "too-few-rows":
         write_csv(csv, rows[:5])
+    elif name == "bad-number":
+        write_csv(csv, rows)
+        text = csv.read_text(encoding="utf-8").replace("0.020000,0.400000", "0.020000,0.4mm", 1)
+        csv.write_text(text, encoding="utf-8")
     else:
         write_csv(csv, rows)
     flags: dict[str, list[str | Path]] = {
@@ -141,27 +202,38 @@ def bad_case(tmp_path: Path, name: str) -> list[str | Path]:
 @pytest.mark.parametrize(
     ("name", "expected"),
     [
-        ("missing-file", "no such file"),
+        ("missing-file", "nope.csv: no such file"),
         ("missing-column", "missing column(s) displacement_mm"),
         ("nan", "line 152: force_n is 'nan'"),
         ("non-monotonic-time", "line 203: time_s 4 does not increase"),
         ("no-hold", "no hold phase"),
-        ("not-a-csv", "not a text CSV"),
-        ("too-few-rows", "only 5 data rows"),
         ("terms-0", "--terms must be >= 1"),
         ("window-negative", "--window-s must be > 0"),
+    ],
+)
+def test_bad_input_subprocess(tmp_path: Path, name: str, expected: str) -> None:
+    proc = run_cli(*bad_case(tmp_path, name))
+    assert_one_error_line(proc.returncode, proc.stdout, proc.stderr, expected)
+
+
+@pytest.mark.parametrize(
+    ("name", "expected"),
+    [
+        ("not-a-csv", "not a text CSV"),
+        ("too-few-rows", "only 5 data rows"),
+        ("bad-number", "line 3: displacement_mm value '0.4mm' is not a number"),
         ("window-too-short", "needs at least 10"),
         ("weighting-unknown", "--weighting must be one of time, sample"),
         ("plot-missing-dir", "does not exist"),
         ("plot-bad-extension", "unsupported plot format"),
     ],
 )
-def test_bad_input_is_one_error_line(tmp_path: Path, name: str, expected: str) -> None:
-    proc = run_cli(*bad_case(tmp_path, name))
-    assert proc.returncode == 2
-    assert proc.stdout == ""
-    assert "Traceback" not in proc.stderr
-    lines = proc.stderr.strip().splitlines()
-    assert len(lines) == 1, proc.stderr
-    assert lines[0].startswith("error: ")
-    assert expected in lines[0]
+def test_bad_input_in_process(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    name: str,
+    expected: str,
+) -> None:
+    code, out, err = run_main(bad_case(tmp_path, name), monkeypatch, capsys)
+    assert_one_error_line(code, out, err, expected)

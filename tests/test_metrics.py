@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -97,6 +98,6 @@ def test_perfect_prediction() -> None:
         (lambda: amplitude([]), "at least 1"),
     ],
 )
-def test_invalid_input_raises(call, match: str) -> None:  # type: ignore[no-untyped-def]
+def test_invalid_input_raises(call: Callable[[], float], match: str) -> None:
     with pytest.raises(ValueError, match=match):
         call()

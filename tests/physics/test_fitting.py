@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -170,7 +172,9 @@ def test_time_weighting_is_not_dominated_by_dense_samples() -> None:
     by_time = fit_reduced(T_S, f_n, weighting="time")
     by_sample = fit_reduced(T_S, f_n, weighting="sample")
     tail = T_S >= 10.0
-    tail_err = [float(np.sqrt(np.mean((f.predict(T_S) - f_n)[tail] ** 2))) for f in (by_time, by_sample)]
+    tail_err = [
+        float(np.sqrt(np.mean((f.predict(T_S) - f_n)[tail] ** 2))) for f in (by_time, by_sample)
+    ]
     assert tail_err[0] < tail_err[1]
 
 
@@ -202,7 +206,9 @@ def test_too_few_samples_are_rejected() -> None:
         (T_S, np.exp(-T_S), {"n_terms": 0}, "n_terms"),
     ],
 )
-def test_malformed_arrays_raise_value_error(t_s, f_n, kwargs, match) -> None:  # type: ignore[no-untyped-def]
+def test_malformed_arrays_raise_value_error(
+    t_s: np.ndarray, f_n: np.ndarray, kwargs: dict[str, Any], match: str
+) -> None:
     with pytest.raises(ValueError, match=match):
         fit_prony(t_s, f_n, **kwargs)
 
@@ -285,7 +291,7 @@ def test_hold_start_on_measured_records(path: Path) -> None:
     ],
     ids=["ramp", "zero", "returns-to-start", "constant", "oscillating"],
 )
-def test_no_hold_phase_raises(make, match: str) -> None:  # type: ignore[no-untyped-def]
+def test_no_hold_phase_raises(make: Callable[[np.ndarray], np.ndarray], match: str) -> None:
     t = np.arange(0.0, 10.0, 0.02)
     with pytest.raises(InputError, match=match):
         find_hold_start(t, make(t))

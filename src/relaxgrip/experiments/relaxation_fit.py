@@ -212,9 +212,7 @@ def load_relaxation_csv(path: str | Path) -> RelaxationRecord:
     missing = [c for c in COLUMNS if c not in header]
     if missing:
         found = ", ".join(h for h in header if h) or "none"
-        raise InputError(
-            f"{path}: missing column(s) {', '.join(missing)} (header has: {found})"
-        )
+        raise InputError(f"{path}: missing column(s) {', '.join(missing)} (header has: {found})")
     index = [header.index(c) for c in COLUMNS]
 
     data = np.empty((len(rows) - 1, len(COLUMNS)), dtype=np.float64)

@@ -36,7 +36,6 @@ from typing import Literal, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import least_squares
 
 from relaxgrip.errors import InputError
 from relaxgrip.physics.viscoelastic import prony_force, reduced_force
@@ -447,7 +446,9 @@ class _Problem:
     def log_grid(self, per_decade: int) -> FloatArray:
         """Log-spaced relaxation times over the admissible range (natural log)."""
         decades = (self.log_tau_hi - self.log_tau_lo) / math.log(10.0)
-        return np.linspace(self.log_tau_lo, self.log_tau_hi, max(2, math.ceil(decades * per_decade)))
+        return np.linspace(
+            self.log_tau_lo, self.log_tau_hi, max(2, math.ceil(decades * per_decade))
+        )
 
     def project(self, log_tau: FloatArray) -> _Projection:
         """Eliminate the amplitudes at fixed ``log tau`` (Golub–Pereyra).
@@ -480,6 +481,9 @@ class _Problem:
 
     def refine(self, log_tau0: FloatArray) -> _Solution:
         """Local variable-projection solve from ``log_tau0`` (bounded trust region)."""
+        # Imported here: scipy.optimize costs ~0.2 s at start-up of every CLI command.
+        from scipy.optimize import least_squares
+
         lo, hi = self.log_tau_lo, self.log_tau_hi
         # trf needs a strictly feasible start.
         margin = 1e-9 * (hi - lo)

@@ -1,0 +1,179 @@
+"""The digital twin: protocol, determinism, motor, heaters, contact, lift."""
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from relaxgrip.backend import Command, Gripper, check_backend
+from relaxgrip.clock import VirtualClock, WallClock
+from relaxgrip.errors import InputError
+from relaxgrip.twin import CATALOGUE, GripperTwin, ScatterParams, TwinConfig, get_object
+
+
+def run_grasp(seed: int, config: TwinConfig | None = None, seconds: float = 12.0):
+    clock = VirtualClock()
+    twin = GripperTwin(config or TwinConfig(initial_temp_c=40.0), seed=seed, clock=clock)
+    rows = []
+    for k in range(int(seconds * 30)):
+        v = 20.0 if k < 150 else 0.0
+        twin.act(Command(v, (0.3, 0.2)))
+        clock.advance(1 / 30)
+        obs = twin.observe()
+        rows.append((obs.t_s, obs.motor_position_mm, obs.truth.contact_force_n,
+                     *obs.truth.finger_temps_c[0], *obs.truth.marker_deflection_m))
+    return np.array(rows)
+
+
+def test_twin_implements_the_backend_protocol():
+    clock = VirtualClock()
+    twin = GripperTwin(clock=clock)
+    assert isinstance(twin, Gripper)
+    check_backend(twin, clock.advance)
+    assert twin.info.has_truth and twin.info.version.startswith("relaxgrip-twin-v")
+
+
+def test_same_seed_identical_run_other_seed_differs():
+    a, b, c = run_grasp(3), run_grasp(3), run_grasp(4)
+    assert np.array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+def test_virtual_time_and_step_size_independence():
+    # The integrators are exact: observing at 30 Hz or once at the end agrees.
+    cfg = TwinConfig(initial_temp_c=40.0)
+    fine, coarse = GripperTwin(cfg, seed=1), GripperTwin(cfg, seed=1)
+    for twin in (fine, coarse):
+        twin.act(Command(20.0, (0.4, 0.4)))
+    for _ in range(90):
+        fine.clock.advance(1 / 30)
+        fine.observe()
+    coarse.clock.advance(3.0)
+    a, b = fine.observe().truth, coarse.observe().truth
+    assert a.aperture_m == pytest.approx(b.aperture_m, abs=1e-9)
+    assert a.finger_temps_c[0][2] == pytest.approx(b.finger_temps_c[0][2], abs=1e-9)
+
+
+def test_wall_clock_runs_in_real_time():
+    clock = WallClock()
+    twin = GripperTwin(clock=clock)
+    twin.act(Command(10.0))
+    clock.sleep_until(0.2)
+    obs = twin.observe()
+    assert obs.t_s >= 0.2
+    assert obs.motor_position_mm == pytest.approx(10.0 * obs.t_s, abs=1.0)
+
+
+def test_motor_velocity_limit_lag_and_encoder():
+    clock = VirtualClock()
+    twin = GripperTwin(TwinConfig(object_name=None), clock=clock)
+    twin.act(Command(1000.0))
+    clock.advance(0.05)
+    lagged = twin.observe().motor_position_mm
+    limit = twin.config.motor.max_velocity_mm_s
+    assert 0 < lagged < limit * 0.05
+    clock.advance(1.0)
+    obs = twin.observe()
+    assert obs.motor_position_mm == pytest.approx(limit * 1.05 - limit * twin.config.motor.lag_s,
+                                                  abs=0.05)
+    res = twin.config.motor.encoder_resolution_mm
+    assert obs.motor_position_mm / res == pytest.approx(round(obs.motor_position_mm / res))
+    clock.advance(30.0)
+    assert twin.observe().motor_position_mm == pytest.approx(twin.config.motor.stroke_mm)
+
+
+def test_each_finger_heats_with_its_own_heater():
+    clock = VirtualClock()
+    twin = GripperTwin(TwinConfig(object_name=None), clock=clock)
+    twin.act(Command(0.0, (1.0, 0.0)))
+    clock.advance(120.0)
+    t = twin.observe().truth
+    assert np.mean(t.finger_temps_c[0]) > 55.0
+    assert np.mean(t.finger_temps_c[1]) == pytest.approx(twin.material.ambient_c, abs=0.01)
+
+
+def test_contact_force_and_relaxation_at_fixed_aperture():
+    rows = run_grasp(0, seconds=60.0)
+    force = rows[:, 2]
+    held = force[200:]
+    assert held[0] > 3.0
+    assert np.all(np.diff(held) < 1e-9), "force relaxes at a fixed aperture"
+    assert np.all(force >= 0.0)
+    assert np.all(rows[150:, -1] > 0), "the marker moves with the loaded finger"
+
+
+def test_release_brings_the_force_to_zero_and_fingers_recover():
+    clock = VirtualClock()
+    twin = GripperTwin(TwinConfig(initial_temp_c=55.0), seed=0, clock=clock)
+    twin.act(Command(20.0))
+    clock.advance(5.5)
+    assert twin.observe().truth.contact_force_n > 1.0
+    twin.act(Command(-20.0))
+    clock.advance(2.0)
+    t = twin.observe().truth
+    assert t.contact_force_n == 0.0
+    clock.advance(600.0)
+    assert max(abs(x) for x in twin.observe().truth.finger_deflection_m) < 1e-5
+
+
+def test_crushable_object_takes_a_permanent_set():
+    clock = VirtualClock()
+    twin = GripperTwin(TwinConfig(object_name="aluminium_can"), seed=0, clock=clock)
+    twin.act(Command(20.0))
+    clock.advance(5.0)
+    t = twin.observe().truth
+    assert t.contact_force_n == pytest.approx(get_object("aluminium_can").yield_force_n)
+    assert t.object_crushed and t.object_plastic_m > 0.0
+
+
+@pytest.mark.parametrize(("name", "lifted"), [("hammer", True), ("weight_1kg", False)])
+def test_lift_holds_by_friction_or_slips(name, lifted):
+    clock = VirtualClock()
+    twin = GripperTwin(TwinConfig(object_name=name, initial_temp_c=25.0), seed=0, clock=clock)
+    obj = get_object(name)
+    gap_s = (150.0 - obj.width_m * 1e3) / 20.0
+    twin.act(Command(20.0))
+    clock.advance(gap_s + 0.45)  # ~8 mm interpenetration: about 5 N
+    twin.act(Command(0.0, arm_velocity_mm_s=20.0))
+    clock.advance(1.0)
+    t = twin.observe().truth
+    assert t.object_lifted is lifted
+    assert t.object_slipping is (not lifted)
+
+
+def test_adhesion_pads_hold_a_flat_object_only_when_heated():
+    def lift(temp_c: float) -> bool:
+        clock = VirtualClock()
+        cfg = TwinConfig(object_name="flat_box", initial_temp_c=temp_c)
+        twin = GripperTwin(cfg, seed=0, clock=clock)
+        twin.act(Command(20.0, (0.5, 0.5)))
+        clock.advance((150.0 - 40.0) / 20.0 + 0.05)
+        twin.act(Command(0.0, (0.5, 0.5), arm_velocity_mm_s=20.0))
+        clock.advance(0.5)
+        return twin.observe().truth.object_lifted
+
+    assert not lift(25.0)
+    assert lift(58.0)
+
+
+def test_catalogue_and_bad_input():
+    assert {"force_ball", "hammer", "orange", "balloon", "paper_cup", "glass", "aluminium_can",
+            "weight_1kg", "feather", "brush", "wrench"} <= set(CATALOGUE)
+    with pytest.raises(InputError, match="unknown object 'anvil'"):
+        TwinConfig(object_name="anvil")
+    with pytest.raises(InputError, match="outside 0-1"):
+        Command(0.0, (1.2, 0.0))
+    with pytest.raises(InputError, match="finite"):
+        Command(math.nan)
+    with pytest.raises(InputError, match="absolute zero"):
+        TwinConfig(ambient_c=-300.0)
+    with pytest.raises(InputError, match="non-negative"):
+        GripperTwin(seed=-1)
+
+
+def test_nominal_twin_has_no_scatter():
+    cfg = TwinConfig(scatter=ScatterParams().scaled(0.0))
+    a, b = GripperTwin(cfg, seed=1).material, GripperTwin(cfg, seed=2).material
+    assert a == b
+    assert replace(cfg).object is not None
