@@ -189,7 +189,8 @@ def check_backend(backend: Gripper, advance: Callable[[float], None], seconds: f
     """
     assert isinstance(backend, Gripper), "backend does not implement the Gripper protocol"
     info = backend.info
-    assert info.name and info.version, "backend info needs a name and a version"
+    assert info.name, "backend info needs a name"
+    assert info.version, "backend info needs a version"
     obs = backend.reset(seed=0)
     assert isinstance(obs, Observation), "reset() must return an Observation"
     if not info.has_truth:

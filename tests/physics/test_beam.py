@@ -76,7 +76,7 @@ def test_local_stiffness_rises_towards_the_base():
 
 
 def test_params_validate():
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="length_m > 0"):
         FingerParams(length_m=0.0)
     with pytest.raises(ValueError, match="outside"):
         unit_profile_m_per_n(0.2, 25.0, replace(UNIFORM, length_m=0.11))

@@ -32,7 +32,8 @@ def test_shift_factor_wlf_above_arrhenius_below_continuous_at_tg():
     assert shift_factor(P.tg_c + dt, P) == pytest.approx(wlf)
     ea = P.activation_energy_j_per_mol
     t_k, tg_k = P.tg_c - dt + 273.15, P.tg_c + 273.15
-    assert shift_factor(P.tg_c - dt, P) == pytest.approx(np.exp(ea / 8.314462618 * (1 / t_k - 1 / tg_k)))
+    expected = np.exp(ea / 8.314462618 * (1 / t_k - 1 / tg_k))
+    assert shift_factor(P.tg_c - dt, P) == pytest.approx(expected)
     # value and slope of ln a_T continuous at Tg
     eps = 1e-4
     lo, mid, hi = np.log(shift_factor([P.tg_c - eps, P.tg_c, P.tg_c + eps], P))
@@ -55,7 +56,7 @@ def test_relaxation_fraction_rises_with_temperature():
 
 
 def test_params_validate():
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="e_glassy_pa > e_rubbery_pa"):
         SMPParams(e_glassy_pa=1.0, e_rubbery_pa=2.0)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="relax_fraction_glassy <="):
         SMPParams(relax_fraction_glassy=0.5, relax_fraction_rubbery=0.4)

@@ -90,7 +90,7 @@ def test_dominant_mode_is_least_squares_optimum():
     t = np.linspace(0, horizon, 2001)
     loss = -np.expm1(-t[:, None] / taus) @ k
 
-    def cost(bk, tt):
+    def cost(bk: float, tt: float) -> float:
         return float(np.mean((loss + bk * np.expm1(-t / tt)) ** 2))
 
     best = cost(big_k, tau)

@@ -20,6 +20,7 @@ from relaxgrip.physics.beam import (
     beam_grid,
     deflection_area_m2,
     deflection_profile_m,
+    local_stiffness_n_per_m,
 )
 from relaxgrip.twin.config import TWIN_VERSION
 from relaxgrip.validate import check_positive, check_temp_c
@@ -96,7 +97,8 @@ class Characterization:
         idx = int(np.argmin(np.abs(self.loads_n - load_n)))
         if not np.isclose(self.loads_n[idx], load_n):
             raise ValueError(f"load {load_n} N was not characterized")
-        return self.area_m2[idx] * 1e6
+        out: FloatArray = self.area_m2[idx] * 1e6
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         """Summary as plain Python (the ``--json`` output of ``relaxgrip characterize``)."""
@@ -175,7 +177,7 @@ def characterize(
     local = np.array(
         [
             [
-                position_load_n / np.interp(a, x, deflection_profile_m(position_load_n, a, t, finger))
+                local_stiffness_n_per_m(position_load_n, t, finger, contact_m=a, at_m=a)
                 for t in temps
             ]
             for a in positions

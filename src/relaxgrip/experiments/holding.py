@@ -188,7 +188,7 @@ def run_fixed_aperture_hold(
     thermostat = TruthThermostat(temp_c, duty_for_mean_temp(temp_c, cfg.heat, cfg.ambient_c))
     t0 = close_to_force(twin, target_n, thermostat, rate_hz)
     dt = 1.0 / rate_hz
-    n = int(round(duration_s * rate_hz)) + 1
+    n = round(duration_s * rate_hz) + 1
     t = np.empty(n)
     force = np.empty(n)
     temp = np.empty(n)

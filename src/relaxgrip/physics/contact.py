@@ -159,7 +159,9 @@ class AdhesionParams:
     width_k: float = 2.5
 
 
-def adhesion_pulloff_n(pad_temp_c: ArrayLike, flat_surface: bool, params: AdhesionParams) -> FloatArray:
+def adhesion_pulloff_n(
+    pad_temp_c: ArrayLike, flat_surface: bool, params: AdhesionParams
+) -> FloatArray:
     """Pull-off force the heated pads add on a flat surface (N).
 
     Parameters
@@ -179,4 +181,5 @@ def adhesion_pulloff_n(pad_temp_c: ArrayLike, flat_surface: bool, params: Adhesi
     t = np.asarray(pad_temp_c, dtype=np.float64)
     if not flat_surface:
         return np.zeros_like(t)
-    return params.max_pulloff_n * 0.5 * (1.0 + np.tanh(0.5 * (t - params.activation_c) / params.width_k))
+    activation = 0.5 * (1.0 + np.tanh(0.5 * (t - params.activation_c) / params.width_k))
+    return params.max_pulloff_n * activation

@@ -20,6 +20,7 @@ gripper's holding behaviour, not the universal 17.44 / 51.6 K of bulk polymers.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -90,7 +91,7 @@ class SMPParams:
         ``E_a = R Tg^2 C1 ln(10) / C2``.
         """
         tg_k = self.tg_c + ZERO_CELSIUS_K
-        return GAS_CONSTANT_J_PER_MOL_K * tg_k**2 * self.wlf_c1 * np.log(10.0) / self.wlf_c2_k
+        return GAS_CONSTANT_J_PER_MOL_K * tg_k**2 * self.wlf_c1 * math.log(10.0) / self.wlf_c2_k
 
 
 def glassy_fraction(temp_c: ArrayLike, params: SMPParams) -> FloatArray:

@@ -179,7 +179,8 @@ def heat_step(
     if not 0.0 <= duty <= 1.0:
         raise ValueError(f"heater duty must be in [0, 1], got {duty}")
     ad, bd = discrete_heat_system(params, float(dt_s))
-    return ad @ np.asarray(temps_c, dtype=np.float64) + bd @ np.array([duty, ambient_c])
+    out: FloatArray = ad @ np.asarray(temps_c, dtype=np.float64) + bd @ np.array([duty, ambient_c])
+    return out
 
 
 def steady_state_c(duty: float, params: HeatParams, ambient_c: float) -> FloatArray:

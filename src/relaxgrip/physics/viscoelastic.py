@@ -34,9 +34,9 @@ FloatArray = NDArray[np.float64]
 __all__ = [
     "PronySeries",
     "RelaxationParams",
-    "finger_prony",
     "branch_update",
     "dominant_mode",
+    "finger_prony",
     "phi1",
     "prony_force",
     "reduced_force",

@@ -142,7 +142,9 @@ class TwinConfig:
         for name in ("contact_position_m", "marker_position_m"):
             value = getattr(self, name)
             if not 0.0 < value <= self.finger.length_m:
-                raise InputError(f"{name} {value} m is outside the finger (0, {self.finger.length_m}]")
+                raise InputError(
+                    f"{name} {value} m is outside the finger (0, {self.finger.length_m}]"
+                )
 
     @property
     def object(self) -> ObjectSpec | None:

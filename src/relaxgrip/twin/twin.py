@@ -20,7 +20,12 @@ from numpy.typing import NDArray
 from relaxgrip.backend import BackendInfo, Command, Observation, Truth
 from relaxgrip.clock import Clock, VirtualClock
 from relaxgrip.errors import InputError
-from relaxgrip.physics.beam import FingerParams, beam_grid, bending_stiffness_n_m2, unit_profile_m_per_n
+from relaxgrip.physics.beam import (
+    FingerParams,
+    beam_grid,
+    bending_stiffness_n_m2,
+    unit_profile_m_per_n,
+)
 from relaxgrip.physics.contact import adhesion_pulloff_n, friction_capacity_n, series_contact
 from relaxgrip.physics.smp import relaxation_fraction, shift_factor
 from relaxgrip.physics.thermal import (
@@ -75,7 +80,8 @@ class TwinMaterial:
         """Draw one run's scatter from ``rng``."""
         sc = config.scatter
         smp = config.finger.smp
-        batch = replace(config.finger, smp=replace(smp, tg_c=smp.tg_c + sc.tg_k * rng.standard_normal()))
+        tg_c = smp.tg_c + sc.tg_k * rng.standard_normal()
+        batch = replace(config.finger, smp=replace(smp, tg_c=tg_c))
 
         def pair(sigma: float) -> tuple[float, float]:
             a, b = np.exp(sigma * rng.standard_normal(2))
@@ -119,7 +125,8 @@ class _FingerStiffness:
         w = np.asarray(config.relax.branch_weights)
         self.k_e = k_inst * (1.0 - g)
         self.k_i = k_inst * g * w
-        self.tau = np.asarray(config.relax.tau_ref_s) * float(shift_factor(temp_eff, smp)) * tau_scale
+        a_t = float(shift_factor(temp_eff, smp))
+        self.tau = np.asarray(config.relax.tau_ref_s) * a_t * tau_scale
         self._coeffs: tuple[float, tuple[float, ...], tuple[float, ...], float] | None = None
         self.marker_ratio = float(np.interp(marker_m, x, z)) / c_a
         self.slope_ratio = float(np.interp(marker_m, x, slope)) / c_a
@@ -128,7 +135,7 @@ class _FingerStiffness:
         self.temps_c = temps_c.copy()
 
     def step_coefficients(self, dt_s: float) -> tuple[tuple[float, ...], tuple[float, ...], float]:
-        """Branch decay ``e^{-dt/tau_i}``, gains ``k_i phi1(dt/tau_i)`` and their sum over ``dt_s``."""
+        """Branch decays ``e^{-dt/tau_i}``, gains ``k_i phi1(dt/tau_i)`` and the gains' sum."""
         if self._coeffs is None or self._coeffs[0] != dt_s:
             h = dt_s / self.tau
             gain = self.k_i * phi1(h)

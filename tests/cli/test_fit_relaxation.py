@@ -10,18 +10,16 @@ from __future__ import annotations
 import json
 import os
 import subprocess
-import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from relaxgrip.cli import main
 from relaxgrip.physics.viscoelastic import prony_force
+from tests.clitools import SHARED_DIR, assert_one_error_line, run_cli, run_main
 
-# The repository is cloned with the shared data folder beside it: <repo>/../shared.
-DATA_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "vhb4910-relaxation"
+DATA_DIR = SHARED_DIR / "data" / "vhb4910-relaxation"
 REAL_FILES = sorted(DATA_DIR.glob("*.csv")) if DATA_DIR.is_dir() else []
 needs_data = pytest.mark.skipif(not REAL_FILES, reason=f"VHB4910 data not found in {DATA_DIR}")
 
@@ -29,37 +27,16 @@ HEADER = "time_s,displacement_mm,force_n"
 Row = tuple[float, float, float]
 
 
-def run_cli(*args: str | Path) -> subprocess.CompletedProcess[str]:
+def run_fit(*args: str | Path) -> subprocess.CompletedProcess[str]:
     """``python -m relaxgrip fit-relaxation ARGS`` in a fresh interpreter."""
-    return subprocess.run(
-        [sys.executable, "-m", "relaxgrip", "fit-relaxation", *map(str, args)],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        check=False,
-    )
+    return run_cli("fit-relaxation", *args, timeout_s=120.0)
 
 
-def run_main(
+def run_fit_main(
     args: list[str | Path], monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> tuple[int, str, str]:
     """``relaxgrip fit-relaxation ARGS`` in-process: exit code, stdout, stderr."""
-    monkeypatch.setattr(sys, "argv", ["relaxgrip", "fit-relaxation", *map(str, args)])
-    with pytest.raises(SystemExit) as exit_info:
-        main()
-    out, err = capsys.readouterr()
-    code = exit_info.value.code
-    return (code if isinstance(code, int) else 1), out, err
-
-
-def assert_one_error_line(code: int, out: str, err: str, expected: str) -> None:
-    assert code == 2
-    assert out == ""
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    assert lines[0].startswith("error: ")
-    assert expected in lines[0]
+    return run_main(["fit-relaxation", *args], monkeypatch, capsys)
 
 
 def synthetic_rows() -> list[Row]:
@@ -90,7 +67,7 @@ def good_csv(tmp_path: Path) -> Path:
 def real_runs() -> dict[Path, subprocess.CompletedProcess[str]]:
     """``--json`` runs on every measured record, concurrently (each is a separate process)."""
     with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
-        runs = pool.map(lambda path: run_cli(path, "--json"), REAL_FILES)
+        runs = pool.map(lambda path: run_fit(path, "--json"), REAL_FILES)
         return dict(zip(REAL_FILES, runs, strict=True))
 
 
@@ -126,7 +103,7 @@ def test_fits_measured_vhb4910_record(
 
 def test_plot_writes_png(good_csv: Path, tmp_path: Path) -> None:
     png = tmp_path / "fit.png"
-    proc = run_cli(good_csv, "--json", "--plot", png)
+    proc = run_fit(good_csv, "--json", "--plot", png)
     assert proc.returncode == 0, proc.stderr
     json.loads(proc.stdout)  # --plot adds nothing to standard output
     assert png.read_bytes().startswith(b"\x89PNG\r\n\x1a\n")
@@ -136,7 +113,7 @@ def test_plot_writes_png(good_csv: Path, tmp_path: Path) -> None:
 def test_table_output(
     good_csv: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    code, out, err = run_main([good_csv, "--terms", "2"], monkeypatch, capsys)
+    code, out, err = run_fit_main([good_csv, "--terms", "2"], monkeypatch, capsys)
     assert (code, err) == (0, "")
     for text in ("NRMSE", "AUC_rel", "reduced", "Prony (2 terms)", "F_inst", "τ2"):
         assert text in out
@@ -146,7 +123,7 @@ def test_window_and_weighting_options(
     good_csv: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     args: list[str | Path] = [good_csv, "--json", "--window-s", "40", "--terms", "2"]
-    code, out, err = run_main([*args, "--weighting", "sample"], monkeypatch, capsys)
+    code, out, err = run_fit_main([*args, "--weighting", "sample"], monkeypatch, capsys)
     assert (code, err) == (0, "")
     result = json.loads(out)
     assert result["window_s"] == pytest.approx(40.0)
@@ -212,7 +189,7 @@ def bad_case(tmp_path: Path, name: str) -> list[str | Path]:
     ],
 )
 def test_bad_input_subprocess(tmp_path: Path, name: str, expected: str) -> None:
-    proc = run_cli(*bad_case(tmp_path, name))
+    proc = run_fit(*bad_case(tmp_path, name))
     assert_one_error_line(proc.returncode, proc.stdout, proc.stderr, expected)
 
 
@@ -235,5 +212,5 @@ def test_bad_input_in_process(
     name: str,
     expected: str,
 ) -> None:
-    code, out, err = run_main(bad_case(tmp_path, name), monkeypatch, capsys)
+    code, out, err = run_fit_main(bad_case(tmp_path, name), monkeypatch, capsys)
     assert_one_error_line(code, out, err, expected)

@@ -1,0 +1,37 @@
+"""``relaxgrip bench``: the report's shape (speed itself is measured, never asserted)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.clitools import assert_one_error_line, run_main
+
+
+def test_json_report_has_medians_and_realtime_factor(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    code, out, _ = run_main(["bench", "twin-hold", "--repeat", "1", "--json"], monkeypatch, capsys)
+    assert code == 0
+    report = json.loads(out)
+    (bench,) = report["benchmarks"]
+    assert bench["name"] == "twin-hold"
+    assert bench["runs"] == 1
+    assert bench["median_s"] > 0.0
+    assert bench["realtime_factor"] == pytest.approx(280.0 / bench["median_s"])
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [(["bench", "warp-drive"], "unknown benchmark 'warp-drive'"),
+     (["bench", "--repeat", "0"], "--repeat must be >= 1")],
+)
+def test_bad_flags(
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    args: list[str],
+    expected: str,
+) -> None:
+    code, out, err = run_main(list(args), monkeypatch, capsys)
+    assert_one_error_line(code, out, err, expected)
