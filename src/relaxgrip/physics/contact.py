@@ -91,21 +91,27 @@ def series_contact(
     """
     if min(finger_stiffness_n_per_m) <= 0 or object_stiffness_n_per_m <= 0:
         raise ValueError("stiffnesses must be > 0")
-    pairs = tuple(zip(finger_stiffness_n_per_m, finger_offset_n, strict=True))
-    compliance = sum(1.0 / k for k, _ in pairs) + 1.0 / object_stiffness_n_per_m
-    force = (delta_m + sum(c / k for k, c in pairs)) / compliance
+    if len(finger_stiffness_n_per_m) != len(finger_offset_n):
+        raise ValueError("one offset per finger stiffness")
+    finger_compliance = 0.0
+    preload = 0.0
+    for k, c in zip(finger_stiffness_n_per_m, finger_offset_n):  # noqa: B905 (lengths checked)
+        finger_compliance += 1.0 / k
+        preload += c / k
+    force = (delta_m + preload) / (finger_compliance + 1.0 / object_stiffness_n_per_m)
     if force <= 0.0:
-        return SeriesContact(0.0, tuple(-c / k for k, c in pairs), 0.0, 0.0)
-    plastic = 0.0
-    if force > object_yield_n:
+        force = 0.0
+    elif force > object_yield_n:
         force = object_yield_n
-        x_fingers = tuple((force - c) / k for k, c in pairs)
-        elastic = force / object_stiffness_n_per_m
-        plastic = max(0.0, delta_m - sum(x_fingers) - elastic)
-        return SeriesContact(force, x_fingers, elastic, plastic)
-    return SeriesContact(
-        force, tuple((force - c) / k for k, c in pairs), force / object_stiffness_n_per_m, 0.0
+    x_fingers = tuple(
+        (force - c) / k
+        for k, c in zip(finger_stiffness_n_per_m, finger_offset_n)  # noqa: B905 (lengths checked)
     )
+    if force == 0.0:
+        return SeriesContact(0.0, x_fingers, 0.0, 0.0)
+    elastic = force / object_stiffness_n_per_m
+    plastic = max(0.0, delta_m - sum(x_fingers) - elastic) if force == object_yield_n else 0.0
+    return SeriesContact(force, x_fingers, elastic, plastic)
 
 
 def friction_capacity_n(

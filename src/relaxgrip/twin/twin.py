@@ -12,6 +12,7 @@ time.
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -197,7 +198,7 @@ class GripperTwin:
             duty = duty_for_mean_temp(cfg.initial_temp_c, cfg.heat, ambient)
             start = steady_state_c(duty, cfg.heat, ambient)
             start += cfg.initial_temp_c - float(np.mean(start))
-        self._temps = np.vstack([start, start])
+        self._set_temps(np.vstack([start, start]))
         self._x = [0.0, 0.0]
         n_branches = len(cfg.relax.tau_ref_s)
         self._branches = [[0.0] * n_branches, [0.0] * n_branches]
@@ -206,6 +207,8 @@ class GripperTwin:
         self._step_cache: tuple[float, FloatArray, FloatArray] | None = None
         self._heat_dt = 0.0
         self._heat_duty = [0.0, 0.0]
+        self._motor_decay = (0.0, 1.0)
+        self._stiffening_per_m2 = cfg.finger.stiffening / cfg.finger.length_m**2
         return self.observe()
 
     def observe(self) -> Observation:
@@ -265,7 +268,7 @@ class GripperTwin:
             marker_deflection_m=(self._x[0] * s[0].marker_ratio, self._x[1] * s[1].marker_ratio),
             marker_slope_rad=(self._x[0] * s[0].slope_ratio, self._x[1] * s[1].slope_ratio),
             contact_position_m=self.material.contact_position_m,
-            finger_temps_c=(tuple(self._temps[0].tolist()), tuple(self._temps[1].tolist())),
+            finger_temps_c=self._temps_tuple,
             finger_effective_temp_c=(s[0].temp_eff_c, s[1].temp_eff_c),
             aperture_m=self.aperture_m,
             object_name=None if obj is None else obj.name,
@@ -300,7 +303,9 @@ class GripperTwin:
         # Motor: first-order velocity lag, integrated exactly over the step.
         mp = cfg.motor
         v_cmd = min(max(cmd.motor_velocity_mm_s, -mp.max_velocity_mm_s), mp.max_velocity_mm_s)
-        e = math.exp(-dt / mp.lag_s)
+        if self._motor_decay[0] != dt:
+            self._motor_decay = (dt, math.exp(-dt / mp.lag_s))
+        e = self._motor_decay[1]
         pos = self._motor_mm + v_cmd * dt + (self._motor_v - v_cmd) * mp.lag_s * (1.0 - e)
         self._motor_v = v_cmd + (self._motor_v - v_cmd) * e
         if not 0.0 <= pos <= mp.stroke_mm:
@@ -321,7 +326,7 @@ class GripperTwin:
         # Fingers: exact Maxwell update (Eq. 2) made implicit in the new
         # deflection, F_j = K_j X_j + c_j, then the series contact solve.
         # Plain floats: two fingers of a few branches, where NumPy calls cost more.
-        inv_len2 = cfg.finger.stiffening / cfg.finger.length_m**2
+        inv_len2 = self._stiffening_per_m2
         k_eff: list[float] = []
         offset: list[float] = []
         coeffs = []
@@ -329,7 +334,7 @@ class GripperTwin:
             decay, gain, gain_sum = self._stiff[j].step_coefficients(dt)
             x = self._x[j]
             stiffen = 1.0 + inv_len2 * x * x
-            memory = sum(f * d for f, d in zip(self._branches[j], decay, strict=True))
+            memory = sum(map(operator.mul, self._branches[j], decay))
             k_eff.append(stiffen * (self._stiff[j].k_e + gain_sum))
             offset.append(stiffen * (memory - gain_sum * x))
             coeffs.append((decay, gain))
@@ -354,6 +359,10 @@ class GripperTwin:
         if obj is not None and self._engaged:
             self._lift(obj, force)
 
+    def _set_temps(self, temps_c: FloatArray) -> None:
+        self._temps = temps_c
+        self._temps_tuple = (tuple(temps_c[0].tolist()), tuple(temps_c[1].tolist()))
+
     def _advance_heat(self) -> None:
         dt = self._heat_dt
         if dt <= 0.0:
@@ -364,7 +373,7 @@ class GripperTwin:
         _, ad_t, bd_t = self._step_cache
         ambient = self.material.ambient_c
         inputs = np.array([[self._heat_duty[0] / dt, ambient], [self._heat_duty[1] / dt, ambient]])
-        self._temps = self._temps @ ad_t + inputs @ bd_t
+        self._set_temps(self._temps @ ad_t + inputs @ bd_t)
         self._heat_dt = 0.0
         self._heat_duty = [0.0, 0.0]
         if np.abs(self._temps - self._stiff_temps).max() > _REFRESH_K:
