@@ -1,0 +1,456 @@
+"""Geometry of a gripper rig: cameras, marker, fingers, and the frames that join them.
+
+The twin renders its camera frames from this description and perception
+interprets frames with it, so the two can never disagree about where a camera
+looks.  A real rig is described by the same dataclasses (loaded from a TOML
+file by the hardware layer).
+
+Frames (right-handed; lengths in m; transforms are 4×4 homogeneous matrices
+named ``a2b``: they map points given in frame ``a`` to frame ``b``):
+
+* **gripper** ``G``: origin at the base, midway between the finger roots;
+  ``x`` forward along the fingers, ``y`` towards finger 1, ``z`` up.
+* **finger** ``F_j``: origin at finger ``j``'s root on its centre line; ``x``
+  along the finger to the tip, ``z`` outwards, away from the object (the
+  direction in which a grasp deflects the finger), ``y = z × x``.
+* **RGB camera** ``C`` (OpenCV): ``x`` right, ``y`` down, ``z`` along the
+  optical axis.  It sits at the root of the marker finger and moves with it,
+  looking along the finger through its open skeleton.
+* **marker** ``M`` (OpenCV ArUco): origin at the marker centre, ``x`` right
+  and ``y`` up in the marker image, ``z`` out of the marker towards the camera.
+* **infrared camera** ``I`` (OpenCV): fixed on the gripper base, looking
+  forward and down on both fingers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from relaxgrip.errors import InputError
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "ARUCO_DICTIONARIES",
+    "CameraIntrinsics",
+    "FingerGeometry",
+    "IrCameraMount",
+    "MarkerMount",
+    "RgbCameraMount",
+    "RigGeometry",
+    "invert_transform",
+    "rotation_x",
+    "rotation_y",
+    "rotation_z",
+    "transform_from",
+    "transform_points",
+]
+
+#: Dictionary names accepted for markers (OpenCV's ``DICT_*`` constants, without the prefix).
+ARUCO_DICTIONARIES: tuple[str, ...] = tuple(
+    sorted(name[5:] for name in dir(cv2.aruco) if name.startswith("DICT_"))
+)
+
+
+def rotation_x(angle_rad: float) -> FloatArray:
+    """Rotation matrix about ``x`` by ``angle_rad`` (right-hand rule)."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rotation_y(angle_rad: float) -> FloatArray:
+    """Rotation matrix about ``y`` by ``angle_rad`` (right-hand rule)."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rotation_z(angle_rad: float) -> FloatArray:
+    """Rotation matrix about ``z`` by ``angle_rad`` (right-hand rule)."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def transform_from(rotation: ArrayLike, translation_m: ArrayLike) -> FloatArray:
+    """4×4 homogeneous transform ``[R t; 0 1]``."""
+    out = np.eye(4)
+    out[:3, :3] = np.asarray(rotation, dtype=np.float64)
+    out[:3, 3] = np.asarray(translation_m, dtype=np.float64)
+    return out
+
+
+def invert_transform(a2b: FloatArray) -> FloatArray:
+    """Inverse of a rigid transform: ``b2a``."""
+    rot = a2b[:3, :3]
+    return transform_from(rot.T, -rot.T @ a2b[:3, 3])
+
+
+def transform_points(a2b: FloatArray, points_m: ArrayLike) -> FloatArray:
+    """Apply ``a2b`` to points of shape ``(..., 3)``."""
+    p = np.asarray(points_m, dtype=np.float64)
+    out: FloatArray = p @ a2b[:3, :3].T + a2b[:3, 3]
+    return out
+
+
+@dataclass(frozen=True)
+class CameraIntrinsics:
+    """Pinhole intrinsics with optional OpenCV distortion.
+
+    Attributes
+    ----------
+    width_px, height_px : int
+        Image size (pixels).
+    fx_px, fy_px : float
+        Focal lengths (pixels).
+    cx_px, cy_px : float
+        Principal point (pixels; pixel centres at integer coordinates).
+    dist : tuple of float
+        OpenCV distortion coefficients ``(k1, k2, p1, p2[, k3, ...])``; empty
+        for none.
+    """
+
+    width_px: int
+    height_px: int
+    fx_px: float
+    fy_px: float
+    cx_px: float
+    cy_px: float
+    dist: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.width_px < 1 or self.height_px < 1:
+            raise InputError(f"image size must be positive, got {self.width_px}x{self.height_px}")
+        for name in ("fx_px", "fy_px"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise InputError(f"{name} must be a positive number of pixels, got {value}")
+        for name in ("cx_px", "cy_px"):
+            if not math.isfinite(getattr(self, name)):
+                raise InputError(f"{name} must be finite, got {getattr(self, name)}")
+        if len(self.dist) not in (0, 4, 5, 8, 12, 14):
+            raise InputError(
+                f"distortion needs 4, 5, 8, 12 or 14 coefficients, got {len(self.dist)}"
+            )
+        if not all(math.isfinite(d) for d in self.dist):
+            raise InputError("distortion coefficients must be finite")
+
+    @classmethod
+    def centred(
+        cls, width_px: int, height_px: int, fx_px: float, fy_px: float | None = None
+    ) -> CameraIntrinsics:
+        """Intrinsics with the principal point at the image centre."""
+        return cls(
+            width_px, height_px, fx_px, fx_px if fy_px is None else fy_px,
+            (width_px - 1) / 2.0, (height_px - 1) / 2.0,
+        )
+
+    @property
+    def matrix(self) -> FloatArray:
+        """Camera matrix ``K`` (3×3)."""
+        return np.array(
+            [[self.fx_px, 0.0, self.cx_px], [0.0, self.fy_px, self.cy_px], [0.0, 0.0, 1.0]]
+        )
+
+    @property
+    def dist_coeffs(self) -> FloatArray | None:
+        """Distortion coefficients for OpenCV, or ``None``."""
+        return np.asarray(self.dist, dtype=np.float64) if self.dist else None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(height, width)`` of a frame."""
+        return self.height_px, self.width_px
+
+    def project(self, points_cam_m: ArrayLike) -> FloatArray:
+        """Project camera-frame points ``(..., 3)`` to pixels ``(..., 2)``."""
+        p = np.asarray(points_cam_m, dtype=np.float64)
+        flat = p.reshape(-1, 3)
+        if self.dist:
+            px, _ = cv2.projectPoints(flat, np.zeros(3), np.zeros(3), self.matrix, self.dist_coeffs)
+            out: FloatArray = px.reshape(*p.shape[:-1], 2).astype(np.float64)
+            return out
+        uv = flat[:, :2] / flat[:, 2:3]
+        out = uv * np.array([self.fx_px, self.fy_px]) + np.array([self.cx_px, self.cy_px])
+        return out.reshape(*p.shape[:-1], 2)
+
+    def normalized(self, pixels: ArrayLike) -> FloatArray:
+        """Undistorted normalised image coordinates ``(x/z, y/z)`` of pixels ``(..., 2)``."""
+        px = np.asarray(pixels, dtype=np.float64)
+        flat = px.reshape(-1, 1, 2)
+        if self.dist:
+            out: FloatArray = cv2.undistortPoints(flat, self.matrix, self.dist_coeffs).astype(
+                np.float64
+            )
+        else:
+            centre = np.array([self.cx_px, self.cy_px])
+            out = (flat - centre) / np.array([self.fx_px, self.fy_px])
+        return out.reshape(px.shape)
+
+
+@dataclass(frozen=True)
+class FingerGeometry:
+    """Outer shape of a finger, as the cameras see it.
+
+    Attributes
+    ----------
+    length_m : float
+        Root to tip (m).
+    thickness_m : float
+        Contact face to back face (m).
+    height_m : float
+        Extent of the contact face across the finger, along the gripper's ``z`` (m).
+    beam_positions_m : tuple of float
+        Where the SMP beams' temperatures are read along the finger (m from
+        the root): the centres of the infrared regions of interest.
+    """
+
+    length_m: float = 0.110
+    thickness_m: float = 0.012
+    height_m: float = 0.020
+    beam_positions_m: tuple[float, ...] = (0.011, 0.033, 0.055, 0.077, 0.099)
+
+    def __post_init__(self) -> None:
+        if min(self.length_m, self.thickness_m, self.height_m) <= 0:
+            raise InputError("finger length, thickness and height must be > 0")
+        if not self.beam_positions_m or not all(
+            0.0 <= x <= self.length_m for x in self.beam_positions_m
+        ):
+            raise InputError("beam positions must lie on the finger, within [0, length]")
+
+
+@dataclass(frozen=True)
+class MarkerMount:
+    """The ArUco marker on its tab inside the finger.
+
+    The tab stands in the finger's open skeleton facing the camera, tilted
+    about the bending axis so the camera sees the marker obliquely: an
+    oblique view makes the finger's bending rotation visible to first order,
+    where a face-on square only shows it through perspective.
+
+    Attributes
+    ----------
+    dictionary : str
+        OpenCV dictionary name without ``DICT_`` (e.g. ``"4X4_50"``).
+    marker_id : int
+        Marker id in the dictionary.
+    size_m : float
+        Side of the black square (m).
+    position_m : float
+        Where the tab is fixed along the finger (m from the root).
+    tilt_deg : float
+        Tab tilt about the finger's bending axis (degrees; 0 faces the camera).
+    """
+
+    dictionary: str = "4X4_50"
+    marker_id: int = 0
+    size_m: float = 0.012
+    position_m: float = 0.060
+    tilt_deg: float = 30.0
+
+    def __post_init__(self) -> None:
+        if self.dictionary not in ARUCO_DICTIONARIES:
+            raise InputError(
+                f"unknown ArUco dictionary {self.dictionary!r}; "
+                f"known: {', '.join(ARUCO_DICTIONARIES)}"
+            )
+        if not self.size_m > 0:
+            raise InputError(f"marker size must be > 0 m, got {self.size_m}")
+        if not abs(self.tilt_deg) < 75.0:
+            raise InputError(f"marker tilt must be within ±75°, got {self.tilt_deg}")
+
+    @property
+    def aruco_dictionary(self) -> cv2.aruco.Dictionary:
+        """The OpenCV dictionary object."""
+        return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, "DICT_" + self.dictionary))
+
+    @property
+    def object_points_m(self) -> FloatArray:
+        """Marker corners in the marker frame, in OpenCV's order for ``SOLVEPNP_IPPE_SQUARE``."""
+        h = self.size_m / 2.0
+        return np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+
+    def marker2finger(self, deflection_m: float = 0.0, slope_rad: float = 0.0) -> FloatArray:
+        """Pose of the marker in its finger's frame for a bent finger.
+
+        Parameters
+        ----------
+        deflection_m : float
+            Finger deflection ``z`` at the tab (m).
+        slope_rad : float
+            Slope angle of the finger at the tab (rad): the beam's ``x`` axis
+            turns towards ``+z`` by this angle.
+
+        Returns
+        -------
+        ndarray, shape (4, 4)
+            ``marker2finger``.
+        """
+        # Unbent, the marker faces the root: its x along the finger's z,
+        # its y along the finger's y, its normal towards -x.
+        facing = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
+        rest = rotation_y(math.radians(self.tilt_deg)) @ facing
+        bend = rotation_y(-slope_rad)
+        return transform_from(bend @ rest, [self.position_m, 0.0, deflection_m])
+
+
+@dataclass(frozen=True)
+class RgbCameraMount:
+    """The RGB camera at the root of the marker finger.
+
+    Attributes
+    ----------
+    intrinsics : CameraIntrinsics
+        Default 640×480, fx = fy = 600 px.
+    rate_hz : float
+        Frame rate (Hz).
+    position_m : tuple of float
+        Optical centre in the finger frame (m).
+    toe_in_deg : float
+        Rotation of the optical axis from the finger's ``x`` towards the
+        object side (degrees), so that the grasp region is in view.
+    """
+
+    intrinsics: CameraIntrinsics = field(
+        default_factory=lambda: CameraIntrinsics.centred(640, 480, 600.0)
+    )
+    rate_hz: float = 30.0
+    position_m: tuple[float, float, float] = (-0.025, 0.0, 0.0)
+    toe_in_deg: float = 10.0
+
+    @property
+    def cam2finger(self) -> FloatArray:
+        """Camera frame to finger frame."""
+        # Looking along the finger: camera z = finger x, camera x = finger z.
+        along = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
+        # Turning towards the object (-z of the finger) is a rotation about the finger's y.
+        toe = rotation_y(math.radians(self.toe_in_deg))
+        return transform_from(toe @ along, self.position_m)
+
+    @property
+    def finger2cam(self) -> FloatArray:
+        """Finger frame to camera frame."""
+        return invert_transform(self.cam2finger)
+
+
+@dataclass(frozen=True)
+class IrCameraMount:
+    """The infrared camera on the gripper base, looking at both fingers.
+
+    Attributes
+    ----------
+    intrinsics : CameraIntrinsics
+        Default 256×192 with a 90° horizontal field of view.
+    rate_hz : float
+        Frame rate (Hz).
+    position_m : tuple of float
+        Optical centre in the gripper frame (m).
+    pitch_down_deg : float
+        Downward tilt of the optical axis from the gripper's ``x`` (degrees).
+    """
+
+    intrinsics: CameraIntrinsics = field(
+        default_factory=lambda: CameraIntrinsics.centred(256, 192, 128.0)
+    )
+    rate_hz: float = 1.0
+    position_m: tuple[float, float, float] = (-0.050, 0.0, 0.030)
+    pitch_down_deg: float = 15.0
+
+    @property
+    def cam2gripper(self) -> FloatArray:
+        """Camera frame to gripper frame."""
+        # Looking forward: camera z = gripper x, camera x = -gripper y (right in the
+        # image is finger 0's side), camera y = -gripper z (down).
+        forward = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+        pitch = rotation_y(math.radians(self.pitch_down_deg))
+        return transform_from(pitch @ forward, self.position_m)
+
+    @property
+    def gripper2cam(self) -> FloatArray:
+        """Gripper frame to camera frame."""
+        return invert_transform(self.cam2gripper)
+
+
+@dataclass(frozen=True)
+class RigGeometry:
+    """Everything perception needs to know about where things are.
+
+    Attributes
+    ----------
+    finger : FingerGeometry
+        Shape of each finger.
+    marker : MarkerMount
+        The marker on finger ``marker_finger``.
+    rgb : RgbCameraMount
+        RGB camera at the root of finger ``marker_finger``.
+    ir : IrCameraMount
+        Infrared camera on the base.
+    open_aperture_m : float
+        Gap between the contact faces at motor position 0 (m).
+    marker_finger : int
+        Finger (0 or 1) that carries the marker and the RGB camera.
+    """
+
+    finger: FingerGeometry = field(default_factory=FingerGeometry)
+    marker: MarkerMount = field(default_factory=MarkerMount)
+    rgb: RgbCameraMount = field(default_factory=RgbCameraMount)
+    ir: IrCameraMount = field(default_factory=IrCameraMount)
+    open_aperture_m: float = 0.150
+    marker_finger: int = 0
+
+    def __post_init__(self) -> None:
+        if self.marker_finger not in (0, 1):
+            raise InputError(f"marker_finger must be 0 or 1, got {self.marker_finger}")
+        if not 0.0 < self.marker.position_m <= self.finger.length_m:
+            raise InputError(
+                f"marker position {self.marker.position_m} m is outside the finger "
+                f"(0, {self.finger.length_m}]"
+            )
+
+    def aperture_m(self, motor_position_mm: float) -> float:
+        """Gap between the undeflected contact faces at an encoder position (m)."""
+        return self.open_aperture_m - motor_position_mm * 1e-3
+
+    def finger2gripper(self, j: int, aperture_m: float) -> FloatArray:
+        """Finger ``j``'s frame in the gripper frame at a given aperture."""
+        side = -1.0 if j == 0 else 1.0
+        # Outward (finger z) is -y for finger 0 and +y for finger 1; finger y = z × x.
+        rot = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, side], [0.0, -side, 0.0]])
+        offset = side * (0.5 * aperture_m + 0.5 * self.finger.thickness_m)
+        return transform_from(rot, [0.0, offset, 0.0])
+
+    def marker2cam(self, deflection_m: float = 0.0, slope_rad: float = 0.0) -> FloatArray:
+        """Marker pose in the RGB camera frame for a bent marker finger."""
+        out: FloatArray = self.rgb.finger2cam @ self.marker.marker2finger(deflection_m, slope_rad)
+        return out
+
+    def face_points_gripper(
+        self, j: int, aperture_m: float, along_m: ArrayLike, across_m: ArrayLike = 0.0
+    ) -> FloatArray:
+        """Points on finger ``j``'s contact face, in the gripper frame.
+
+        Parameters
+        ----------
+        j : int
+            Finger.
+        aperture_m : float
+            Current aperture (m).
+        along_m : array_like
+            Positions along the finger (m from the root).
+        across_m : array_like
+            Positions across the face, along the gripper's ``z`` (m from the centre line).
+
+        Returns
+        -------
+        ndarray, shape (..., 3)
+            Points (m), broadcast over ``along_m`` and ``across_m``.
+        """
+        along, across = np.broadcast_arrays(
+            np.asarray(along_m, dtype=np.float64), np.asarray(across_m, dtype=np.float64)
+        )
+        side = -1.0 if j == 0 else 1.0
+        y = side * 0.5 * aperture_m
+        return np.stack([along, np.full_like(along, y), across], axis=-1)

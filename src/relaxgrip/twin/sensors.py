@@ -1,0 +1,122 @@
+"""How the twin's sensors misbehave: noise, offsets, blur, lighting, occlusion.
+
+Geometry (where the cameras are and what they look at) lives in
+:mod:`relaxgrip.rig`, shared with perception; what lives here is the twin's
+side only: the imperfections a real sensor has and perception must cope with.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from relaxgrip.errors import InputError
+from relaxgrip.twin.objects import get_object
+
+__all__ = ["ForceSensorConfig", "IrSensorConfig", "RgbSensorConfig", "SceneObject"]
+
+
+@dataclass(frozen=True)
+class RgbSensorConfig:
+    """Rendering of the RGB camera.
+
+    Attributes
+    ----------
+    supersample : int
+        Supersampling factor: the marker is warped at this multiple of the
+        resolution, then area-averaged down (antialiased, sub-pixel edges).
+    noise_dn : float
+        Standard deviation of the pixel noise (8-bit levels).
+    blur_sigma_px : float
+        Gaussian blur of the optics (pixels); 0 for none.
+    lighting_gain : float
+        Overall brightness factor (1 is nominal).
+    lighting_flicker : float
+        Relative frame-to-frame brightness jitter (standard deviation).
+    occlusion : float
+        Fraction of the marker width covered from its left side (0 for none).
+    """
+
+    supersample: int = 4
+    noise_dn: float = 2.0
+    blur_sigma_px: float = 0.0
+    lighting_gain: float = 1.0
+    lighting_flicker: float = 0.0
+    occlusion: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.supersample <= 8:
+            raise InputError(f"supersample must be 1-8, got {self.supersample}")
+        if self.noise_dn < 0 or self.blur_sigma_px < 0 or self.lighting_flicker < 0:
+            raise InputError("noise, blur and flicker must be >= 0")
+        if not 0.05 <= self.lighting_gain <= 4.0:
+            raise InputError(f"lighting_gain must be in [0.05, 4], got {self.lighting_gain}")
+        if not 0.0 <= self.occlusion <= 1.0:
+            raise InputError(f"occlusion must be in [0, 1], got {self.occlusion}")
+
+
+@dataclass(frozen=True)
+class IrSensorConfig:
+    """Rendering of the infrared (microbolometer) camera.
+
+    Attributes
+    ----------
+    netd_k : float
+        Noise-equivalent temperature difference: per-pixel noise std (K).
+    max_offset_k : float
+        Each camera (each seed) has a fixed offset drawn uniformly in
+        ``±max_offset_k`` (K): the absolute accuracy of an uncalibrated core.
+    finger_emissivity : float
+        Emissivity of the finger skin.
+    background_emissivity : float
+        Emissivity of the scene behind the fingers (at ambient temperature).
+    psf_sigma_px : float
+        Gaussian blur of the optics (pixels).
+    """
+
+    netd_k: float = 0.05
+    max_offset_k: float = 1.0
+    finger_emissivity: float = 0.95
+    background_emissivity: float = 0.95
+    psf_sigma_px: float = 0.7
+
+    def __post_init__(self) -> None:
+        if self.netd_k < 0 or self.max_offset_k < 0 or self.psf_sigma_px < 0:
+            raise InputError("NETD, offset and blur must be >= 0")
+        for name in ("finger_emissivity", "background_emissivity"):
+            if not 0.0 < getattr(self, name) <= 1.0:
+                raise InputError(f"{name} must be in (0, 1], got {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
+class ForceSensorConfig:
+    """The force-measurement ball's internal sensor.
+
+    Attributes
+    ----------
+    rate_hz : float
+        Sampling rate (Hz).
+    noise_n : float
+        Measurement noise std (N).
+    """
+
+    rate_hz: float = 100.0
+    noise_n: float = 0.01
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    """A catalogue object standing in the scene, seen by the cameras but not grasped.
+
+    Attributes
+    ----------
+    name : str
+        Catalogue key (see :data:`relaxgrip.twin.objects.CATALOGUE`).
+    position_m : tuple of float
+        Centre in the world frame, which is the gripper frame at reset (m).
+    """
+
+    name: str
+    position_m: tuple[float, float, float]
+
+    def __post_init__(self) -> None:
+        get_object(self.name)
