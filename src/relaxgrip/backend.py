@@ -24,6 +24,7 @@ from relaxgrip.validate import check_duty, check_finite
 __all__ = [
     "BackendInfo",
     "Command",
+    "ForceSamples",
     "Frame",
     "Gripper",
     "Observation",
@@ -63,15 +64,20 @@ class Command:
         PWM duty of each finger's heater film, in [0, 1].
     arm_velocity_mm_s : float
         Vertical velocity of the arm carrying the gripper (mm/s); positive lifts.
+    approach_velocity_mm_s : float
+        Velocity of the arm along the fingers (mm/s); positive moves the
+        gripper towards the object ahead.
     """
 
     motor_velocity_mm_s: float = 0.0
     heater_duty: tuple[float, float] = (0.0, 0.0)
     arm_velocity_mm_s: float = 0.0
+    approach_velocity_mm_s: float = 0.0
 
     def __post_init__(self) -> None:
         check_finite(self.motor_velocity_mm_s, "motor_velocity_mm_s")
         check_finite(self.arm_velocity_mm_s, "arm_velocity_mm_s")
+        check_finite(self.approach_velocity_mm_s, "approach_velocity_mm_s")
         if len(self.heater_duty) != 2:
             raise InputError(f"heater_duty needs 2 values, got {len(self.heater_duty)}")
         for duty in self.heater_duty:
@@ -94,10 +100,30 @@ class Truth:
     finger_effective_temp_c: tuple[float, float]
     aperture_m: float
     object_name: str | None
+    object_ahead_m: float
     object_lifted: bool
     object_slipping: bool
     object_crushed: bool
     object_plastic_m: float
+
+
+@dataclass(frozen=True)
+class ForceSamples:
+    """Readings of a reference force sensor (the force-measurement ball).
+
+    This is ground truth: only experiments and metrics read it, never an
+    estimator or a controller.
+
+    Attributes
+    ----------
+    t_s : ndarray, shape (n,)
+        Sample times on the backend's clock (s).
+    force_n : ndarray, shape (n,)
+        Measured normal force (N).
+    """
+
+    t_s: NDArray[np.float64]
+    force_n: NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -112,6 +138,8 @@ class Observation:
         Encoder position of the closing motor (mm from fully open).
     arm_height_mm : float
         Height of the arm above its start (mm).
+    arm_forward_mm : float
+        Travel of the arm along the fingers since the start (mm).
     heater_duty : tuple of float
         Heater duty read back from the driver.
     rgb : Frame or None
@@ -120,6 +148,9 @@ class Observation:
         Latest infrared frame (1 Hz stream), if the backend has one.
     faults : frozenset of str
         Active fault flags.
+    force_ref : ForceSamples or None
+        Reference force readings since the previous observation, when a
+        force sensor is in the grasp (ground truth: experiments only).
     truth : Truth or None
         Ground truth; only the twin fills it.
     """
@@ -128,9 +159,11 @@ class Observation:
     motor_position_mm: float
     arm_height_mm: float
     heater_duty: tuple[float, float]
+    arm_forward_mm: float = 0.0
     rgb: Frame | None = None
     ir: Frame | None = None
     faults: frozenset[str] = field(default_factory=frozenset)
+    force_ref: ForceSamples | None = None
     truth: Truth | None = None
 
 

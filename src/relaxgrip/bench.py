@@ -102,7 +102,8 @@ def bench_twin_step(repeat: int) -> BenchResult:
 
     def run(seed: int) -> None:
         clock = VirtualClock()
-        twin = GripperTwin(TwinConfig(initial_temp_c=40.0), seed=seed, clock=clock)
+        cfg = TwinConfig(initial_temp_c=40.0).without_cameras()
+        twin = GripperTwin(cfg, seed=seed, clock=clock)
         twin.act(Command(20.0, (0.3, 0.3)))
         clock.advance(4.5)  # close onto the ball
         twin.act(Command(0.0, (0.3, 0.3)))

@@ -202,7 +202,7 @@ class FingerGeometry:
     thickness_m : float
         Contact face to back face (m).
     height_m : float
-        Extent of the contact face across the finger, along the gripper's ``z`` (m).
+        Extent of the finger along the gripper's ``z``: contact face height (m).
     beam_positions_m : tuple of float
         Where the SMP beams' temperatures are read along the finger (m from
         the root): the centres of the infrared regions of interest.
@@ -338,7 +338,7 @@ class RgbCameraMount:
 
 @dataclass(frozen=True)
 class IrCameraMount:
-    """The infrared camera on the gripper base, looking at both fingers.
+    """The infrared camera on the gripper base, looking down on both fingers' top faces.
 
     Attributes
     ----------
@@ -356,8 +356,8 @@ class IrCameraMount:
         default_factory=lambda: CameraIntrinsics.centred(256, 192, 128.0)
     )
     rate_hz: float = 1.0
-    position_m: tuple[float, float, float] = (-0.050, 0.0, 0.030)
-    pitch_down_deg: float = 15.0
+    position_m: tuple[float, float, float] = (-0.070, 0.0, 0.060)
+    pitch_down_deg: float = 25.0
 
     @property
     def cam2gripper(self) -> FloatArray:
@@ -427,10 +427,14 @@ class RigGeometry:
         out: FloatArray = self.rgb.finger2cam @ self.marker.marker2finger(deflection_m, slope_rad)
         return out
 
-    def face_points_gripper(
+    def top_points_gripper(
         self, j: int, aperture_m: float, along_m: ArrayLike, across_m: ArrayLike = 0.0
     ) -> FloatArray:
-        """Points on finger ``j``'s contact face, in the gripper frame.
+        """Points on finger ``j``'s top face, the face the infrared camera reads, in ``G``.
+
+        The top face is where the base-mounted thermal camera sees the SMP
+        beams without the grasped object in the way (an object between the
+        fingers would hide their contact faces).
 
         Parameters
         ----------
@@ -441,7 +445,8 @@ class RigGeometry:
         along_m : array_like
             Positions along the finger (m from the root).
         across_m : array_like
-            Positions across the face, along the gripper's ``z`` (m from the centre line).
+            Positions across the top face from its centre line, towards the
+            finger's outside (m), within ``±thickness_m / 2``.
 
         Returns
         -------
@@ -452,5 +457,5 @@ class RigGeometry:
             np.asarray(along_m, dtype=np.float64), np.asarray(across_m, dtype=np.float64)
         )
         side = -1.0 if j == 0 else 1.0
-        y = side * 0.5 * aperture_m
-        return np.stack([along, np.full_like(along, y), across], axis=-1)
+        y = side * (0.5 * aperture_m + 0.5 * self.finger.thickness_m + across)
+        return np.stack([along, y, np.full_like(along, 0.5 * self.finger.height_m)], axis=-1)

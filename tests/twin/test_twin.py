@@ -67,11 +67,12 @@ def test_virtual_time_and_step_size_independence():
 def test_wall_clock_runs_in_real_time():
     clock = WallClock()
     twin = GripperTwin(clock=clock)
+    t_act = clock.now()
     twin.act(Command(10.0))
-    clock.sleep_until(0.2)
+    clock.sleep_until(t_act + 0.2)
     obs = twin.observe()
-    assert obs.t_s >= 0.2
-    assert obs.motor_position_mm == pytest.approx(10.0 * obs.t_s, abs=1.0)
+    assert obs.t_s >= t_act + 0.2
+    assert obs.motor_position_mm == pytest.approx(10.0 * (obs.t_s - t_act), abs=1.0)
 
 
 def test_motor_velocity_limit_lag_and_encoder():

@@ -169,7 +169,8 @@ def run_fixed_aperture_hold(
     seed : int
         Twin seed (run-to-run scatter).
     config : TwinConfig, optional
-        Twin configuration (object: the force ball by default).
+        Twin configuration (default: the force ball, no cameras: the hold
+        reads ground truth only).
     rate_hz : float
         Control and sampling rate (Hz).
 
@@ -181,7 +182,8 @@ def run_fixed_aperture_hold(
     check_temp_c(temp_c, "hold temperature")
     check_positive(target_n, "target force")
     check_positive(duration_s, "hold duration")
-    cfg = replace(config if config is not None else TwinConfig(), initial_temp_c=temp_c)
+    base = config if config is not None else TwinConfig().without_cameras()
+    cfg = replace(base, initial_temp_c=temp_c)
     twin = GripperTwin(cfg, seed=seed)
     clock = twin.clock
     assert isinstance(clock, VirtualClock)

@@ -2,20 +2,22 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from relaxgrip.errors import InputError
 from relaxgrip.physics.beam import FingerParams
 from relaxgrip.physics.contact import AdhesionParams
 from relaxgrip.physics.thermal import HeatParams
 from relaxgrip.physics.viscoelastic import RelaxationParams
+from relaxgrip.rig import RigGeometry
 from relaxgrip.twin.objects import ObjectSpec, get_object
+from relaxgrip.twin.sensors import ForceSensorConfig, IrSensorConfig, RgbSensorConfig, SceneObject
 from relaxgrip.validate import check_positive, check_temp_c
 
 __all__ = ["TWIN_VERSION", "MotorParams", "ScatterParams", "TwinConfig"]
 
 #: Bumped whenever the twin's behaviour changes; every result records it.
-TWIN_VERSION = "relaxgrip-twin-v1"
+TWIN_VERSION = "relaxgrip-twin-v2"
 
 
 @dataclass(frozen=True)
@@ -28,8 +30,6 @@ class MotorParams:
         Velocity limit (mm/s).
     lag_s : float
         First-order velocity lag (s).
-    open_aperture_mm : float
-        Aperture between the finger contact faces at motor position 0 (mm).
     stroke_mm : float
         Closing travel available (mm).
     encoder_resolution_mm : float
@@ -38,7 +38,6 @@ class MotorParams:
 
     max_velocity_mm_s: float = 20.0
     lag_s: float = 0.05
-    open_aperture_mm: float = 150.0
     stroke_mm: float = 148.0
     encoder_resolution_mm: float = 0.005
 
@@ -103,8 +102,19 @@ class TwinConfig:
         Object between the fingers (see :data:`relaxgrip.twin.objects.CATALOGUE`).
     contact_position_m : float
         Nominal contact position along the finger (m).
-    marker_position_m : float
-        Where the ArUco marker sits along the finger (m).
+    object_distance_m : float
+        How far ahead of its grasp position the object starts (m): the arm's
+        approach axis closes that distance; 0 puts it between the fingers.
+    rig : RigGeometry
+        Cameras, marker and finger outline (shared with perception).
+    rgb : RgbSensorConfig or None
+        RGB camera imperfections; ``None``: no RGB camera (no frames rendered).
+    ir : IrSensorConfig or None
+        Infrared camera imperfections; ``None``: no infrared camera.
+    force_sensor : ForceSensorConfig
+        The force ball's sensor (only objects with ``force_sensor`` carry one).
+    scene : tuple of SceneObject
+        Further objects standing in view (seen by the cameras, never touched).
     ambient_c : float
         Air temperature (°C).
     initial_temp_c : float or None
@@ -125,7 +135,12 @@ class TwinConfig:
     scatter: ScatterParams = field(default_factory=ScatterParams)
     object_name: str | None = "force_ball"
     contact_position_m: float = 0.080
-    marker_position_m: float = 0.060
+    object_distance_m: float = 0.0
+    rig: RigGeometry = field(default_factory=RigGeometry)
+    rgb: RgbSensorConfig | None = field(default_factory=RgbSensorConfig)
+    ir: IrSensorConfig | None = field(default_factory=IrSensorConfig)
+    force_sensor: ForceSensorConfig = field(default_factory=ForceSensorConfig)
+    scene: tuple[SceneObject, ...] = ()
     ambient_c: float = 25.0
     initial_temp_c: float | None = None
     max_step_s: float = 1.0 / 30.0
@@ -139,12 +154,22 @@ class TwinConfig:
             check_temp_c(self.initial_temp_c, "initial finger temperature")
         check_positive(self.max_step_s, "max_step_s")
         check_positive(self.thermal_step_s, "thermal_step_s")
-        for name in ("contact_position_m", "marker_position_m"):
-            value = getattr(self, name)
-            if not 0.0 < value <= self.finger.length_m:
-                raise InputError(
-                    f"{name} {value} m is outside the finger (0, {self.finger.length_m}]"
-                )
+        if not 0.0 < self.contact_position_m <= self.finger.length_m:
+            raise InputError(
+                f"contact position {self.contact_position_m} m is outside the finger "
+                f"(0, {self.finger.length_m}]"
+            )
+        if not self.object_distance_m >= 0.0:
+            raise InputError(f"object distance must be >= 0 m, got {self.object_distance_m}")
+        if abs(self.rig.finger.length_m - self.finger.length_m) > 1e-9:
+            raise InputError(
+                f"the rig's finger is {self.rig.finger.length_m} m long but the beam model's "
+                f"is {self.finger.length_m} m"
+            )
+
+    def without_cameras(self) -> TwinConfig:
+        """The same twin with no RGB or infrared camera (physics and truth only, fastest)."""
+        return replace(self, rgb=None, ir=None)
 
     @property
     def object(self) -> ObjectSpec | None:

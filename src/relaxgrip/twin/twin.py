@@ -37,7 +37,8 @@ from relaxgrip.physics.thermal import (
 )
 from relaxgrip.physics.viscoelastic import phi1
 from relaxgrip.twin.config import TWIN_VERSION, TwinConfig
-from relaxgrip.twin.objects import ObjectSpec
+from relaxgrip.twin.objects import ObjectSpec, get_object
+from relaxgrip.twin.sensor_suite import SceneState, SensorSuite
 
 FloatArray = NDArray[np.float64]
 
@@ -185,9 +186,11 @@ class GripperTwin:
         self._motor_mm = 0.0
         self._motor_v = 0.0
         self._arm_mm = 0.0
+        self._forward_mm = 0.0
+        self._object_x_mm = cfg.object_distance_m * 1e3
         self._object: ObjectSpec | None = cfg.object
         self._object_height_mm = 0.0
-        self._engaged = self._object is not None
+        self._engaged = self._object is not None and cfg.object_distance_m == 0.0
         self._plastic_m = 0.0
         self._slipping = False
         self._force_n = 0.0
@@ -209,6 +212,8 @@ class GripperTwin:
         self._heat_duty = [0.0, 0.0]
         self._motor_decay = (0.0, 1.0)
         self._stiffening_per_m2 = cfg.finger.stiffening / cfg.finger.length_m**2
+        self._sensors = SensorSuite(cfg, self.seed, self._t, self._nodes_m)
+        self._advance_to(self._t)  # the cameras' first frames
         return self.observe()
 
     def observe(self) -> Observation:
@@ -220,6 +225,10 @@ class GripperTwin:
             motor_position_mm=round(self._motor_mm / res) * res,
             arm_height_mm=self._arm_mm,
             heater_duty=self._command.heater_duty,
+            arm_forward_mm=self._forward_mm,
+            rgb=self._sensors.rgb_frame(),
+            ir=self._sensors.ir_frame(),
+            force_ref=self._sensors.take_force(),
             truth=self.truth(),
         )
 
@@ -247,15 +256,19 @@ class GripperTwin:
     @property
     def aperture_m(self) -> float:
         """Distance between the undeflected finger contact faces (m)."""
-        return (self.config.motor.open_aperture_mm - self._motor_mm) * 1e-3
+        return self.config.rig.aperture_m(self._motor_mm)
+
+    @property
+    def object_ahead_m(self) -> float:
+        """How far ahead of its grasp position the object stands (m); 0 between the fingers."""
+        return (self._object_x_mm - self._forward_mm) * 1e-3
 
     def set_object(self, name: str | None) -> None:
         """Place another catalogue object between the (open) fingers."""
-        from relaxgrip.twin.objects import get_object
-
         self._object = None if name is None else get_object(name)
         self._engaged = self._object is not None
-        self._object_height_mm = 0.0
+        self._object_height_mm = self._arm_mm
+        self._object_x_mm = self._forward_mm
         self._plastic_m = 0.0
 
     def truth(self) -> Truth:
@@ -266,12 +279,14 @@ class GripperTwin:
             contact_force_n=self._force_n,
             finger_deflection_m=(self._x[0], self._x[1]),
             marker_deflection_m=(self._x[0] * s[0].marker_ratio, self._x[1] * s[1].marker_ratio),
-            marker_slope_rad=(self._x[0] * s[0].slope_ratio, self._x[1] * s[1].slope_ratio),
+            marker_slope_rad=(math.atan(self._x[0] * s[0].slope_ratio),
+                              math.atan(self._x[1] * s[1].slope_ratio)),
             contact_position_m=self.material.contact_position_m,
             finger_temps_c=self._temps_tuple,
             finger_effective_temp_c=(s[0].temp_eff_c, s[1].temp_eff_c),
             aperture_m=self.aperture_m,
             object_name=None if obj is None else obj.name,
+            object_ahead_m=self.object_ahead_m,
             object_lifted=self._engaged and self._object_height_mm > 0.0,
             object_slipping=self._slipping,
             object_crushed=self._plastic_m > _CRUSHED_M,
@@ -283,19 +298,61 @@ class GripperTwin:
         m = self.material
         return _FingerStiffness(
             self._temps[j], m.finger[j], self._nodes_m, m.contact_position_m,
-            self.config.marker_position_m, self.config, m.stiffness_scale[j],
+            self.config.rig.marker.position_m, self.config, m.stiffness_scale[j],
             m.relax_scale[j], m.relax_scale_rubbery[j], m.tau_scale[j],
         )
 
     def _advance_to(self, t_s: float) -> None:
+        """Integrate to ``t_s``, stopping at every camera capture on the way."""
+        while True:
+            t_capture = self._sensors.next_capture_s()
+            if t_capture > t_s + 1e-9:
+                break
+            self._integrate_to(t_capture)
+            self._sensors.capture(t_capture, self._scene())
+        self._integrate_to(t_s)
+
+    def _integrate_to(self, t_s: float) -> None:
         remaining = t_s - self._t
         if remaining <= 0.0:
             return
         n = max(1, math.ceil(remaining / self.config.max_step_s - 1e-9))
         dt = remaining / n
+        obj = self._object
+        sensing = obj is not None and obj.force_sensor
         for _ in range(n):
+            t0, f0 = self._t, self._force_n
             self._step(dt)
+            self._t = t0 + dt
+            if sensing and self._engaged:
+                self._sensors.sample_force(t0, self._t, f0, self._force_n)
+        if not (sensing and self._engaged):
+            self._sensors.skip_force(t_s)
         self._t = t_s
+
+    def _scene(self) -> SceneState:
+        """What the cameras see now."""
+        cfg = self.config
+        j = cfg.rig.marker_finger
+        stiff = self._stiff[j]
+        fwd_m, arm_m = self._forward_mm * 1e-3, self._arm_mm * 1e-3
+        objects = [
+            (get_object(o.name), (o.position_m[0] - fwd_m, o.position_m[1],
+                                  o.position_m[2] - arm_m))
+            for o in cfg.scene
+        ]
+        if self._object is not None:
+            centre = (self.material.contact_position_m + self.object_ahead_m, 0.0,
+                      (self._object_height_mm - self._arm_mm) * 1e-3)
+            objects.append((self._object, centre))
+        return SceneState(
+            marker_deflection_m=self._x[j] * stiff.marker_ratio,
+            marker_slope_rad=math.atan(self._x[j] * stiff.slope_ratio),
+            aperture_m=self.aperture_m,
+            finger_temps_c=self._temps.copy(),
+            ambient_c=self.material.ambient_c,
+            objects=tuple(objects),
+        )
 
     def _step(self, dt: float) -> None:
         cfg = self.config
@@ -313,6 +370,8 @@ class GripperTwin:
             self._motor_v = 0.0
         self._motor_mm = pos
         self._arm_mm = max(0.0, self._arm_mm + cmd.arm_velocity_mm_s * dt)
+        if cmd.approach_velocity_mm_s != 0.0:
+            self._approach(cmd.approach_velocity_mm_s * dt)
 
         # Heat: the film sees the PWM's mean power, and the finger's thermal
         # time constants are seconds, so the heat model advances in steps of
@@ -379,6 +438,30 @@ class GripperTwin:
         if np.abs(self._temps - self._stiff_temps).max() > _REFRESH_K:
             self._stiff = [self._evaluate(0), self._evaluate(1)]
             self._stiff_temps = self._temps.copy()
+
+    def _approach(self, step_mm: float) -> None:
+        """Move the arm along the fingers.
+
+        A lifted object travels with the gripper; one standing on the table
+        stops the arm when it reaches the grasp position, and enters the grasp
+        if the fingers are open wide enough; backing off leaves it behind.
+        """
+        obj = self._object
+        if obj is None:
+            self._forward_mm += step_mm
+            return
+        if self._engaged and self._object_height_mm > 0.0:
+            self._forward_mm += step_mm
+            self._object_x_mm += step_mm
+            return
+        self._forward_mm = min(self._forward_mm + step_mm, self._object_x_mm)
+        at_grasp = self._forward_mm >= self._object_x_mm - 1e-9
+        if self._engaged:
+            self._engaged = at_grasp
+            return
+        level = abs(self._arm_mm - self._object_height_mm) * 1e-3 < obj.grip_length_m
+        if at_grasp and level and self.aperture_m >= obj.width_m - self._plastic_m:
+            self._engaged = True
 
     def _lift(self, obj: ObjectSpec, force_n: float) -> None:
         """Carry the object with the arm if friction and adhesion hold its weight."""

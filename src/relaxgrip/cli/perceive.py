@@ -1,0 +1,120 @@
+"""``relaxgrip perceive IMAGE``: ArUco markers and their poses in any image."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Any
+
+import cv2
+import numpy as np
+import typer
+from rich.table import Table
+
+from relaxgrip.cli._app import app, console, emit_json
+from relaxgrip.errors import InputError
+from relaxgrip.perception.marker import (
+    PoseSolver,
+    detect_markers,
+    make_detector,
+    refine_corners_by_edges,
+    to_gray,
+)
+from relaxgrip.rig import ARUCO_DICTIONARIES, CameraIntrinsics, MarkerMount
+
+__all__ = ["perceive"]
+
+
+def _read_gray(path: Path) -> np.ndarray[Any, np.dtype[np.uint8]]:
+    """Read any image OpenCV can decode as 8-bit grey."""
+    if not path.is_file():
+        raise InputError(f"{path}: no such file")
+    data = np.fromfile(path, dtype=np.uint8)
+    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    if image is None:
+        raise InputError(f"{path}: not an image OpenCV can read")
+    if image.dtype != np.uint8:  # 16-bit or float images: scale to 8 bits
+        lo, hi = float(image.min()), float(image.max())
+        image = ((image - lo) * (255.0 / max(hi - lo, 1e-12))).astype(np.uint8)
+    if image.ndim == 3:
+        code = cv2.COLOR_BGRA2GRAY if image.shape[2] == 4 else cv2.COLOR_BGR2GRAY
+        image = cv2.cvtColor(image, code)
+    return to_gray(np.asarray(image, dtype=np.uint8))
+
+
+def _parse_dist(text: str | None) -> tuple[float, ...]:
+    if text is None or not text.strip():
+        return ()
+    try:
+        values = tuple(float(v) for v in text.replace(",", " ").split())
+    except ValueError:
+        raise InputError(f"--dist must be numbers separated by commas, got {text!r}") from None
+    return values
+
+
+@app.command("perceive")
+def perceive(
+    image: Annotated[Path, typer.Argument(metavar="IMAGE", help="Any image file (PNG, JPEG, ...).",
+                                          show_default=False)],
+    fx: Annotated[float, typer.Option("--fx", help="Focal length x (pixels).")] = 600.0,
+    fy: Annotated[float | None, typer.Option("--fy", help="Focal length y (pixels; default fx).",
+                                             show_default=False)] = None,
+    cx: Annotated[float | None, typer.Option("--cx", help="Principal point x (default centre).",
+                                             show_default=False)] = None,
+    cy: Annotated[float | None, typer.Option("--cy", help="Principal point y (default centre).",
+                                             show_default=False)] = None,
+    marker_mm: Annotated[float, typer.Option("--marker-mm", help="Marker side (mm).")] = 12.0,
+    dictionary: Annotated[str, typer.Option("--dict", help="ArUco dictionary, e.g. 4X4_50.")] = (
+        "4X4_50"
+    ),
+    dist: Annotated[str | None, typer.Option(
+        "--dist", help="Distortion coefficients k1,k2,p1,p2[,k3...].", show_default=False)] = None,
+    edge_refine: Annotated[bool, typer.Option(
+        "--edge-refine/--no-edge-refine",
+        help="Refine corners by fitting lines to the marker's edges.")] = True,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Detect ArUco markers in an image and estimate each one's pose (SOLVEPNP_IPPE_SQUARE)."""
+    name = dictionary.upper().removeprefix("DICT_")
+    if name not in ARUCO_DICTIONARIES:
+        raise InputError(f"--dict {dictionary!r} is not an ArUco dictionary; "
+                         f"known: {', '.join(ARUCO_DICTIONARIES)}")
+    if not (math.isfinite(marker_mm) and marker_mm > 0):
+        raise InputError(f"--marker-mm must be > 0, got {marker_mm}")
+    gray = _read_gray(image)
+    h, w = gray.shape
+    intrinsics = CameraIntrinsics(
+        w, h, fx, fx if fy is None else fy,
+        (w - 1) / 2.0 if cx is None else cx, (h - 1) / 2.0 if cy is None else cy,
+        _parse_dist(dist),
+    )
+    marker = MarkerMount(dictionary=name, size_m=marker_mm * 1e-3)
+    solver = PoseSolver(marker.size_m, intrinsics)
+    found = []
+    for det in detect_markers(gray, make_detector(marker.aruco_dictionary)):
+        corners = det.corners_px
+        if edge_refine:
+            refined = refine_corners_by_edges(gray, corners, intrinsics)
+            corners = corners if refined is None else refined
+        pose = solver.solve(corners)
+        found.append({
+            "id": det.marker_id,
+            "rvec": pose.rvec.tolist(),
+            "tvec_m": pose.tvec_m.tolist(),
+            "corners_px": corners.tolist(),
+            "reprojection_px": pose.reprojection_px,
+        })
+    found.sort(key=lambda m: int(m["id"]))
+    if json_out:
+        emit_json({"image": str(image), "width_px": w, "height_px": h, "dictionary": name,
+                   "marker_m": marker.size_m, "markers": found})
+        return
+    table = Table(title=f"{image.name}: {len(found)} marker(s), DICT_{name}, {marker_mm:g} mm")
+    for col in ("id", "t (mm, camera frame)", "rvec (rad)", "distance (mm)", "reproj. (px)"):
+        table.add_column(col, justify="right")
+    for m in found:
+        t = np.asarray(m["tvec_m"]) * 1e3
+        table.add_row(str(m["id"]), " ".join(f"{v:8.2f}" for v in t),
+                      " ".join(f"{v:7.4f}" for v in m["rvec"]), f"{np.linalg.norm(t):.1f}",
+                      f"{m['reprojection_px']:.3f}")
+    console.print(table)

@@ -1,0 +1,186 @@
+"""Perception: frames and encoder in, marker pose, thermal state and ICFN features out.
+
+:class:`Perception` reads only what a real gripper provides (RGB and
+infrared frames, the motor encoder); it never sees an
+:class:`~relaxgrip.backend.Observation`'s ground truth, because it is never
+handed one.  The 30 Hz and 1 Hz streams are synchronised by holding the
+latest infrared features between infrared frames; every percept says how old
+they are, and a consumer (the temperature loop) decides when they are too
+old to act on.  A bad frame gives an ``invalid`` state for that stream, never
+an exception.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from relaxgrip.backend import Frame
+from relaxgrip.perception.features import build_icfn_features
+from relaxgrip.perception.frames import FrameError
+from relaxgrip.perception.marker import MarkerState, MarkerTracker, TrackStatus
+from relaxgrip.perception.proximity import Proximity, ProximityEstimator, ProximityTarget
+from relaxgrip.perception.thermal import ThermalFeatures, ThermalPerception
+from relaxgrip.rig import RigGeometry
+
+FloatArray = NDArray[np.float64]
+
+__all__ = ["Percept", "Perception", "StreamSync"]
+
+#: The marker tab's outline relative to the black square (its white quiet
+#: zone and a margin), masked out when looking for a target object.
+_TAB_SCALE = 1.45
+
+
+class StreamSync:
+    """Hold the latest item of a slow stream and tell its age.
+
+    Parameters
+    ----------
+    max_age_s : float
+        Age beyond which the held item counts as stale.
+    """
+
+    def __init__(self, max_age_s: float) -> None:
+        self.max_age_s = max_age_s
+        self.latest: ThermalFeatures | None = None
+        self.error: str = ""
+
+    def hold(self, item: ThermalFeatures) -> None:
+        """Replace the held item."""
+        self.latest = item
+        self.error = ""
+
+    def age_s(self, t_s: float) -> float:
+        """Age of the held item at ``t_s`` (s); ``inf`` if none yet."""
+        return math.inf if self.latest is None else max(0.0, t_s - self.latest.t_s)
+
+    def stale(self, t_s: float) -> bool:
+        """Whether the held item is missing or older than ``max_age_s``."""
+        return self.age_s(t_s) > self.max_age_s
+
+
+@dataclass(frozen=True)
+class Percept:
+    """What perception makes of the sensors at one instant.
+
+    Attributes
+    ----------
+    t_s : float
+        Time of the RGB frame it is based on (s).
+    marker : MarkerState
+        Marker tracking for that frame.
+    thermal : ThermalFeatures or None
+        Latest infrared features (held between infrared frames).
+    ir_age_s : float
+        Age of ``thermal`` (s); ``inf`` if none yet.
+    ir_error : str
+        Why the last infrared frame was rejected, if it was.
+    features : ndarray or None
+        ICFN features (:data:`relaxgrip.perception.features.ICFN_SCHEMA`),
+        when the marker is tracked and thermal features exist.
+    proximity : Proximity or None
+        Approach cue, when a target is set.
+    """
+
+    t_s: float
+    marker: MarkerState
+    thermal: ThermalFeatures | None
+    ir_age_s: float
+    ir_error: str
+    features: FloatArray | None
+    proximity: Proximity | None
+
+
+class Perception:
+    """The perception stage of the loop.
+
+    Parameters
+    ----------
+    rig : RigGeometry
+        Cameras, marker and fingers.
+    tracker : MarkerTracker, optional
+        Marker tracker (default: one for ``rig`` with default settings).
+    thermal : ThermalPerception, optional
+        Thermal feature extractor (default: one for ``rig``).
+    max_ir_age_s : float
+        Age beyond which infrared features count as stale (s).
+    """
+
+    def __init__(
+        self,
+        rig: RigGeometry,
+        tracker: MarkerTracker | None = None,
+        thermal: ThermalPerception | None = None,
+        max_ir_age_s: float = 3.0,
+    ) -> None:
+        self.rig = rig
+        self.tracker = tracker if tracker is not None else MarkerTracker(rig.rgb.intrinsics,
+                                                                        rig.marker)
+        self.thermal = thermal if thermal is not None else ThermalPerception(rig)
+        self.ir = StreamSync(max_ir_age_s)
+        self._proximity: ProximityEstimator | None = None
+        self._last_rgb_seq: int | None = None
+        self._last_ir_seq: int | None = None
+        self._last: Percept | None = None
+
+    def set_target(self, target: ProximityTarget | None) -> None:
+        """Look for ``target`` in the RGB frames (``None`` to stop)."""
+        self._proximity = None if target is None else ProximityEstimator(self.rig, target)
+
+    def reset(self) -> None:
+        """Forget the zero pose, the held infrared features and the last frames."""
+        self.tracker.reset()
+        self.ir = StreamSync(self.ir.max_age_s)
+        self._last_rgb_seq = self._last_ir_seq = None
+        self._last = None
+
+    def update(self, rgb: Frame | None, ir: Frame | None, motor_position_mm: float) -> Percept:
+        """Process whatever frames are new.
+
+        Parameters
+        ----------
+        rgb, ir : Frame or None
+            The latest frames of each stream (the same frame may come again:
+            it is processed once).
+        motor_position_mm : float
+            Encoder position, for where the fingers are.
+
+        Returns
+        -------
+        Percept
+        """
+        if ir is not None and ir.seq != self._last_ir_seq:
+            self._last_ir_seq = ir.seq
+            try:
+                self.ir.hold(self.thermal.extract(ir, motor_position_mm))
+            except FrameError as exc:
+                self.ir.error = str(exc)
+        if rgb is None:
+            t_s = self._last.t_s if self._last is not None else 0.0
+            marker = MarkerState(t_s, TrackStatus.INVALID, message="no RGB frame")
+            return self._percept(marker, None, None)
+        if rgb.seq == self._last_rgb_seq and self._last is not None:
+            return self._last
+        self._last_rgb_seq = rgb.seq
+        marker = self.tracker.update(rgb)
+        proximity = None
+        if self._proximity is not None and marker.status is not TrackStatus.INVALID:
+            tab = None
+            if marker.pose is not None:
+                corners = marker.pose.corners_px
+                centre = corners.mean(axis=0)
+                tab = centre + _TAB_SCALE * (corners - centre)
+            proximity = self._proximity.estimate(rgb, motor_position_mm, tab)
+        self._last = self._percept(marker, proximity, rgb.t_s)
+        return self._last
+
+    def _percept(self, marker: MarkerState, proximity: Proximity | None,
+                 t_s: float | None) -> Percept:
+        t = marker.t_s if t_s is None else t_s
+        thermal = self.ir.latest
+        features = None if thermal is None else build_icfn_features(marker, thermal)
+        return Percept(t, marker, thermal, self.ir.age_s(t), self.ir.error, features, proximity)

@@ -1,0 +1,321 @@
+"""The twin's infrared camera: a radiometric microbolometer looking at both fingers.
+
+The scene is painted in radiance, not in temperature: every surface gets the
+broadband graybody signal a radiometric camera set to emissivity 1 receives,
+``T_app^4 = ε T^4 + (1 - ε) T_refl^4`` (kelvin), with the room at ambient as
+the reflected surroundings.  A low-emissivity object (bare aluminium) so
+shows the room, not itself.
+
+Surfaces are ray cast through the centre of each pixel: a finger's contact
+face is a rectangle whose plane maps to the image by a homography, so each
+pixel gets the exact position along the finger it sees and the temperature
+the thermal nodes give there (no stair steps, however foreshortened the face);
+an object is a sphere, which also gives its exact silhouette.  A depth buffer
+decides which surface a pixel sees, so near things cover far ones.  Then the
+optics blur the radiance, and the sensor adds its fixed offset and its
+per-pixel noise.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from relaxgrip.errors import InputError
+from relaxgrip.rig import RigGeometry, transform_points
+from relaxgrip.twin.sensors import IrSensorConfig
+from relaxgrip.validate import ABSOLUTE_ZERO_C, check_finite, check_temp_c
+
+FloatArray = NDArray[np.float64]
+
+__all__ = ["IrObject", "IrRenderer", "apparent_temp_c"]
+
+#: Surfaces nearer to the lens than this are not drawn (m).
+_NEAR_M = 0.005
+#: Margin around a surface's projected bounding box that is ray cast (pixels).
+_MARGIN_PX = 3
+
+
+@dataclass(frozen=True)
+class IrObject:
+    """An object seen by the IR camera: a sphere-like blob.
+
+    Attributes
+    ----------
+    center_gripper_m : tuple of float
+        Centre in the gripper frame ``G`` (m).
+    radius_m : float
+        Radius (m).
+    temp_c : float
+        Surface temperature (°C).
+    emissivity : float
+        Broadband emissivity in (0, 1].
+    """
+
+    center_gripper_m: tuple[float, float, float]
+    radius_m: float
+    temp_c: float
+    emissivity: float
+
+    def __post_init__(self) -> None:
+        if len(self.center_gripper_m) != 3 or not all(
+            math.isfinite(c) for c in self.center_gripper_m
+        ):
+            raise InputError(f"object centre must be 3 finite numbers, got {self.center_gripper_m}")
+        if not (math.isfinite(self.radius_m) and self.radius_m > 0):
+            raise InputError(f"object radius must be > 0 m, got {self.radius_m}")
+        check_temp_c(self.temp_c, "object temperature")
+        if not 0.0 < self.emissivity <= 1.0:
+            raise InputError(f"object emissivity must be in (0, 1], got {self.emissivity}")
+
+
+def apparent_temp_c(temp_c: ArrayLike, emissivity: float, reflected_c: float) -> FloatArray:
+    """Temperature a radiometric camera set to emissivity 1 reports for a graybody.
+
+    Broadband approximation: ``T_app^4 = ε T^4 + (1 - ε) T_refl^4`` in kelvin.
+
+    Parameters
+    ----------
+    temp_c : array_like
+        True surface temperatures (°C).
+    emissivity : float
+        Emissivity of the surface, in (0, 1].
+    reflected_c : float
+        Temperature of the surroundings the surface reflects (°C).
+
+    Returns
+    -------
+    ndarray
+        Apparent temperatures (°C), shaped like ``temp_c``.
+    """
+    out: FloatArray = np.sqrt(np.sqrt(_radiance(temp_c, emissivity, reflected_c)))
+    out += ABSOLUTE_ZERO_C
+    return out
+
+
+def _radiance(temp_c: ArrayLike, emissivity: float, reflected_c: float) -> FloatArray:
+    """Apparent signal ``T_app^4`` (K^4) of a graybody: what the image holds before the sensor."""
+    t_k = np.asarray(temp_c, dtype=np.float64) - ABSOLUTE_ZERO_C
+    r_k = reflected_c - ABSOLUTE_ZERO_C
+    out: FloatArray = emissivity * t_k**4 + (1.0 - emissivity) * r_k**4
+    return out
+
+
+class IrRenderer:
+    """Renders the frames of the infrared camera on the gripper base.
+
+    Parameters
+    ----------
+    rig : RigGeometry
+        Camera mount, intrinsics and finger shape.
+    config : IrSensorConfig
+        Noise, offset, emissivities and blur.
+    seed : int
+        Seed of this camera: fixes its offset, and frame ``seq`` of a seed is
+        always the same image, whatever other frames were rendered.
+    """
+
+    def __init__(self, rig: RigGeometry, config: IrSensorConfig, seed: int) -> None:
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+            raise InputError(f"seed must be a non-negative integer, got {seed!r}")
+        self.rig = rig
+        self.config = config
+        self.seed = int(seed)
+        self.intrinsics = rig.ir.intrinsics
+        self._gripper2cam = rig.ir.gripper2cam
+        self._offset_k = float(
+            np.random.default_rng([self.seed, 3]).uniform(-config.max_offset_k, config.max_offset_k)
+        )
+        # Direction (x/z, y/z, 1) of the ray through each pixel centre, distortion included.
+        h, w = self.intrinsics.shape
+        grid = np.stack(np.meshgrid(np.arange(w), np.arange(h)), axis=-1).astype(np.float64)
+        normalized = self.intrinsics.normalized(grid)
+        self._ray_x = np.ascontiguousarray(normalized[..., 0])
+        self._ray_y = np.ascontiguousarray(normalized[..., 1])
+
+    @property
+    def offset_k(self) -> float:
+        """This camera's fixed offset (K), drawn once from the seed in ``±max_offset_k``."""
+        return self._offset_k
+
+    def render(
+        self,
+        seq: int,
+        finger_temps_c: ArrayLike,
+        node_positions_m: ArrayLike,
+        aperture_m: float,
+        objects: Sequence[IrObject],
+        ambient_c: float,
+    ) -> NDArray[np.float32]:
+        """Render frame ``seq``.
+
+        Parameters
+        ----------
+        seq : int
+            Frame number: selects the frame's noise.
+        finger_temps_c : array_like, shape (2, n_nodes)
+            Node temperatures of finger 0 and finger 1 (°C).
+        node_positions_m : array_like, shape (n_nodes,)
+            Node positions along the finger (m from the root), increasing.  The
+            temperature between nodes is interpolated linearly, and held
+            constant beyond the first and last node.
+        aperture_m : float
+            Gap between the contact faces (m).
+        objects : sequence of IrObject
+            Objects in the scene, in any order.
+        ambient_c : float
+            Temperature of the room: the background and what surfaces reflect (°C).
+
+        Returns
+        -------
+        ndarray, shape (H, W), float32
+            Apparent temperatures (°C) as a radiometric camera set to
+            emissivity 1 reports them, offset and noise included.
+        """
+        if isinstance(seq, bool) or not isinstance(seq, int | np.integer) or seq < 0:
+            raise InputError(f"seq must be a non-negative integer, got {seq!r}")
+        temps, nodes = self._check_fingers(finger_temps_c, node_positions_m)
+        aperture = check_finite(aperture_m, "aperture_m")
+        ambient = check_temp_c(ambient_c, "ambient_c")
+        cfg = self.config
+
+        h, w = self.intrinsics.shape
+        background = float(_radiance(ambient, cfg.background_emissivity, ambient))
+        img = np.full((h, w), background, dtype=np.float32)
+        depth = np.full((h, w), np.inf)
+        for j in (0, 1):
+            self._draw_face(img, depth, j, aperture, temps[j], nodes, ambient)
+        for obj in objects:
+            self._draw_sphere(img, depth, obj, ambient)
+
+        if cfg.psf_sigma_px > 0:
+            cv2.GaussianBlur(
+                img, (0, 0), cfg.psf_sigma_px, dst=img, borderType=cv2.BORDER_REPLICATE
+            )
+        out = np.sqrt(np.sqrt(img, out=img), out=img)
+        out += np.float32(self._offset_k + ABSOLUTE_ZERO_C)
+        if cfg.netd_k > 0:
+            noise = np.random.default_rng([self.seed, 2, int(seq)]).standard_normal(
+                (h, w), dtype=np.float32
+            )
+            noise *= np.float32(cfg.netd_k)
+            out += noise
+        return out
+
+    def _check_fingers(
+        self, finger_temps_c: ArrayLike, node_positions_m: ArrayLike
+    ) -> tuple[FloatArray, FloatArray]:
+        temps = np.asarray(finger_temps_c, dtype=np.float64)
+        nodes = np.asarray(node_positions_m, dtype=np.float64)
+        if nodes.ndim != 1 or nodes.size < 1:
+            raise InputError(f"node_positions_m must be a 1-D array, got shape {nodes.shape}")
+        if temps.shape != (2, nodes.size):
+            raise InputError(
+                f"finger_temps_c must have shape (2, {nodes.size}), got {temps.shape}"
+            )
+        if not (np.all(np.isfinite(nodes)) and np.all(np.diff(nodes) > 0)):
+            raise InputError("node_positions_m must be finite and increasing")
+        if not np.all(np.isfinite(temps)) or float(temps.min()) <= ABSOLUTE_ZERO_C:
+            raise InputError("finger temperatures must be finite and above absolute zero")
+        return temps, nodes
+
+    def _window(self, corners_cam_m: FloatArray) -> tuple[slice, slice]:
+        """Image rows and columns that can see the convex hull of ``corners_cam_m``.
+
+        The whole image if any corner is behind the lens (its projection is unbounded).
+        """
+        h, w = self.intrinsics.shape
+        if np.any(corners_cam_m[:, 2] <= _NEAR_M):
+            return slice(0, h), slice(0, w)
+        px = self.intrinsics.project(corners_cam_m)
+        pad = _MARGIN_PX
+        x0 = max(0, math.floor(float(px[:, 0].min()) - pad))
+        x1 = min(w, math.ceil(float(px[:, 0].max()) + pad) + 1)
+        y0 = max(0, math.floor(float(px[:, 1].min()) - pad))
+        y1 = min(h, math.ceil(float(px[:, 1].max()) + pad) + 1)
+        return slice(y0, max(y0, y1)), slice(x0, max(x0, x1))
+
+    def _draw_face(
+        self,
+        img: NDArray[np.float32],
+        depth: FloatArray,
+        j: int,
+        aperture_m: float,
+        temps_c: FloatArray,
+        nodes_m: FloatArray,
+        ambient_c: float,
+    ) -> None:
+        """Ray cast finger ``j``'s top face into ``img`` where it is nearest."""
+        finger = self.rig.finger
+        half = 0.5 * finger.thickness_m
+        # The face's frame in the camera: origin at the root, unit vectors along and across.
+        ref = transform_points(
+            self._gripper2cam,
+            self.rig.top_points_gripper(j, aperture_m, [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]),
+        )
+        origin, e_along, e_across = ref[0], ref[1] - ref[0], ref[2] - ref[0]
+        normal = np.cross(e_along, e_across)
+        corners = origin + np.array(
+            [a * finger.length_m * e_along + c * half * e_across for a in (0, 1) for c in (-1, 1)]
+        )
+        rows, cols = self._window(corners)
+        rx, ry = self._ray_x[rows, cols], self._ray_y[rows, cols]
+        if rx.size == 0:
+            return
+        # The ray t (x, y, 1) meets the plane n . (p - o) = 0 at t = n . o / n . (x, y, 1);
+        # t is the depth.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = float(normal @ origin) / (normal[0] * rx + normal[1] * ry + normal[2])
+        along = t * (e_along[0] * rx + e_along[1] * ry + e_along[2]) - float(e_along @ origin)
+        across = t * (e_across[0] * rx + e_across[1] * ry + e_across[2]) - float(
+            e_across @ origin
+        )
+        sub_depth = depth[rows, cols]
+        seen = (
+            (t > _NEAR_M)
+            & (along >= 0.0)
+            & (along <= finger.length_m)
+            & (np.abs(across) <= half)
+            & (t < sub_depth)
+        )
+        if not np.any(seen):
+            return
+        field = np.interp(along[seen], nodes_m, temps_c)
+        img[rows, cols][seen] = _radiance(field, self.config.finger_emissivity, ambient_c)
+        sub_depth[seen] = t[seen]
+
+    def _draw_sphere(
+        self, img: NDArray[np.float32], depth: FloatArray, obj: IrObject, ambient_c: float
+    ) -> None:
+        """Ray cast an object (a sphere) into ``img`` where it is nearest."""
+        centre = transform_points(self._gripper2cam, np.asarray(obj.center_gripper_m))
+        r = obj.radius_m
+        dist2 = float(centre @ centre)
+        if dist2 <= r * r or centre[2] + r <= _NEAR_M:
+            return  # around the lens or behind it: nothing sensible to draw
+        # The sphere's image lies within that of its bounding cube.
+        cube = centre + r * np.array(
+            [[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64
+        )
+        rows, cols = self._window(cube)
+        rx, ry = self._ray_x[rows, cols], self._ray_y[rows, cols]
+        if rx.size == 0:
+            return
+        # |t d - c|^2 = r^2 with d = (x, y, 1): a t^2 - 2 b t + (|c|^2 - r^2) = 0; near root.
+        a = rx * rx + ry * ry + 1.0
+        b = centre[0] * rx + centre[1] * ry + centre[2]
+        disc = b * b - a * (dist2 - r * r)
+        hit = disc >= 0.0
+        t = np.full(rx.shape, np.inf)
+        t[hit] = (b[hit] - np.sqrt(disc[hit])) / a[hit]
+        sub_depth = depth[rows, cols]
+        seen = hit & (t > _NEAR_M) & (t < sub_depth)
+        if not np.any(seen):
+            return
+        img[rows, cols][seen] = np.float32(_radiance(obj.temp_c, obj.emissivity, ambient_c))
+        sub_depth[seen] = t[seen]

@@ -1,0 +1,268 @@
+"""The twin's RGB camera: the ArUco marker on its tab, objects ahead, sensor noise.
+
+The marker image comes from OpenCV (``generateImageMarker``) and is projected
+through the camera intrinsics with the homography of its pose.  It is warped
+at ``supersample`` times the resolution onto an upsampled copy of the
+region it covers and area-averaged back down, so its edges carry sub-pixel
+information the way a real optical image does (a plain warp gives jagged,
+biased edges).  Objects are shaded discs, drawn with sub-pixel centres.
+Pixel noise comes from a bank of pre-drawn noise, sliced at a random offset
+per frame: a full frame of fresh Gaussian noise would cost more than the
+rest of the rendering together.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from relaxgrip.errors import InputError
+from relaxgrip.rig import RigGeometry
+from relaxgrip.twin.sensors import RgbSensorConfig
+
+FloatArray = NDArray[np.float64]
+Image = NDArray[np.uint8]
+
+__all__ = ["RgbObject", "RgbRenderer"]
+
+#: Pixels per marker module in the texture; the texture is then finer than the
+#: supersampled image at any useful marker distance.
+_TEXTURE_PX_PER_MODULE = 48
+#: White margin around the black square, in modules (ArUco's quiet zone).
+_QUIET_MODULES = 1
+_TAB_WHITE = (228, 226, 220)
+_INK = (24, 24, 26)
+_NOISE_PAD = 48
+_NOISE_BANKS = 3
+#: Sub-pixel bits for OpenCV's drawing functions.
+_SHIFT = 4
+
+
+@dataclass(frozen=True)
+class RgbObject:
+    """An object as the RGB camera sees it: a shaded sphere-like disc.
+
+    Attributes
+    ----------
+    center_cam_m : tuple of float
+        Centre in the camera frame (m).
+    radius_m : float
+        Radius (m).
+    color_rgb : tuple of int
+        Mean colour (0-255).
+    """
+
+    center_cam_m: tuple[float, float, float]
+    radius_m: float
+    color_rgb: tuple[int, int, int]
+
+
+class RgbRenderer:
+    """Renders RGB frames of the marker camera.
+
+    Parameters
+    ----------
+    rig : RigGeometry
+        Camera intrinsics and marker.
+    config : RgbSensorConfig
+        Noise, blur, lighting, occlusion.
+    seed : int
+        Seed of this camera's noise and lighting jitter; frame ``seq`` of a
+        seed is always the same image.
+    """
+
+    def __init__(self, rig: RigGeometry, config: RgbSensorConfig, seed: int) -> None:
+        self.rig = rig
+        self.config = config
+        self.seed = seed
+        self.intrinsics = rig.rgb.intrinsics
+        if self.intrinsics.dist:
+            raise InputError(
+                "the twin renders an undistorted pinhole camera; give its intrinsics without "
+                "distortion coefficients"
+            )
+        self._texture, self._texture_to_marker = _tab_texture(rig)
+        self._background = _background(self.intrinsics.shape)
+        self._noise_pos, self._noise_neg = _noise_banks(self.intrinsics.shape, config.noise_dn)
+
+    def marker_corners_px(self, marker2cam: FloatArray) -> FloatArray:
+        """Image positions of the marker's four corners (OpenCV order), (4, 2)."""
+        corners = self.rig.marker.object_points_m @ marker2cam[:3, :3].T + marker2cam[:3, 3]
+        return self.intrinsics.project(corners)
+
+    def render(
+        self, seq: int, marker2cam: FloatArray, objects: Sequence[RgbObject] = ()
+    ) -> Image:
+        """Render frame ``seq``.
+
+        Parameters
+        ----------
+        seq : int
+            Frame number: selects the frame's noise and lighting jitter.
+        marker2cam : ndarray, shape (4, 4)
+            Pose of the marker in the camera frame.
+        objects : sequence of RgbObject
+            Objects in front of the camera, in any order.
+
+        Returns
+        -------
+        ndarray, shape (H, W, 3), uint8
+            The RGB frame.
+        """
+        cfg = self.config
+        rng = np.random.default_rng([self.seed, 12, seq])
+        img = self._background.copy()
+        for obj in sorted(objects, key=lambda o: -o.center_cam_m[2]):
+            self._draw_object(img, obj)
+        self._draw_tab(img, marker2cam)
+        if cfg.blur_sigma_px > 0:
+            cv2.GaussianBlur(img, (0, 0), cfg.blur_sigma_px, dst=img)
+        gain = cfg.lighting_gain * (1.0 + cfg.lighting_flicker * float(rng.standard_normal()))
+        if gain != 1.0:
+            cv2.convertScaleAbs(img, dst=img, alpha=max(gain, 0.0))
+        if cfg.noise_dn > 0:
+            bank = int(rng.integers(_NOISE_BANKS))
+            oy, ox = (int(v) for v in rng.integers(0, _NOISE_PAD, size=2))
+            h, w = self.intrinsics.shape
+            cv2.add(img, self._noise_pos[bank, oy : oy + h, ox : ox + w], dst=img)
+            cv2.subtract(img, self._noise_neg[bank, oy : oy + h, ox : ox + w], dst=img)
+        return img
+
+    def _draw_object(self, img: Image, obj: RgbObject) -> None:
+        x, y, z = obj.center_cam_m
+        if z <= obj.radius_m + 0.005:
+            return  # touching or behind the lens: nothing sensible to draw
+        (u, v), = self.intrinsics.project([[x, y, z]])
+        r_px = self.intrinsics.fx_px * obj.radius_m / math.sqrt(z * z - obj.radius_m**2)
+        h, w = self.intrinsics.shape
+        if r_px < 0.5 or u + r_px < 0 or u - r_px > w or v + r_px < 0 or v - r_px > h:
+            return
+        base = tuple(0.75 * c for c in obj.color_rgb)
+        lit = tuple(min(255.0, 1.05 * c + 10.0) for c in obj.color_rgb)
+        scale = 1 << _SHIFT
+
+        def circle(cu: float, cv: float, radius: float, colour: tuple[float, ...]) -> None:
+            cv2.circle(img, (round(cu * scale), round(cv * scale)), max(1, round(radius * scale)),
+                       colour, -1, cv2.LINE_AA, _SHIFT)
+
+        circle(u, v, r_px, base)
+        circle(u - 0.25 * r_px, v - 0.25 * r_px, 0.55 * r_px, lit)
+
+    def _draw_tab(self, img: Image, marker2cam: FloatArray) -> None:
+        """Warp the marker tab onto ``img`` at ``supersample`` times the resolution."""
+        ss = self.config.supersample
+        k = self.intrinsics.matrix
+        tex_to_img = k @ marker2cam[:3, [0, 1, 3]] @ self._texture_to_marker
+        th, tw = self._texture.shape[:2]
+        outline = np.array(
+            [[[-0.5, -0.5], [tw - 0.5, -0.5], [tw - 0.5, th - 0.5], [-0.5, th - 0.5]]]
+        )
+        if marker2cam[2, 3] <= 0.0:
+            return  # behind the camera
+        corners = cv2.perspectiveTransform(outline, tex_to_img)[0]
+        h, w = self.intrinsics.shape
+        x0 = max(math.floor(corners[:, 0].min()) - 2, 0)
+        y0 = max(math.floor(corners[:, 1].min()) - 2, 0)
+        x1 = min(math.ceil(corners[:, 0].max()) + 3, w)
+        y1 = min(math.ceil(corners[:, 1].max()) + 3, h)
+        if x1 <= x0 or y1 <= y0:
+            return
+        roi = img[y0:y1, x0:x1]
+        up = np.asarray(cv2.resize(roi, None, fx=ss, fy=ss, interpolation=cv2.INTER_NEAREST),
+                        dtype=np.uint8)
+        # Supersampled pixel I covers image x in [x0 - 1/2 + I/ss, x0 - 1/2 + (I+1)/ss].
+        to_up = np.array(
+            [[ss, 0.0, ss * (0.5 - x0) - 0.5], [0.0, ss, ss * (0.5 - y0) - 0.5], [0.0, 0.0, 1.0]]
+        )
+        cv2.warpPerspective(
+            self._texture, to_up @ tex_to_img, (up.shape[1], up.shape[0]), dst=up,
+            flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_TRANSPARENT,
+        )
+        if self.config.occlusion > 0:
+            self._occlude(up, marker2cam, to_up)
+        roi[...] = cv2.resize(up, (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
+
+    def _occlude(self, up: Image, marker2cam: FloatArray, to_up: FloatArray) -> None:
+        """Cover the left ``occlusion`` fraction of the marker (a cable, a finger beam)."""
+        half = 0.5 * self.rig.marker.size_m
+        quiet = half * (1.0 + 2.0 * _QUIET_MODULES / self._modules)
+        edge = -half + 2.0 * half * self.config.occlusion
+        patch = np.array([[-quiet - 1e-3, quiet + 1e-3, 0.0], [edge, quiet + 1e-3, 0.0],
+                          [edge, -quiet - 1e-3, 0.0], [-quiet - 1e-3, -quiet - 1e-3, 0.0]])
+        cam = patch @ marker2cam[:3, :3].T + marker2cam[:3, 3]
+        px = self.intrinsics.project(cam)
+        up_px = cv2.perspectiveTransform(px[None], to_up)[0]
+        cv2.fillConvexPoly(up, np.round(up_px * (1 << _SHIFT)).astype(np.int32), (55, 52, 50),
+                           cv2.LINE_AA, _SHIFT)
+
+    @property
+    def _modules(self) -> int:
+        return int(self.rig.marker.aruco_dictionary.markerSize) + 2
+
+
+def _tab_texture(rig: RigGeometry) -> tuple[Image, FloatArray]:
+    """The marker with its white quiet zone, and the map from texture pixels to the marker plane."""
+    marker = rig.marker
+    dictionary = marker.aruco_dictionary
+    modules = int(dictionary.markerSize) + 2
+    side = modules * _TEXTURE_PX_PER_MODULE
+    gray = cv2.aruco.generateImageMarker(dictionary, marker.marker_id, side, borderBits=1)
+    pad = _QUIET_MODULES * _TEXTURE_PX_PER_MODULE
+    gray = cv2.copyMakeBorder(gray, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
+    ink, white = np.array(_INK, np.float64), np.array(_TAB_WHITE, np.float64)
+    texture = (ink + (white - ink) * (gray[..., None] / 255.0)).round().astype(np.uint8)
+    # Texture pixel centres are integers; the black square spans [pad - 1/2, pad + side - 1/2].
+    metres_per_px = marker.size_m / side
+    centre = pad + 0.5 * side - 0.5
+    texture_to_marker = np.array(
+        [[metres_per_px, 0.0, -centre * metres_per_px],
+         [0.0, -metres_per_px, centre * metres_per_px],  # marker y points up
+         [0.0, 0.0, 1.0]]
+    )
+    return texture, texture_to_marker
+
+
+@lru_cache(maxsize=4)
+def _background(shape: tuple[int, int]) -> Image:
+    """The finger's open skeleton seen from its root: dark, with lighter beams (read-only)."""
+    rng = np.random.default_rng(10)
+    h, w = shape
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    base = 62.0 + 18.0 * (y / h) - 10.0 * ((x - w / 2) / w) ** 2
+    for _ in range(4):
+        x_beam = rng.uniform(0.05, 0.95) * w
+        slope = rng.uniform(-0.3, 0.3)
+        width = rng.uniform(8.0, 22.0)
+        dist = np.abs(x - (x_beam + slope * (y - h / 2))) / width
+        base += rng.uniform(12.0, 30.0) * np.exp(-0.5 * dist**2)
+    base += cv2.GaussianBlur(rng.normal(0.0, 6.0, size=(h, w)), (0, 0), 3.0)
+    tint = np.array([1.0, 0.97, 0.92])
+    out: Image = np.clip(base[..., None] * tint, 0, 255).astype(np.uint8)
+    out.flags.writeable = False
+    return out
+
+
+@lru_cache(maxsize=4)
+def _noise_banks(shape: tuple[int, int], sigma_dn: float) -> tuple[Image, Image]:
+    """Positive and negative parts of pre-drawn Gaussian pixel noise (saturating adds).
+
+    The banks are shared by every renderer (read-only); each frame takes its
+    noise from a bank and offset drawn from its own seed.
+    """
+    rng = np.random.default_rng(11)
+    h, w = shape
+    size = (_NOISE_BANKS, h + _NOISE_PAD, w + _NOISE_PAD, 3)
+    if sigma_dn <= 0:
+        zero = np.zeros((_NOISE_BANKS, _NOISE_PAD, _NOISE_PAD, 3), np.uint8)
+        return zero, zero
+    noise = np.rint(rng.normal(0.0, sigma_dn, size=size).astype(np.float32))
+    pos, neg = np.clip(noise, 0, 255).astype(np.uint8), np.clip(-noise, 0, 255).astype(np.uint8)
+    pos.flags.writeable = False
+    neg.flags.writeable = False
+    return pos, neg

@@ -1,0 +1,193 @@
+"""When the twin's sensors sample, and what they saw.
+
+The cameras capture on their own clocks (30 Hz RGB, 1 Hz infrared, from the
+twin's reset).  At each capture time the twin hands over a :class:`SceneState`
+(a snapshot of what the camera would see); the image itself is rendered only
+when someone observes it, so frames nobody looks at cost nothing.  A frame's
+noise is drawn from ``(seed, stream, frame number)``: the same seed gives the
+same frames whatever the observation rate.
+
+The force ball's sensor samples at 100 Hz; between physics steps its true
+force is interpolated linearly (a step is at most a camera period, over which
+the force moves smoothly).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from relaxgrip.backend import ForceSamples, Frame
+from relaxgrip.rig import invert_transform, transform_points
+from relaxgrip.twin.config import TwinConfig
+from relaxgrip.twin.objects import ObjectSpec
+from relaxgrip.twin.render_ir import IrObject, IrRenderer
+from relaxgrip.twin.render_rgb import RgbObject, RgbRenderer
+
+FloatArray = NDArray[np.float64]
+
+__all__ = ["SceneState", "SensorSuite"]
+
+#: Captures closer than this to a requested time count as due (s): clock arithmetic slack.
+_TIME_SLACK_S = 1e-9
+
+
+@dataclass(frozen=True)
+class SceneState:
+    """What the cameras would see at one instant.
+
+    Attributes
+    ----------
+    marker_deflection_m, marker_slope_rad : float
+        Bending of the marker finger at the marker tab.
+    aperture_m : float
+        Gap between the undeflected contact faces (m).
+    finger_temps_c : ndarray, shape (2, n_nodes)
+        Node temperatures of both fingers (°C).
+    ambient_c : float
+        Air temperature (°C).
+    objects : tuple of (ObjectSpec, centre in the gripper frame)
+        Everything standing in view.
+    """
+
+    marker_deflection_m: float
+    marker_slope_rad: float
+    aperture_m: float
+    finger_temps_c: FloatArray
+    ambient_c: float
+    objects: tuple[tuple[ObjectSpec, tuple[float, float, float]], ...]
+
+
+class _Stream:
+    """One camera's schedule and its latest capture."""
+
+    def __init__(self, rate_hz: float, t0_s: float) -> None:
+        self.period_s = 1.0 / rate_hz
+        self.t0_s = t0_s
+        self.next_seq = 0
+        self.latest: tuple[int, float, SceneState] | None = None
+        self.frame: Frame | None = None
+
+    @property
+    def next_t_s(self) -> float:
+        return self.t0_s + self.next_seq * self.period_s
+
+
+class SensorSuite:
+    """The twin's cameras and reference force sensor.
+
+    Parameters
+    ----------
+    config : TwinConfig
+        Rig geometry and sensor imperfections.
+    seed : int
+        The twin's seed.
+    t0_s : float
+        Reset time: frame ``k`` is captured at ``t0_s + k / rate``.
+    node_positions_m : ndarray
+        Positions of the finger's thermal nodes (m from the root).
+    """
+
+    def __init__(self, config: TwinConfig, seed: int, t0_s: float,
+                 node_positions_m: FloatArray) -> None:
+        self.config = config
+        rig = config.rig
+        self._nodes_m = node_positions_m
+        self._rgb = None if config.rgb is None else RgbRenderer(rig, config.rgb, seed)
+        self._ir = None if config.ir is None else IrRenderer(rig, config.ir, seed)
+        self._rgb_stream = None if config.rgb is None else _Stream(rig.rgb.rate_hz, t0_s)
+        self._ir_stream = None if config.ir is None else _Stream(rig.ir.rate_hz, t0_s)
+        self._finger2cam_by_aperture: tuple[float, FloatArray] | None = None
+        self._force_rng = np.random.default_rng([seed, 20])
+        self._force_period_s = 1.0 / config.force_sensor.rate_hz
+        self._force_t0_s = t0_s
+        self._force_next = 0
+        self._force_t: list[float] = []
+        self._force_n: list[float] = []
+
+    @property
+    def streams(self) -> tuple[_Stream, ...]:
+        return tuple(s for s in (self._rgb_stream, self._ir_stream) if s is not None)
+
+    def next_capture_s(self) -> float:
+        """Time of the next camera capture (s), ``inf`` without cameras."""
+        return min((s.next_t_s for s in self.streams), default=math.inf)
+
+    def capture(self, t_s: float, scene: SceneState) -> None:
+        """Record ``scene`` for every camera whose capture is due at ``t_s``."""
+        for stream in self.streams:
+            while stream.next_t_s <= t_s + _TIME_SLACK_S:
+                stream.latest = (stream.next_seq, stream.next_t_s, scene)
+                stream.next_seq += 1
+
+    def rgb_frame(self) -> Frame | None:
+        """The latest RGB frame, rendered on first request."""
+        stream, renderer = self._rgb_stream, self._rgb
+        if stream is None or renderer is None or stream.latest is None:
+            return None
+        seq, t_s, scene = stream.latest
+        if stream.frame is None or stream.frame.seq != seq:
+            marker2cam = self.config.rig.marker2cam(scene.marker_deflection_m,
+                                                    scene.marker_slope_rad)
+            stream.frame = Frame(t_s, seq, renderer.render(seq, marker2cam,
+                                                           self._rgb_objects(scene)))
+        return stream.frame
+
+    def ir_frame(self) -> Frame | None:
+        """The latest infrared frame, rendered on first request."""
+        stream, renderer = self._ir_stream, self._ir
+        if stream is None or renderer is None or stream.latest is None:
+            return None
+        seq, t_s, scene = stream.latest
+        if stream.frame is None or stream.frame.seq != seq:
+            objects = [
+                IrObject(centre, 0.5 * spec.width_m, spec.temp_c, spec.emissivity)
+                for spec, centre in scene.objects
+            ]
+            image = renderer.render(seq, scene.finger_temps_c, self._nodes_m, scene.aperture_m,
+                                    objects, scene.ambient_c)
+            stream.frame = Frame(t_s, seq, image)
+        return stream.frame
+
+    def _rgb_objects(self, scene: SceneState) -> list[RgbObject]:
+        rig = self.config.rig
+        gripper2finger = invert_transform(rig.finger2gripper(rig.marker_finger, scene.aperture_m))
+        gripper2cam = rig.rgb.finger2cam @ gripper2finger
+        out = []
+        for spec, centre in scene.objects:
+            x, y, z = transform_points(gripper2cam, centre).tolist()
+            out.append(RgbObject((x, y, z), 0.5 * spec.width_m, spec.color_rgb))
+        return out
+
+    # -- reference force --------------------------------------------------
+    def sample_force(self, t0_s: float, t1_s: float, f0_n: float, f1_n: float) -> None:
+        """Sample the force sensor at its instants in ``(t0_s, t1_s]``, force linear in between."""
+        span = t1_s - t0_s
+        noise = self.config.force_sensor.noise_n
+        while True:
+            t = self._force_t0_s + self._force_next * self._force_period_s
+            if t > t1_s + _TIME_SLACK_S:
+                return
+            self._force_next += 1
+            if t <= t0_s - _TIME_SLACK_S:
+                continue
+            w = 1.0 if span <= 0.0 else min(max((t - t0_s) / span, 0.0), 1.0)
+            self._force_t.append(t)
+            reading = f0_n + w * (f1_n - f0_n) + noise * self._force_rng.standard_normal()
+            self._force_n.append(reading)
+
+    def skip_force(self, t1_s: float) -> None:
+        """Advance the sensor's schedule to ``t1_s`` without samples (no sensor in the grasp)."""
+        n = math.floor((t1_s - self._force_t0_s) / self._force_period_s + _TIME_SLACK_S) + 1
+        self._force_next = max(self._force_next, n)
+
+    def take_force(self) -> ForceSamples | None:
+        """Readings since the last call, or ``None`` if there were none."""
+        if not self._force_t:
+            return None
+        out = ForceSamples(np.array(self._force_t), np.array(self._force_n))
+        self._force_t, self._force_n = [], []
+        return out

@@ -1,0 +1,87 @@
+"""``relaxgrip perceive``: markers and poses from image files."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from relaxgrip.rig import RigGeometry
+from relaxgrip.twin.render_rgb import RgbRenderer
+from relaxgrip.twin.sensors import RgbSensorConfig
+from tests.clitools import assert_one_error_line, run_cli, run_main
+
+RIG = RigGeometry()
+
+
+@pytest.fixture
+def marker_png(tmp_path: Path) -> tuple[Path, np.ndarray]:
+    pose = RIG.marker2cam(0.003, 0.04)
+    image = RgbRenderer(RIG, RgbSensorConfig(), 0).render(0, pose)
+    path = tmp_path / "marker.png"
+    cv2.imwrite(str(path), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+    return path, pose
+
+
+def test_json_pose_matches_the_rendered_pose(marker_png: tuple[Path, np.ndarray]) -> None:
+    path, pose = marker_png
+    proc = run_cli("perceive", path, "--json")
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    (marker,) = out["markers"]
+    assert marker["id"] == 0
+    assert np.asarray(marker["corners_px"]).shape == (4, 2)
+    assert np.allclose(marker["tvec_m"], pose[:3, 3], atol=5e-5)
+    rot, _ = cv2.Rodrigues(np.asarray(marker["rvec"]))
+    assert np.allclose(rot, pose[:3, :3], atol=2e-3)
+
+
+def test_image_without_markers_is_an_empty_list(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "plain.jpg"
+    cv2.imwrite(str(path), np.full((120, 160, 3), 90, np.uint8))
+    code, out, _ = run_main(["perceive", path, "--json"], monkeypatch, capsys)
+    assert code == 0
+    assert json.loads(out)["markers"] == []
+
+
+def test_table_output(
+    marker_png: tuple[Path, np.ndarray],
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    code, out, _ = run_main(["perceive", marker_png[0], "--fx", "600", "--dist", "0,0,0,0"],
+                            monkeypatch, capsys)
+    assert code == 0
+    assert "1 marker(s)" in out
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["missing.png"], "no such file"),
+        (["notes.txt"], "not an image OpenCV can read"),
+        (["{png}", "--dict", "9X9"], "not an ArUco dictionary"),
+        (["{png}", "--dist", "1,x"], "--dist must be numbers"),
+        (["{png}", "--dist", "1,2,3"], "distortion needs 4, 5, 8"),
+        (["{png}", "--fx", "-3"], "fx_px must be a positive number"),
+        (["{png}", "--marker-mm", "0"], "--marker-mm must be > 0"),
+    ],
+)
+def test_bad_input(
+    tmp_path: Path,
+    marker_png: tuple[Path, np.ndarray],
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    args: list[str],
+    expected: str,
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "notes.txt").write_text("not an image\n")
+    argv = [a.replace("{png}", str(marker_png[0])) for a in args]
+    code, out, err = run_main(["perceive", *argv], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, expected)

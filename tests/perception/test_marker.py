@@ -1,0 +1,164 @@
+"""Marker tracking on rendered frames: accuracy against the twin's geometry, loss, bad frames."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from relaxgrip.backend import Frame
+from relaxgrip.perception.marker import (
+    MarkerTracker,
+    PoseSolver,
+    TrackStatus,
+    detect_markers,
+    make_detector,
+    mean_rotation,
+    refine_corners_by_edges,
+    rotation_angle,
+    to_gray,
+)
+from relaxgrip.rig import CameraIntrinsics, RigGeometry, rotation_x, rotation_z
+from relaxgrip.twin.render_rgb import RgbRenderer
+from relaxgrip.twin.sensors import RgbSensorConfig
+
+RIG = RigGeometry()
+
+
+def bend(k: int, n: int) -> tuple[float, float]:
+    """A grasp: still for 20 frames, then deflection and slope ramping up."""
+    s = max(0.0, (k - 20) / (n - 20))
+    return 0.008 * s, 0.12 * s
+
+
+def track(config: RgbSensorConfig, n: int = 120, edge_refine: bool = True,
+          seed: int = 0) -> tuple[list[TrackStatus], np.ndarray, np.ndarray]:
+    """Track a rendered grasp; errors of the relative pose against the rendered truth."""
+    renderer = RgbRenderer(RIG, config, seed)
+    tracker = MarkerTracker(RIG.rgb.intrinsics, RIG.marker, edge_refine=edge_refine)
+    rest = RIG.marker2cam()
+    statuses, t_err, r_err = [], [], []
+    for k in range(n):
+        pose = RIG.marker2cam(*bend(k, n))
+        state = tracker.update(Frame(k / 30, k, renderer.render(k, pose)))
+        statuses.append(state.status)
+        if state.ok:
+            assert state.delta_t_m is not None
+            assert state.delta_r_rad is not None
+            t_err.append(state.delta_t_m - (pose[:3, 3] - rest[:3, 3]))
+            measured, _ = cv2.Rodrigues(state.delta_r_rad)
+            r_err.append(rotation_angle(measured @ (pose[:3, :3] @ rest[:3, :3].T).T))
+    return statuses, np.array(t_err), np.array(r_err)
+
+
+def test_relative_pose_matches_the_rendered_bend_with_noise_on() -> None:
+    statuses, t_err, r_err = track(RgbSensorConfig())
+    assert statuses[:14] == [TrackStatus.ZEROING] * 14
+    assert statuses[14:] == [TrackStatus.TRACKING] * (len(statuses) - 14)
+    in_plane_rms_mm = 1e3 * np.sqrt(np.mean(t_err[:, :2] ** 2))
+    assert in_plane_rms_mm < 0.05  # the issue's goal; edge fitting gets ~0.002
+    assert math.degrees(np.sqrt(np.mean(r_err**2))) < 0.3
+
+
+def test_plain_subpix_corners_also_meet_the_goal_at_the_tilted_mount() -> None:
+    _, t_err, r_err = track(RgbSensorConfig(), edge_refine=False)
+    assert 1e3 * np.sqrt(np.mean(t_err[:, :2] ** 2)) < 0.05
+    assert math.degrees(np.sqrt(np.mean(r_err**2))) < 0.3
+
+
+def test_edge_fit_removes_the_corner_bias_of_subpix() -> None:
+    renderer = RgbRenderer(RIG, RgbSensorConfig(noise_dn=0.0), 0)
+    pose = RIG.marker2cam(0.003, 0.05)
+    truth = renderer.marker_corners_px(pose)
+    gray = to_gray(renderer.render(0, pose))
+    (det,) = detect_markers(gray, make_detector(RIG.marker.aruco_dictionary))
+    refined = refine_corners_by_edges(gray, det.corners_px)
+    assert refined is not None
+    subpix_err = np.abs(det.corners_px - truth).max()
+    edge_err = np.abs(refined - truth).max()
+    assert edge_err < 0.05
+    assert edge_err < 0.5 * subpix_err
+
+
+def test_tracking_survives_blur_dim_light_and_flicker() -> None:
+    config = RgbSensorConfig(noise_dn=3.0, blur_sigma_px=1.2, lighting_gain=0.5,
+                             lighting_flicker=0.1)
+    statuses, t_err, _ = track(config, n=60)
+    assert statuses.count(TrackStatus.TRACKING) == 60 - 14
+    assert 1e3 * np.sqrt(np.mean(t_err[:, :2] ** 2)) < 0.05
+
+
+def test_occluded_marker_is_lost_not_an_error_and_reacquired() -> None:
+    clear = RgbRenderer(RIG, RgbSensorConfig(), 0)
+    hidden = RgbRenderer(RIG, RgbSensorConfig(occlusion=0.4), 0)
+    tracker = MarkerTracker(RIG.rgb.intrinsics, RIG.marker, zero_frames=3)
+    pose = RIG.marker2cam()
+    states = [tracker.update(Frame(k / 30, k, clear.render(k, pose))) for k in range(5)]
+    assert states[-1].status is TrackStatus.TRACKING
+    lost = [tracker.update(Frame((5 + k) / 30, 5 + k, hidden.render(k, pose))) for k in range(6)]
+    assert all(s.status is TrackStatus.LOST for s in lost)
+    assert lost[-1].lost_for_s == pytest.approx(6 / 30)
+    back = tracker.update(Frame(11 / 30, 11, clear.render(11, pose)))
+    assert back.status is TrackStatus.TRACKING
+    assert back.search == "roi"  # it came back where it was lost
+    moved = RIG.marker2cam(0.010, 0.1)  # a second later, bent far out of the last region
+    far = tracker.update(Frame(1.5, 45, clear.render(45, moved)))
+    assert far.status is TrackStatus.TRACKING
+    assert far.search == "full"
+
+
+def test_roi_search_is_used_while_tracking() -> None:
+    renderer = RgbRenderer(RIG, RgbSensorConfig(), 0)
+    tracker = MarkerTracker(RIG.rgb.intrinsics, RIG.marker)
+    searches = [tracker.update(Frame(k / 30, k, renderer.render(k, RIG.marker2cam()))).search
+                for k in range(10)]
+    assert searches == ["full"] + ["roi"] * 9
+
+
+def test_implausible_jump_is_rejected_then_reacquired() -> None:
+    renderer = RgbRenderer(RIG, RgbSensorConfig(), 0)
+    tracker = MarkerTracker(RIG.rgb.intrinsics, RIG.marker, zero_frames=2, reacquire_after=2)
+    for k in range(3):
+        tracker.update(Frame(k / 30, k, renderer.render(k, RIG.marker2cam())))
+    jumped = RIG.marker2cam(0.015, 0.0)  # 15 mm in one frame: not a finger
+    states = [tracker.update(Frame((3 + k) / 30, 3 + k, renderer.render(3 + k, jumped)))
+              for k in range(3)]
+    assert [s.status for s in states] == [TrackStatus.REJECTED, TrackStatus.REJECTED,
+                                          TrackStatus.TRACKING]
+
+
+@pytest.mark.parametrize(
+    ("image", "message"),
+    [
+        (np.zeros((0, 0, 3), np.uint8), "empty"),
+        (np.zeros((240, 320, 3), np.uint8), "320x240, expected 640x480"),
+        (np.zeros((480, 640, 3), np.float32), "dtype float32"),
+        (np.zeros((480, 640, 4), np.uint8), "4 channels"),
+        ("not an image", "not an image array"),
+    ],
+)
+def test_bad_frames_give_an_invalid_state(image: object, message: str) -> None:
+    tracker = MarkerTracker(RIG.rgb.intrinsics, RIG.marker)
+    state = tracker.update(Frame(0.0, 0, image))  # type: ignore[arg-type]
+    assert state.status is TrackStatus.INVALID
+    assert message in state.message
+
+
+def test_pose_solver_picks_the_solution_nearest_the_previous_pose() -> None:
+    intr = CameraIntrinsics.centred(640, 480, 600.0)
+    solver = PoseSolver(0.012, intr)
+    for tilt_deg in (2.0, -2.0):  # near-frontal: IPPE's two solutions are mirror images
+        rot = rotation_x(math.pi) @ rotation_x(math.radians(tilt_deg))
+        t = np.array([0.001, 0.002, 0.09])
+        corners = intr.project(solver._object @ rot.T + t)
+        prev = solver.solve(corners)
+        prev = type(prev)(prev.rvec, prev.tvec_m, prev.corners_px, prev.reprojection_px, rot)
+        assert rotation_angle(solver.solve(corners, prev).rotation @ rot.T) < 0.01
+
+
+def test_mean_rotation_of_small_perturbations() -> None:
+    base = rotation_z(0.3)
+    rots = [base @ rotation_x(e) for e in (-0.01, 0.0, 0.01)]
+    assert rotation_angle(mean_rotation(rots) @ base.T) < 1e-6

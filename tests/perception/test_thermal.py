@@ -1,0 +1,213 @@
+"""Thermal perception: round trips through the twin's infrared camera."""
+
+import math
+
+import numpy as np
+import pytest
+
+from relaxgrip.backend import Frame
+from relaxgrip.perception.frames import FrameError
+from relaxgrip.perception.thermal import ThermalFeatures, ThermalPerception
+from relaxgrip.physics.thermal import HeatParams, node_positions_m
+from relaxgrip.rig import RigGeometry
+from relaxgrip.twin.objects import get_object
+from relaxgrip.twin.render_ir import IrObject, IrRenderer
+from relaxgrip.twin.sensors import IrSensorConfig
+
+RIG = RigGeometry()
+NODES = node_positions_m(HeatParams())
+BEAMS = np.asarray(RIG.finger.beam_positions_m)
+AMBIENT_C = 25.0
+EXAMPLE_C = np.array([[40, 41, 42, 41, 40], [55, 56, 57, 56, 55]], dtype=float)
+
+
+def motor_mm(aperture_m: float) -> float:
+    return (RIG.open_aperture_m - aperture_m) * 1e3
+
+
+def sense(
+    temps_c: np.ndarray,
+    aperture_m: float = 0.075,
+    objects: tuple[IrObject, ...] = (),
+    seed: int = 1,
+    seq: int = 0,
+) -> tuple[ThermalFeatures, float]:
+    """Render a frame with the twin's camera and read it back; also the camera's offset."""
+    renderer = IrRenderer(RIG, IrSensorConfig(), seed=seed)
+    image = renderer.render(seq, temps_c, NODES, aperture_m, objects, AMBIENT_C)
+    features = ThermalPerception(RIG).extract(Frame(12.5, seq, image), motor_mm(aperture_m))
+    return features, renderer.offset_k
+
+
+def cup(name: str, y_m: float) -> IrObject:
+    spec = get_object(name)
+    return IrObject((0.25, y_m, -0.03), 0.5 * spec.width_m, spec.temp_c, spec.emissivity)
+
+
+@pytest.mark.parametrize("aperture_m", [0.06, 0.075, 0.1, 0.13])
+@pytest.mark.parametrize("seed", [1, 2])
+def test_beam_temperatures_round_trip(aperture_m, seed):
+    features, offset = sense(EXAMPLE_C, aperture_m, seed=seed)
+    for j in (0, 1):
+        truth = np.interp(BEAMS, NODES, EXAMPLE_C[j])
+        beams = np.array(features.fingers[j].beam_temps_c)
+        seen = np.isfinite(beams)
+        assert np.count_nonzero(seen) >= 4
+        # The camera's offset is unknown to perception: it reads the truth plus the offset.
+        assert np.allclose(beams[seen], truth[seen] + offset, atol=0.3)
+
+
+def test_uniform_finger_reads_uniform_beams():
+    temps = np.array([np.full(NODES.size, 50.0), np.full(NODES.size, 35.0)])
+    features, offset = sense(temps, 0.075)
+    for j, temp in ((0, 50.0), (1, 35.0)):
+        beams = np.array(features.fingers[j].beam_temps_c)
+        assert np.all(np.isfinite(beams))
+        assert float(np.std(beams)) < 0.1  # the tip beam, near the face's end, reads ~0.2 K low
+        assert float(np.mean(beams)) == pytest.approx(temp + offset, abs=0.1)
+        assert abs(features.fingers[j].gradient_k_per_m) < 5.0
+
+
+def test_gradient_sign_and_magnitude():
+    rising = np.linspace(35.0, 55.0, NODES.size)
+    temps = np.array([rising, rising[::-1]])
+    slope_k_per_m = (55.0 - 35.0) / (NODES[-1] - NODES[0])
+    features, _ = sense(temps, 0.09)
+    assert features.fingers[0].gradient_k_per_m == pytest.approx(slope_k_per_m, rel=0.1)
+    assert features.fingers[1].gradient_k_per_m == pytest.approx(-slope_k_per_m, rel=0.1)
+
+
+def test_face_statistics_are_ordered_and_span_the_finger():
+    features, offset = sense(EXAMPLE_C, 0.075)
+    for j in (0, 1):
+        f = features.fingers[j]
+        assert f.min_c <= f.mean_c <= f.max_c
+        assert f.std_k > 0
+        assert f.min_c > EXAMPLE_C[j].min() + offset - 0.5  # no background in the face mask
+        assert f.max_c < EXAMPLE_C[j].max() + offset + 0.5
+    assert features.background_c == pytest.approx(AMBIENT_C + offset, abs=0.02)
+    assert features.t_s == 12.5
+    assert features.objects == ()
+
+
+def test_emissivity_correction_raises_hot_fingers():
+    renderer = IrRenderer(RIG, IrSensorConfig(), seed=1)
+    frame = Frame(0.0, 0, renderer.render(0, EXAMPLE_C, NODES, 0.075, [], AMBIENT_C))
+    corrected = ThermalPerception(RIG, emissivity=0.95).extract(frame, motor_mm(0.075))
+    apparent = ThermalPerception(RIG, emissivity=1.0).extract(frame, motor_mm(0.075))
+    for j in (0, 1):
+        assert corrected.fingers[j].mean_c > apparent.fingers[j].mean_c + 0.5
+
+
+def test_hot_and_cool_cups_are_found_on_their_sides():
+    # Finger 1's side (+y) is the left of the image, finger 0's side (-y) the right.
+    hot, cool = cup("paper_cup_hot", 0.06), cup("paper_cup", -0.06)
+    features, offset = sense(EXAMPLE_C, 0.075, objects=(hot, cool))
+    kinds = sorted(o.kind for o in features.objects)
+    assert kinds == ["cool", "warm"]
+    warm_obj = next(o for o in features.objects if o.kind == "warm")
+    cool_obj = next(o for o in features.objects if o.kind == "cool")
+    cx = RIG.ir.intrinsics.cx_px
+    assert warm_obj.centroid_px[0] < cx < cool_obj.centroid_px[0]
+    assert warm_obj.peak_c > 60.0 + offset
+    assert cool_obj.peak_c < features.background_c - 1.0
+    assert cool_obj.temp_c < features.background_c
+    areas = [o.area_px for o in features.objects]
+    assert areas == sorted(areas, reverse=True)
+    for o in features.objects:
+        x, y, w, h = o.bbox_px
+        assert x <= o.centroid_px[0] <= x + w
+        assert y <= o.centroid_px[1] <= y + h
+        assert o.area_px <= w * h
+
+
+def test_a_cold_aluminium_can_is_not_an_object():
+    can = get_object("aluminium_can")
+    obj = IrObject((0.25, 0.0, -0.03), 0.5 * can.width_m, 30.0, can.emissivity)
+    features, _ = sense(EXAMPLE_C, 0.075, objects=(obj,))
+    assert features.objects == ()
+
+
+@pytest.mark.parametrize(
+    ("image", "message"),
+    [
+        (np.zeros((0, 0), np.float32), "empty"),
+        (np.zeros((100, 100), np.float32), "expected 256x192"),
+        (np.zeros((192, 256), np.int16), "dtype"),
+        (np.full((192, 256), np.nan, np.float32), "non-finite"),
+        (np.zeros((192, 256, 3), np.float32), "dimensions"),
+        ([[25.0]], "not an image"),
+    ],
+)
+def test_bad_frames_raise_frame_error(image, message):
+    with pytest.raises(FrameError, match=message):
+        ThermalPerception(RIG).extract(Frame(0.0, 0, image), 75.0)
+
+
+def test_bad_settings_are_rejected():
+    from relaxgrip.errors import InputError
+
+    with pytest.raises(InputError, match="emissivity"):
+        ThermalPerception(RIG, emissivity=0.0)
+    with pytest.raises(InputError, match="roi_half_px"):
+        ThermalPerception(RIG, roi_half_px=-1)
+    with pytest.raises(InputError, match="motor_position_mm"):
+        ThermalPerception(RIG).extract(Frame(0.0, 0, np.zeros((192, 256), np.float32)), math.inf)
+
+
+@pytest.mark.parametrize("aperture_m", [0.0, 0.02, 0.075, RIG.open_aperture_m])
+def test_every_beam_is_read_over_the_whole_stroke(aperture_m):
+    # Looking down on the top faces, the camera sees every beam from closed to fully open.
+    features, offset = sense(EXAMPLE_C, aperture_m)
+    for j in (0, 1):
+        beams = np.array(features.fingers[j].beam_temps_c)
+        truth = np.interp(BEAMS, NODES, EXAMPLE_C[j]) + offset
+        assert np.allclose(beams, truth, atol=0.3)
+        assert math.isfinite(features.fingers[j].gradient_k_per_m)
+
+
+def test_grasped_object_does_not_hide_the_beams():
+    # The object between the fingers would hide their contact faces, not their tops.
+    ball = IrObject((0.08, 0.0, 0.0), 0.03, AMBIENT_C, 0.95)
+    renderer = IrRenderer(RIG, IrSensorConfig(), seed=0)
+    frame = Frame(0.0, 0, renderer.render(0, EXAMPLE_C, NODES, 0.06, [ball], AMBIENT_C))
+    features = ThermalPerception(RIG).extract(frame, motor_mm(0.06))
+    for j in (0, 1):
+        truth = np.interp(BEAMS, NODES, EXAMPLE_C[j]) + renderer.offset_k
+        assert np.allclose(features.fingers[j].beam_temps_c, truth, atol=0.3)
+
+
+@pytest.mark.parametrize("aperture_m", [0.3, 0.6])
+def test_fingers_out_of_view_give_nan_without_exceptions(aperture_m):
+    # Beyond the stroke the fingers leave the field of view.
+    features, _ = sense(EXAMPLE_C, aperture_m)
+    for f in features.fingers:
+        assert all(math.isnan(b) for b in f.beam_temps_c)
+        assert math.isnan(f.gradient_k_per_m)
+    assert math.isfinite(features.background_c)
+
+
+def test_same_frame_gives_same_features():
+    renderer = IrRenderer(RIG, IrSensorConfig(), seed=5)
+    frame = Frame(1.0, 3, renderer.render(3, EXAMPLE_C, NODES, 0.08, [cup("paper_cup_hot", 0.0)],
+                                          AMBIENT_C))
+    perception = ThermalPerception(RIG)
+    first = perception.extract(frame, motor_mm(0.08))
+    perception.extract(Frame(2.0, 4, frame.image), motor_mm(0.05))  # another aperture between
+    again = perception.extract(frame, motor_mm(0.08))
+    fresh = ThermalPerception(RIG).extract(frame, motor_mm(0.08))
+    assert np.allclose(first.fingers[0].beam_temps_c, again.fingers[0].beam_temps_c, equal_nan=True)
+    assert repr(first) == repr(again) == repr(fresh)
+
+
+def test_round_trip_through_a_distorted_lens():
+    from relaxgrip.rig import CameraIntrinsics, IrCameraMount
+
+    lens = CameraIntrinsics(256, 192, 128.0, 128.0, 127.5, 95.5, (-0.2, 0.05, 0.0, 0.0))
+    rig = RigGeometry(ir=IrCameraMount(intrinsics=lens))
+    renderer = IrRenderer(rig, IrSensorConfig(), seed=1)
+    image = renderer.render(0, EXAMPLE_C, NODES, 0.09, [], AMBIENT_C)
+    features = ThermalPerception(rig).extract(Frame(0.0, 0, image), motor_mm(0.09))
+    for j in (0, 1):
+        truth = np.interp(BEAMS, NODES, EXAMPLE_C[j]) + renderer.offset_k
+        assert np.allclose(features.fingers[j].beam_temps_c, truth, atol=0.3)
