@@ -109,12 +109,32 @@ def test_occluded_marker_is_lost_not_an_error_and_reacquired() -> None:
     assert far.search == "full"
 
 
-def test_roi_search_is_used_while_tracking() -> None:
+@pytest.mark.parametrize(
+    ("verify_every", "expected"),
+    [
+        (5, ["full"] + (["edges"] * 4 + ["roi"]) * 2),  # the detector confirms every 5th frame
+        (1, ["full"] + ["roi"] * 10),
+    ],
+)
+def test_search_schedule_while_tracking(verify_every: int, expected: list[str]) -> None:
     renderer = RgbRenderer(RIG, RgbSensorConfig(), 0)
-    tracker = MarkerTracker(RIG.rgb.intrinsics, RIG.marker)
+    tracker = MarkerTracker(RIG.rgb.intrinsics, RIG.marker, verify_every=verify_every)
     searches = [tracker.update(Frame(k / 30, k, renderer.render(k, RIG.marker2cam()))).search
-                for k in range(10)]
-    assert searches == ["full"] + ["roi"] * 9
+                for k in range(11)]
+    assert searches == expected
+
+
+def test_edge_following_keeps_up_with_a_fast_bend() -> None:
+    renderer = RgbRenderer(RIG, RgbSensorConfig(), 0)
+    tracker = MarkerTracker(RIG.rgb.intrinsics, RIG.marker, zero_frames=2)
+    rest = RIG.marker2cam()
+    for k in range(40):  # 0.3 mm and 0.5 degree per frame: 9 mm/s, faster than any grasp
+        bent = max(0, k - 2)  # unloaded while the zero pose is taken
+        pose = RIG.marker2cam(3e-4 * bent, math.radians(0.5) * bent)
+        state = tracker.update(Frame(k / 30, k, renderer.render(k, pose)))
+        assert state.status in (TrackStatus.ZEROING, TrackStatus.TRACKING)
+    assert state.delta_t_m is not None
+    assert np.abs(state.delta_t_m - (pose[:3, 3] - rest[:3, 3]))[:2].max() < 1e-5
 
 
 def test_implausible_jump_is_rejected_then_reacquired() -> None:
@@ -154,7 +174,7 @@ def test_pose_solver_picks_the_solution_nearest_the_previous_pose() -> None:
         t = np.array([0.001, 0.002, 0.09])
         corners = intr.project(solver._object @ rot.T + t)
         prev = solver.solve(corners)
-        prev = type(prev)(prev.rvec, prev.tvec_m, prev.corners_px, prev.reprojection_px, rot)
+        prev = type(prev)(rot, prev.tvec_m, prev.corners_px, prev.reprojection_px)
         assert rotation_angle(solver.solve(corners, prev).rotation @ rot.T) < 0.01
 
 
@@ -162,3 +182,32 @@ def test_mean_rotation_of_small_perturbations() -> None:
     base = rotation_z(0.3)
     rots = [base @ rotation_x(e) for e in (-0.01, 0.0, 0.01)]
     assert rotation_angle(mean_rotation(rots) @ base.T) < 1e-6
+
+
+def distort(image: np.ndarray, intr: CameraIntrinsics) -> np.ndarray:
+    """What a camera with ``intr``'s distortion sees of an ideal pinhole ``image``."""
+    h, w = image.shape[:2]
+    grid = np.stack(np.meshgrid(np.arange(w), np.arange(h)), axis=-1).reshape(-1, 2)
+    ideal = intr.normalized(grid.astype(np.float64)) * [intr.fx_px, intr.fy_px]
+    ideal += [intr.cx_px, intr.cy_px]
+    maps = ideal.reshape(h, w, 2).astype(np.float32)
+    out = cv2.remap(image, maps, None, cv2.INTER_LINEAR)  # type: ignore[call-overload]
+    return np.asarray(out, dtype=np.uint8)
+
+
+def test_edge_fit_and_pose_with_lens_distortion() -> None:
+    pinhole = RIG.rgb.intrinsics
+    lens = CameraIntrinsics(640, 480, pinhole.fx_px, pinhole.fy_px, pinhole.cx_px,
+                            pinhole.cy_px, (-0.25, 0.08, 0.0005, -0.0003, 0.0))
+    renderer = RgbRenderer(RIG, RgbSensorConfig(noise_dn=0.0, supersample=8), 0)
+    pose = RIG.marker2cam(0.006, 0.08)
+    image = distort(renderer.render(0, pose), lens)
+    gray = to_gray(image)
+    (det,) = detect_markers(gray, make_detector(RIG.marker.aruco_dictionary))
+    truth = lens.project(RIG.marker.object_points_m @ pose[:3, :3].T + pose[:3, 3])
+    refined = refine_corners_by_edges(gray, det.corners_px, lens)
+    assert refined is not None
+    assert np.abs(refined - truth).max() < 0.05
+    solved = PoseSolver(RIG.marker.size_m, lens).solve(refined)
+    assert np.abs(solved.tvec_m - pose[:3, 3]).max() < 2e-5
+    assert math.degrees(rotation_angle(solved.rotation @ pose[:3, :3].T)) < 0.1

@@ -28,6 +28,7 @@ from typing import Literal
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
 
 from relaxgrip.backend import Frame
 from relaxgrip.perception.frames import FrameError, check_rgb_frame
@@ -35,6 +36,7 @@ from relaxgrip.rig import CameraIntrinsics, MarkerMount
 
 FloatArray = NDArray[np.float64]
 GrayImage = NDArray[np.uint8]
+Search = Literal["edges", "roi", "full", "none"]
 
 __all__ = [
     "MarkerDetection",
@@ -60,11 +62,16 @@ _PROFILE_STEP_PX = 0.5
 _EDGE_MARGIN = 0.12
 _EDGE_S = np.linspace(_EDGE_MARGIN, 1.0 - _EDGE_MARGIN, _EDGE_SAMPLES)
 _OFFSETS = np.arange(-_PROFILE_HALF_PX, _PROFILE_HALF_PX + 1e-9, _PROFILE_STEP_PX)
-_INSIDE_MEAN = (_OFFSETS <= -2.0) / np.count_nonzero(_OFFSETS <= -2.0)
-_OUTSIDE_MEAN = (_OFFSETS >= 2.0) / np.count_nonzero(_OFFSETS >= 2.0)
 _TRAPEZOID = np.full(_OFFSETS.size, _PROFILE_STEP_PX)
 _TRAPEZOID[[0, -1]] *= 0.5
 _TRAPEZOID_SUM = float(_TRAPEZOID.sum())
+#: Columns: mean inside the marker (offsets <= -2 px), mean outside (>= 2 px), trapezoid
+#: integral: one matrix product gives all three for every profile.
+_PROFILE_MOMENTS = np.column_stack([
+    (_OFFSETS <= -2.0) / np.count_nonzero(_OFFSETS <= -2.0),
+    (_OFFSETS >= 2.0) / np.count_nonzero(_OFFSETS >= 2.0),
+    _TRAPEZOID,
+])
 #: Rows [1, s, offset] of every profile sample: times an edge's (origin, along, across)
 #: they give its pixel positions in one matrix product.
 _SAMPLE_DESIGN = np.column_stack([
@@ -72,17 +79,22 @@ _SAMPLE_DESIGN = np.column_stack([
     np.repeat(_EDGE_S, _OFFSETS.size),
     np.tile(_OFFSETS, _EDGE_S.size),
 ])
-_EDGE_DESIGN = np.column_stack([np.ones(_EDGE_S.size), _EDGE_S])
+_EDGE_DESIGN = np.column_stack([np.ones(_EDGE_S.size), _EDGE_S])  # rows [1, s] on an edge
+_EDGE_S2 = _EDGE_S * _EDGE_S
 _NEXT = np.roll(np.eye(4), 1, axis=1)  # row k selects corner k+1
 _PREV = np.roll(np.eye(4), -1, axis=1)  # row k selects corner k-1
 _ROT90 = np.array([1.0, -1.0])
+#: Half turn about x: maps the marker frame to the one IPPE sees with the corners reversed.
+_HALF_TURN_X = np.diag([1.0, -1.0, -1.0])
 
 
 def to_gray(image: NDArray[np.uint8]) -> GrayImage:
     """Grey levels of an RGB ``(H, W, 3)`` or grey ``(H, W)`` uint8 image (the image if grey)."""
     if image.ndim == 2:
         return image
-    return np.asarray(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY), dtype=np.uint8)
+    # OpenCV's binding is slow on strided views (a region of a frame): copy first.
+    return np.asarray(cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY),
+                      dtype=np.uint8)
 
 
 def make_detector(dictionary: cv2.aruco.Dictionary, roi: bool = False) -> cv2.aruco.ArucoDetector:
@@ -177,65 +189,114 @@ def refine_corners_by_edges(
         shows no clean dark-to-light step (occluded, saturated).
     """
     c = np.asarray(corners_px, dtype=np.float64)
-    # Every profile sample lies within the corners' box grown by the profile's half-width.
-    (x0, y0), (x1, y1), (x2, y2), (x3, y3) = c.tolist()
+    pts = c.tolist()
+    xs, ys = [p[0] for p in pts], [p[1] for p in pts]
     h, w = gray.shape
-    if min(x0, x1, x2, x3) < _PROFILE_HALF_PX or min(y0, y1, y2, y3) < _PROFILE_HALF_PX or (
-        max(x0, x1, x2, x3) > w - 1 - _PROFILE_HALF_PX
-        or max(y0, y1, y2, y3) > h - 1 - _PROFILE_HALF_PX
+    # Every profile sample lies within the corners' box grown by the profile's half-width.
+    if min(xs) < _PROFILE_HALF_PX or min(ys) < _PROFILE_HALF_PX or (
+        max(xs) > w - 1 - _PROFILE_HALF_PX or max(ys) > h - 1 - _PROFILE_HALF_PX
     ):
         return None
-    vec = _NEXT @ c - c  # edge k runs from corner k to corner k+1
-    length = np.sqrt((vec * vec).sum(axis=1))
-    if length.min() < 12.0:
-        return None
-    normal = vec[:, ::-1] * (_ROT90 / length[:, None])  # (dy, -dx): outward, clockwise order
-    frame = np.stack([c, vec, normal], axis=1)  # (4, 3, 2): origin, along, across
+    # The four edges as plain floats (numpy's per-call cost dominates arrays this small):
+    # edge k runs from corner k to k+1; its normal (dy, -dx) points out for OpenCV's
+    # clockwise corner order.
+    edges = []
+    for k in range(4):
+        ax, ay = pts[k]
+        bx, by = pts[(k + 1) % 4]
+        dx, dy = bx - ax, by - ay
+        length = math.hypot(dx, dy)
+        if length < 12.0:
+            return None
+        edges.append(((ax, ay), (dx, dy), (dy / length, -dx / length)))
+    frame = np.array(edges)  # (4, 3, 2): origin, along (full edge), across (unit normal)
     maps = (_SAMPLE_DESIGN @ frame).astype(np.float32).reshape(4 * _EDGE_SAMPLES, -1, 2)
     prof = cv2.remap(gray, maps, None, cv2.INTER_LINEAR)  # type: ignore[call-overload]
-    inside = prof @ _INSIDE_MEAN
-    contrast = prof @ _OUTSIDE_MEAN - inside
+    inside, outside, integral = (prof @ _PROFILE_MOMENTS).T
+    contrast = outside - inside
     good = contrast > 20.0
     # First moment of the normalised step: for an area-sampled straight edge
     # the area under (I - I_in) / (I_out - I_in) ends exactly at the edge.
-    area = (prof @ _TRAPEZOID - inside * _TRAPEZOID_SUM) / np.where(good, contrast, 1.0)
-    r = (_OFFSETS[-1] - area).reshape(4, _EDGE_SAMPLES)
-    edge_pts = (_EDGE_DESIGN @ frame[:, :2, :]).reshape(4, _EDGE_SAMPLES, 2)
-    edge_pts += r[:, :, None] * normal[:, None, :]
-    edge_pts = edge_pts.reshape(-1, 2)
+    area = (integral - inside * _TRAPEZOID_SUM) / np.where(good, contrast, 1.0)
+    r = (_OFFSETS[-1] - area).reshape(4, _EDGE_SAMPLES)  # edge offsets along each normal
     weight = good.reshape(4, _EDGE_SAMPLES).astype(np.float64)
-    count = weight.sum(axis=1)
-    if count.min() < _EDGE_SAMPLES // 2:
+    s0 = weight.sum(axis=1)
+    if s0.min() < _EDGE_SAMPLES // 2:
         return None
-    distorted = intrinsics is not None and bool(intrinsics.dist)
-    if distorted:
-        assert intrinsics is not None
-        shift = np.asarray(origin_px, dtype=np.float64)
-        focal = np.array([intrinsics.fx_px, intrinsics.fy_px])
-        centre_px = np.array([intrinsics.cx_px, intrinsics.cy_px])
-        edge_pts = intrinsics.normalized(edge_pts + shift) * focal + centre_px
-    # Total least squares line per edge: centroid and principal direction of the points.
-    e = edge_pts.reshape(4, _EDGE_SAMPLES, 2)
-    centroid = np.matmul(weight[:, None, :], e)[:, 0, :] / count[:, None]
-    dev = e - centroid[:, None, :]
-    cov = np.matmul((dev * weight[:, :, None]).transpose(0, 2, 1), dev)  # (4, 2, 2)
-    angle = 0.5 * np.arctan2(2.0 * cov[:, 0, 1], cov[:, 0, 0] - cov[:, 1, 1])
-    u = np.empty((4, 2))
-    u[:, 0] = np.cos(angle)
-    u[:, 1] = np.sin(angle)
-    # Corner k is where edge k-1 meets edge k: p + t u = q + s v.
-    p0, up = _PREV @ centroid, _PREV @ u
-    cross = up[:, 0] * u[:, 1] - up[:, 1] * u[:, 0]
-    if np.abs(cross).min() < 1e-6:
-        return None
-    rhs = centroid - p0
-    t = (rhs[:, 0] * u[:, 1] - rhs[:, 1] * u[:, 0]) / cross
-    out: FloatArray = p0 + t[:, None] * up
-    if distorted:
-        rays = np.column_stack([(out - centre_px) / focal, np.ones(4)])
-        out = intrinsics.project(rays) - shift  # type: ignore[union-attr]
-    if np.abs(out - c).max() > 3.0:
+    if intrinsics is not None and intrinsics.dist:
+        return _refine_distorted(frame, r, weight, c, intrinsics, origin_px)
+    # Weighted least-squares line per edge in its own frame: offset = a + b * along.
+    w_r = weight * r
+    s1, s2 = weight @ _EDGE_S, weight @ _EDGE_S2
+    t0, t1 = w_r.sum(axis=1), w_r @ _EDGE_S
+    slope = ((s0 * t1 - s1 * t0) / (s0 * s2 - s1 * s1)).tolist()
+    offset = ((t0 - np.asarray(slope) * s1) / s0).tolist()
+    lines = [
+        ((ax + a * nx, ay + a * ny), (dx + b * nx, dy + b * ny))
+        for ((ax, ay), (dx, dy), (nx, ny)), a, b in zip(edges, offset, slope, strict=True)
+    ]
+    out = _intersect(lines)
+    if out is None or max(abs(u - v) for u, v in zip(np.ravel(out), np.ravel(c), strict=True)) > 3:
         return None  # the fit moved a corner by more than the detector's error: distrust it
+    return out
+
+
+def _intersect(lines: list[tuple[tuple[float, float], tuple[float, float]]]) -> FloatArray | None:
+    """Corner k where line k-1 meets line k; lines as (point, direction)."""
+    out = []
+    for k in range(4):
+        (px, py), (ux, uy) = lines[k - 1]
+        (qx, qy), (vx, vy) = lines[k]
+        cross = ux * vy - uy * vx
+        if abs(cross) < 1e-9 * (ux * ux + uy * uy):
+            return None
+        t = ((qx - px) * vy - (qy - py) * vx) / cross
+        out.append((px + t * ux, py + t * uy))
+    return np.array(out)
+
+
+def _refine_distorted(
+    frame: FloatArray,
+    r: FloatArray,
+    weight: FloatArray,
+    corners: FloatArray,
+    intrinsics: CameraIntrinsics,
+    origin_px: tuple[int, int],
+) -> FloatArray | None:
+    """The line fit of :func:`refine_corners_by_edges` where edges are straight: undistorted."""
+    shift = np.asarray(origin_px, dtype=np.float64)
+    focal = np.array([intrinsics.fx_px, intrinsics.fy_px])
+    centre_px = np.array([intrinsics.cx_px, intrinsics.cy_px])
+
+    def undistort(px: FloatArray) -> FloatArray:
+        out: FloatArray = intrinsics.normalized(px + shift) * focal + centre_px
+        return out
+
+    pts = (_EDGE_DESIGN @ frame[:, :2, :]) + r[:, :, None] * frame[:, 2, None, :]
+    pts = undistort(pts.reshape(-1, 2)).reshape(4, _EDGE_SAMPLES, 2)
+    c = undistort(corners)
+    vec = _NEXT @ c - c
+    length = np.sqrt((vec * vec).sum(axis=1))
+    normal = vec[:, ::-1] * (_ROT90 / length[:, None])
+    rel = pts - c[:, None, :]
+    along = np.einsum("ksj,kj->ks", rel, vec) / (length * length)[:, None]
+    offset_r = np.einsum("ksj,kj->ks", rel, normal)
+    s0, s1 = weight.sum(axis=1), (weight * along).sum(axis=1)
+    s2 = (weight * along * along).sum(axis=1)
+    t0, t1 = (weight * offset_r).sum(axis=1), (weight * along * offset_r).sum(axis=1)
+    slope = (s0 * t1 - s1 * t0) / (s0 * s2 - s1 * s1)
+    offset = (t0 - slope * s1) / s0
+    point = c + offset[:, None] * normal
+    direction = vec + slope[:, None] * normal
+    lines = [((float(p[0]), float(p[1])), (float(d[0]), float(d[1])))
+             for p, d in zip(point, direction, strict=True)]
+    fitted = _intersect(lines)
+    if fitted is None:
+        return None
+    rays = np.column_stack([(fitted - centre_px) / focal, np.ones(4)])
+    out: FloatArray = intrinsics.project(rays) - shift
+    if np.abs(out - corners).max() > 3.0:
+        return None
     return out
 
 
@@ -245,30 +306,38 @@ class MarkerPose:
 
     Attributes
     ----------
-    rvec : ndarray, shape (3,)
-        Rotation ``marker -> camera`` as a Rodrigues vector (rad).
+    rotation : ndarray, shape (3, 3)
+        Rotation ``marker -> camera``.
     tvec_m : ndarray, shape (3,)
         Marker centre in the camera frame (m).
     corners_px : ndarray, shape (4, 2)
         Image corners the pose was computed from.
     reprojection_px : float
         RMS reprojection error of the corners (pixels).
-    rotation : ndarray, shape (3, 3)
-        Rotation matrix ``marker -> camera`` (the same rotation as ``rvec``).
     """
 
-    rvec: FloatArray
+    rotation: FloatArray
     tvec_m: FloatArray
     corners_px: FloatArray
     reprojection_px: float
-    rotation: FloatArray
+
+    @property
+    def rvec(self) -> FloatArray:
+        """The rotation as a Rodrigues vector (rad), computed stably near a half turn."""
+        out: FloatArray = Rotation.from_matrix(self.rotation).as_rotvec()
+        return out
 
 
 class PoseSolver:
     """Pose of a square marker from its corners (``SOLVEPNP_IPPE_SQUARE``).
 
-    Holds what does not change between frames (camera matrix, distortion,
-    the square's corners), so that solving costs only OpenCV's own work.
+    A marker facing the camera is turned almost exactly half a turn from the
+    camera frame, where the Rodrigues vector is singular, and OpenCV's IPPE
+    returns its solutions through that vector: occasionally a fraction of a
+    pixel off.  The solver therefore solves for the marker frame turned by a
+    half turn about its own ``x`` (the corners given in reverse order), whose
+    rotation from the camera is small, and turns the result back exactly, as
+    matrices.
 
     Parameters
     ----------
@@ -294,20 +363,21 @@ class PoseSolver:
         """
         corners = np.ascontiguousarray(corners_px, dtype=np.float64)
         _, rvecs, tvecs, errors = cv2.solvePnPGeneric(
-            self._object, corners.reshape(4, 1, 2), self._matrix, self._dist,
+            self._object, corners[::-1].reshape(4, 1, 2), self._matrix, self._dist,
             flags=cv2.SOLVEPNP_IPPE_SQUARE,
         )
-        rotations = [cv2.Rodrigues(r)[0] for r in rvecs]
         best = 0
-        if previous is not None and len(rotations) > 1:
-            # trace(R_i^T R_prev) = 1 + 2 cos(angle between them): largest is closest.
-            best = int(np.argmax([float((r * previous.rotation).sum()) for r in rotations]))
+        rotation = cv2.Rodrigues(rvecs[0])[0] @ _HALF_TURN_X
+        if previous is not None and len(rvecs) > 1:
+            # trace(R_i^T R_prev) = 1 + 2 cos(angle between them): larger is closer.
+            other = cv2.Rodrigues(rvecs[1])[0] @ _HALF_TURN_X
+            if np.vdot(other, previous.rotation) > np.vdot(rotation, previous.rotation):
+                best, rotation = 1, other
         return MarkerPose(
-            np.asarray(rvecs[best], dtype=np.float64).ravel(),
+            np.asarray(rotation, dtype=np.float64),
             np.asarray(tvecs[best], dtype=np.float64).ravel(),
             corners,
-            float(np.ravel(errors)[best]),
-            np.asarray(rotations[best], dtype=np.float64),
+            float(errors[best][0]),
         )
 
 
@@ -386,8 +456,9 @@ class MarkerState:
         camera frame (rad).
     lost_for_s : float
         Time since the marker was last accepted (s); 0 while tracking.
-    search : {"roi", "full", "none"}
-        Where the marker was found.
+    search : {"edges", "roi", "full", "none"}
+        How the marker was found: followed by its edges from the last frames,
+        detected in the region of interest, in the full frame, or not at all.
     message : str
         Why a frame was invalid or rejected; empty otherwise.
     """
@@ -398,7 +469,7 @@ class MarkerState:
     delta_t_m: FloatArray | None = None
     delta_r_rad: FloatArray | None = None
     lost_for_s: float = 0.0
-    search: Literal["roi", "full", "none"] = "none"
+    search: Search = "none"
     message: str = ""
 
     @property
@@ -430,16 +501,24 @@ class MarkerTracker:
     reacquire_after : int
         After this many consecutive rejections the new pose is accepted (the
         marker really moved, e.g. while it was hidden).
+    verify_every : int
+        Between detections the corners are followed by the edge fit alone,
+        started from where the last frames put them (a marker moves a pixel
+        or so between frames); the ArUco detector confirms the marker in the
+        region of interest at least every ``verify_every`` frames, and on
+        every frame where the edge fit fails.  1 runs the detector on every
+        frame.  Needs ``edge_refine``.
     """
 
     intrinsics: CameraIntrinsics
     marker: MarkerMount
     zero_frames: int = 15
-    roi_margin: float = 0.3
+    roi_margin: float = 0.5
     edge_refine: bool = True
     max_speed_m_s: float = 0.15
     max_rate_rad_s: float = 3.0
     reacquire_after: int = 5
+    verify_every: int = 5
     _full: cv2.aruco.ArucoDetector = field(init=False, repr=False)
     _roi: cv2.aruco.ArucoDetector = field(init=False, repr=False)
 
@@ -456,7 +535,9 @@ class MarkerTracker:
         self._zero: tuple[FloatArray, FloatArray] | None = None
         self._last: MarkerPose | None = None
         self._last_t: float | None = None
+        self._previous_corners: FloatArray | None = None
         self._rejections = 0
+        self._followed = 0  # frames since the detector last confirmed the marker
 
     def rezero(self) -> None:
         """Average a new zero pose from the next ``zero_frames`` accepted frames."""
@@ -486,6 +567,7 @@ class MarkerTracker:
                 return MarkerState(frame.t_s, TrackStatus.REJECTED, lost_for_s=lost_for,
                                    search=search, message="implausible jump since last frame")
         self._rejections = 0
+        self._previous_corners = None if self._last is None else self._last.corners_px
         self._last, self._last_t = pose, frame.t_s
         if self._zero is None:
             self._zero_samples.append(pose)
@@ -499,18 +581,47 @@ class MarkerTracker:
         return MarkerState(frame.t_s, TrackStatus.TRACKING, pose, pose.tvec_m - t0, delta_r,
                            search=search)
 
-    def _find(
-        self, image: NDArray[np.uint8]
-    ) -> tuple[FloatArray | None, Literal["roi", "full", "none"]]:
+    def _find(self, image: NDArray[np.uint8]) -> tuple[FloatArray | None, Search]:
         if self._last is not None:
+            if self.edge_refine and self._followed + 1 < self.verify_every:
+                followed = self._follow_edges(image, self._last.corners_px)
+                if followed is not None:
+                    self._followed += 1
+                    return followed, "edges"
             found = self._search_roi(image, self._last.corners_px)
             if found is not None:
+                self._followed = 0
                 return found, "roi"
         gray = to_gray(image)
         for det in detect_markers(gray, self._full):
             if det.marker_id == self.marker.marker_id:
+                self._followed = 0
                 return self._refined(gray, det.corners_px, (0, 0)), "full"
         return None, "none"
+
+    def _follow_edges(self, image: NDArray[np.uint8], corners: FloatArray) -> FloatArray | None:
+        """Re-fit the edges around where the marker is expected, without the detector."""
+        predicted = corners
+        if self._previous_corners is not None:  # constant velocity
+            predicted = 2.0 * corners - self._previous_corners
+        h, w = image.shape[:2]
+        xs, ys = predicted[:, 0].tolist(), predicted[:, 1].tolist()
+        pad = _PROFILE_HALF_PX + 4.0
+        x0, y0 = max(int(min(xs) - pad), 0), max(int(min(ys) - pad), 0)
+        x1, y1 = min(int(max(xs) + pad) + 1, w), min(int(max(ys) + pad) + 1, h)
+        gray = to_gray(image[y0:y1, x0:x1])
+        origin = (x0, y0)
+        shift = np.array([x0, y0], dtype=np.float64)
+        guess = predicted - shift
+        for _ in range(2):  # a second pass when the first moved the corners noticeably
+            fitted = refine_corners_by_edges(gray, guess, self.intrinsics, origin)
+            if fitted is None:
+                return None
+            moved = float(np.abs(fitted - guess).max())
+            guess = fitted
+            if moved < 0.5:
+                break
+        return guess + shift
 
     def _search_roi(self, image: NDArray[np.uint8], corners: FloatArray) -> FloatArray | None:
         h, w = image.shape[:2]

@@ -1,0 +1,25 @@
+"""Benchmarks behind ``relaxgrip bench``: speed goals are measured here, never in tests."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from relaxgrip.bench import core
+from relaxgrip.bench.core import BenchResult
+from relaxgrip.bench.perception import bench_perception
+from relaxgrip.bench.twin import bench_twin_hold, bench_twin_step
+
+__all__ = ["BENCHMARKS", "BenchResult", "run_benchmarks"]
+
+#: Benchmark name -> function of the repeat count.
+BENCHMARKS: dict[str, Callable[[int], BenchResult]] = {
+    "twin-hold": bench_twin_hold,
+    "twin-step": bench_twin_step,
+    "perception": bench_perception,
+}
+
+
+def run_benchmarks(names: list[str], repeat: int) -> dict[str, Any]:
+    """Run the named benchmarks; see :func:`relaxgrip.bench.core.run_benchmarks`."""
+    return core.run_benchmarks(BENCHMARKS, names, repeat)

@@ -1,0 +1,56 @@
+"""Benchmarks of the digital twin without images: how much faster than real time it runs."""
+
+from __future__ import annotations
+
+import statistics
+
+from relaxgrip.bench.core import BenchResult, timed_runs
+
+__all__ = ["bench_twin_hold", "bench_twin_step"]
+
+
+def bench_twin_hold(repeat: int) -> BenchResult:
+    """The paper's 280 s fixed-aperture hold at 5 N, 40 °C, on the twin without images."""
+    from relaxgrip.experiments.holding import run_fixed_aperture_hold
+
+    def hold(seed: int) -> object:
+        return run_fixed_aperture_hold(40.0, 5.0, 280.0, seed=seed)
+
+    times, trace = timed_runs(hold, repeat)
+    return BenchResult(
+        "twin-hold",
+        "close to 5 N at 40 °C, hold 280 s at 30 Hz (observe + act each tick, no images)",
+        times,
+        simulated_s=280.0,
+        notes={"ticks_per_run": int(trace.t_s.size)},
+        headline={"twin_hold_realtime_factor": 280.0 / statistics.median(times)},
+    )
+
+
+def bench_twin_step(repeat: int) -> BenchResult:
+    """Bare physics: 280 s of twin steps at 30 Hz holding a grasp, no loop around it."""
+    from relaxgrip.backend import Command
+    from relaxgrip.clock import VirtualClock
+    from relaxgrip.twin import GripperTwin, TwinConfig
+
+    n = 280 * 30
+
+    def run(seed: int) -> None:
+        clock = VirtualClock()
+        cfg = TwinConfig(initial_temp_c=40.0).without_cameras()
+        twin = GripperTwin(cfg, seed=seed, clock=clock)
+        twin.act(Command(20.0, (0.3, 0.3)))
+        clock.advance(4.5)  # close onto the ball
+        twin.act(Command(0.0, (0.3, 0.3)))
+        for _ in range(n):
+            clock.advance(1.0 / 30.0)
+            twin.observe()
+
+    times, _ = timed_runs(run, repeat)
+    return BenchResult(
+        "twin-step",
+        "GripperTwin.observe at 30 Hz for 280 s holding the ball (per-tick physics only)",
+        times,
+        simulated_s=284.5,
+        notes={"us_per_tick": statistics.median(times) / (n + 1) * 1e6},
+    )
