@@ -75,16 +75,20 @@ class BenchResult:
 def run_benchmarks(
     benchmarks: dict[str, Callable[[int], BenchResult]], names: list[str], repeat: int
 ) -> dict[str, Any]:
-    """Run the named benchmarks on one OpenCV thread; the report records machine and twin.
+    """Run the named benchmarks on one thread; the report records machine and twin.
 
     Key figures of every benchmark are repeated at the report's top level.
     """
     import cv2
+    from threadpoolctl import threadpool_limits
 
+    # One core: OpenCV's pool and OpenBLAS's workers (which spin after even tiny
+    # products, occupying the second core) would otherwise blur every figure.
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
-        results = [benchmarks[name](repeat) for name in names]
+        with threadpool_limits(limits=1):
+            results = [benchmarks[name](repeat) for name in names]
     finally:
         cv2.setNumThreads(threads)
     report: dict[str, Any] = {

@@ -19,7 +19,7 @@ def bench_twin_hold(repeat: int) -> BenchResult:
     times, trace = timed_runs(hold, repeat)
     return BenchResult(
         "twin-hold",
-        "close to 5 N at 40 °C, hold 280 s at 30 Hz (observe + act each tick, no images)",
+        "close to 5 N at 40 °C, hold 280 s at 30 Hz (observe + act each tick, no sensors)",
         times,
         simulated_s=280.0,
         notes={"ticks_per_run": int(trace.t_s.size)},
@@ -37,7 +37,7 @@ def bench_twin_step(repeat: int) -> BenchResult:
 
     def run(seed: int) -> None:
         clock = VirtualClock()
-        cfg = TwinConfig(initial_temp_c=40.0).without_cameras()
+        cfg = TwinConfig(initial_temp_c=40.0).without_sensors()
         twin = GripperTwin(cfg, seed=seed, clock=clock)
         twin.act(Command(20.0, (0.3, 0.3)))
         clock.advance(4.5)  # close onto the ball

@@ -169,8 +169,8 @@ def run_fixed_aperture_hold(
     seed : int
         Twin seed (run-to-run scatter).
     config : TwinConfig, optional
-        Twin configuration (default: the force ball, no cameras: the hold
-        reads ground truth only).
+        Twin configuration (default: the force ball, no cameras and no
+        reference force: the hold reads ground truth only).
     rate_hz : float
         Control and sampling rate (Hz).
 
@@ -182,7 +182,7 @@ def run_fixed_aperture_hold(
     check_temp_c(temp_c, "hold temperature")
     check_positive(target_n, "target force")
     check_positive(duration_s, "hold duration")
-    base = config if config is not None else TwinConfig().without_cameras()
+    base = config if config is not None else TwinConfig().without_sensors()
     cfg = replace(base, initial_temp_c=temp_c)
     twin = GripperTwin(cfg, seed=seed)
     clock = twin.clock

@@ -111,8 +111,9 @@ class TwinConfig:
         RGB camera imperfections; ``None``: no RGB camera (no frames rendered).
     ir : IrSensorConfig or None
         Infrared camera imperfections; ``None``: no infrared camera.
-    force_sensor : ForceSensorConfig
-        The force ball's sensor (only objects with ``force_sensor`` carry one).
+    force_sensor : ForceSensorConfig or None
+        The force ball's sensor (only objects with ``force_sensor`` carry one);
+        ``None``: no reference force readings.
     scene : tuple of SceneObject
         Further objects standing in view (seen by the cameras, never touched).
     ambient_c : float
@@ -139,7 +140,7 @@ class TwinConfig:
     rig: RigGeometry = field(default_factory=RigGeometry)
     rgb: RgbSensorConfig | None = field(default_factory=RgbSensorConfig)
     ir: IrSensorConfig | None = field(default_factory=IrSensorConfig)
-    force_sensor: ForceSensorConfig = field(default_factory=ForceSensorConfig)
+    force_sensor: ForceSensorConfig | None = field(default_factory=ForceSensorConfig)
     scene: tuple[SceneObject, ...] = ()
     ambient_c: float = 25.0
     initial_temp_c: float | None = None
@@ -168,8 +169,12 @@ class TwinConfig:
             )
 
     def without_cameras(self) -> TwinConfig:
-        """The same twin with no RGB or infrared camera (physics and truth only, fastest)."""
+        """The same twin with no RGB or infrared camera (no frames rendered)."""
         return replace(self, rgb=None, ir=None)
+
+    def without_sensors(self) -> TwinConfig:
+        """The same twin with no cameras and no reference force: physics and truth only."""
+        return replace(self, rgb=None, ir=None, force_sensor=None)
 
     @property
     def object(self) -> ObjectSpec | None:

@@ -102,19 +102,23 @@ class SensorSuite:
         self._ir_stream = None if config.ir is None else _Stream(rig.ir.rate_hz, t0_s)
         self._finger2cam_by_aperture: tuple[float, FloatArray] | None = None
         self._force_rng = np.random.default_rng([seed, 20])
-        self._force_period_s = 1.0 / config.force_sensor.rate_hz
+        self._noise_pool: list[float] = []  # standard normals, drawn 1024 at a time
+        self.force_sensor = config.force_sensor
+        rate_hz = 1.0 if config.force_sensor is None else config.force_sensor.rate_hz
+        self._force_period_s = 1.0 / rate_hz
         self._force_t0_s = t0_s
-        self._force_next = 0
-        self._force_t: list[float] = []
-        self._force_n: list[float] = []
+        self._force_next = 0  # index of the next sample instant
+        self._trace_t: list[float] = []  # true force at physics-step ends since the last take
+        self._trace_n: list[float] = []
+        self.streams = tuple(s for s in (self._rgb_stream, self._ir_stream) if s is not None)
+        self._next_capture_s = self._earliest_capture()
 
-    @property
-    def streams(self) -> tuple[_Stream, ...]:
-        return tuple(s for s in (self._rgb_stream, self._ir_stream) if s is not None)
+    def _earliest_capture(self) -> float:
+        return min((s.next_t_s for s in self.streams), default=math.inf)
 
     def next_capture_s(self) -> float:
         """Time of the next camera capture (s), ``inf`` without cameras."""
-        return min((s.next_t_s for s in self.streams), default=math.inf)
+        return self._next_capture_s
 
     def capture(self, t_s: float, scene: SceneState) -> None:
         """Record ``scene`` for every camera whose capture is due at ``t_s``."""
@@ -122,6 +126,7 @@ class SensorSuite:
             while stream.next_t_s <= t_s + _TIME_SLACK_S:
                 stream.latest = (stream.next_seq, stream.next_t_s, scene)
                 stream.next_seq += 1
+        self._next_capture_s = self._earliest_capture()
 
     def rgb_frame(self) -> Frame | None:
         """The latest RGB frame, rendered on first request."""
@@ -163,31 +168,44 @@ class SensorSuite:
         return out
 
     # -- reference force --------------------------------------------------
-    def sample_force(self, t0_s: float, t1_s: float, f0_n: float, f1_n: float) -> None:
-        """Sample the force sensor at its instants in ``(t0_s, t1_s]``, force linear in between."""
-        span = t1_s - t0_s
-        noise = self.config.force_sensor.noise_n
-        while True:
-            t = self._force_t0_s + self._force_next * self._force_period_s
-            if t > t1_s + _TIME_SLACK_S:
-                return
-            self._force_next += 1
-            if t <= t0_s - _TIME_SLACK_S:
-                continue
-            w = 1.0 if span <= 0.0 else min(max((t - t0_s) / span, 0.0), 1.0)
-            self._force_t.append(t)
-            reading = f0_n + w * (f1_n - f0_n) + noise * self._force_rng.standard_normal()
-            self._force_n.append(reading)
+    def record_force(self, t_s: float, force_n: float) -> None:
+        """Note the true force at a physics-step end (the sensor samples between them)."""
+        self._trace_t.append(t_s)
+        self._trace_n.append(force_n)
 
-    def skip_force(self, t1_s: float) -> None:
-        """Advance the sensor's schedule to ``t1_s`` without samples (no sensor in the grasp)."""
-        n = math.floor((t1_s - self._force_t0_s) / self._force_period_s + _TIME_SLACK_S) + 1
+    def skip_force(self, t_s: float) -> None:
+        """No sensor in the grasp up to ``t_s``: drop the trace, no samples until then."""
+        n = math.floor((t_s - self._force_t0_s) / self._force_period_s + _TIME_SLACK_S) + 1
         self._force_next = max(self._force_next, n)
+        self._trace_t, self._trace_n = [], []
 
     def take_force(self) -> ForceSamples | None:
-        """Readings since the last call, or ``None`` if there were none."""
-        if not self._force_t:
+        """Readings at the sensor's instants covered by the trace since the last call."""
+        trace_t, trace_n = self._trace_t, self._trace_n
+        if len(trace_t) < 2:
             return None
-        out = ForceSamples(np.array(self._force_t), np.array(self._force_n))
-        self._force_t, self._force_n = [], []
-        return out
+        period, origin = self._force_period_s, self._force_t0_s
+        first = max(self._force_next,
+                    math.ceil((trace_t[0] - origin) / period - _TIME_SLACK_S))
+        last = math.floor((trace_t[-1] - origin) / period + _TIME_SLACK_S)
+        self._trace_t, self._trace_n = trace_t[-1:], trace_n[-1:]
+        if last < first:
+            return None
+        self._force_next = last + 1
+        # A handful of samples per observation: plain floats beat NumPy calls here.
+        assert self.force_sensor is not None, "no force sensor configured"
+        noise = self.force_sensor.noise_n
+        times, forces = [], []
+        j, end = 0, len(trace_t) - 2
+        for k in range(first, last + 1):
+            t = origin + k * period
+            while j < end and trace_t[j + 1] < t:
+                j += 1
+            t0, t1 = trace_t[j], trace_t[j + 1]
+            w = min(max((t - t0) / (t1 - t0), 0.0), 1.0) if t1 > t0 else 1.0
+            if not self._noise_pool:
+                self._noise_pool = self._force_rng.standard_normal(1024).tolist()
+            times.append(t)
+            forces.append(trace_n[j] + w * (trace_n[j + 1] - trace_n[j])
+                          + noise * self._noise_pool.pop())
+        return ForceSamples(np.array(times), np.array(forces))

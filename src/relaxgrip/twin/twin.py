@@ -319,15 +319,18 @@ class GripperTwin:
         n = max(1, math.ceil(remaining / self.config.max_step_s - 1e-9))
         dt = remaining / n
         obj = self._object
-        sensing = obj is not None and obj.force_sensor
+        sensors = self._sensors
+        sensing = (obj is not None and obj.force_sensor and self._engaged
+                   and sensors.force_sensor is not None)
+        if sensing:
+            sensors.record_force(self._t, self._force_n)
         for _ in range(n):
-            t0, f0 = self._t, self._force_n
             self._step(dt)
-            self._t = t0 + dt
-            if sensing and self._engaged:
-                self._sensors.sample_force(t0, self._t, f0, self._force_n)
-        if not (sensing and self._engaged):
-            self._sensors.skip_force(t_s)
+            self._t += dt
+            if sensing:
+                sensors.record_force(self._t, self._force_n)
+        if not sensing:
+            sensors.skip_force(t_s)
         self._t = t_s
 
     def _scene(self) -> SceneState:
