@@ -310,3 +310,30 @@ def test_hold_must_have_ten_samples() -> None:
     x = np.minimum(20.0 * t, 40.0)
     with pytest.raises(InputError, match="last 8 samples"):
         find_hold_start(t, x)
+
+
+def test_anchored_fit_recovers_the_reduced_model_with_fixed_f_inst() -> None:
+    t = np.linspace(0.0, 100.0, 1001)
+    fit = fit_reduced(t, reduced_force(t, 5.0, 0.6, 20.0), f_inst_n=5.0)
+    assert fit.f_inst_n == 5.0
+    assert fit.k_n == pytest.approx(0.6, rel=1e-6)
+    assert fit.tau_s == pytest.approx(20.0, rel=1e-6)
+
+
+def test_anchored_fit_is_the_least_squares_optimum_and_passes_through_the_anchor() -> None:
+    t = np.linspace(0.0, 100.0, 1001)
+    f = prony_force(t, 4.0, (0.3, 0.4, 0.3), (1.5, 15.0, 150.0))
+    fit = fit_reduced(t, f, f_inst_n=float(f[0]))
+    assert fit.predict(0.0) == pytest.approx(f[0])
+    w = quadrature_weights(t)
+
+    def cost(k: float, tau: float) -> float:
+        return float(w @ (reduced_force(t, float(f[0]), k, tau) - f) ** 2)
+
+    best = cost(fit.k_n, fit.tau_s)
+    assert best == pytest.approx(fit.objective, rel=1e-9)
+    for dk in (-0.01, 0.01):
+        for dtau in (-0.01, 0.01):
+            assert best <= cost(fit.k_n * (1 + dk), fit.tau_s * (1 + dtau))
+    free = fit_reduced(t, f)
+    assert free.objective <= fit.objective  # one parameter fewer cannot fit better

@@ -27,7 +27,16 @@ from relaxgrip.perception.thermal import ThermalFeatures
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["ICFN_SCHEMA", "N_BEAMS", "FeatureSchema", "build_icfn_features"]
+__all__ = [
+    "ICFN_SCHEMA",
+    "N_BEAMS",
+    "RCFN_SCHEMA",
+    "FeatureSchema",
+    "RcfnFeatures",
+    "build_icfn_features",
+    "finger_temperature_c",
+    "marker_pose",
+]
 
 #: Beam temperatures read per finger (regions of interest along it).
 N_BEAMS = 5
@@ -132,3 +141,85 @@ def build_icfn_features(marker: MarkerState, thermal: ThermalFeatures) -> FloatA
         gradient = finger.gradient_k_per_m if math.isfinite(finger.gradient_k_per_m) else 0.0
         stats += [mean, finger.max_c, finger.min_c, finger.std_k, gradient]
     return np.array(values + stats)
+
+
+def _rcfn_schema() -> FeatureSchema:
+    pose = [("dx", "m"), ("dy", "m"), ("dz", "m"), ("rx", "rad"), ("ry", "rad"), ("rz", "rad")]
+    names = ["temp_c"]
+    units = ["degC"]
+    for prefix, suffix in (("onset_", ""), ("", ""), ("v", "_s")):
+        for axis, unit in pose:
+            names.append(f"{prefix}{axis}_{unit}{suffix}")
+            units.append(f"{unit}/s" if suffix else unit)
+    return FeatureSchema("relaxgrip-rcfn-features-v1", tuple(names), tuple(units))
+
+
+#: The RCFN input (paper §IV-B): current finger temperature, marker pose at contact
+#: onset, current marker pose, and its velocity over the last second.
+RCFN_SCHEMA = _rcfn_schema()
+
+
+def marker_pose(marker: MarkerState) -> FloatArray | None:
+    """The relative pose as six numbers ``(dx, dy, dz, rx, ry, rz)`` (m, rad), if tracked."""
+    if marker.delta_t_m is None or marker.delta_r_rad is None:
+        return None
+    return np.concatenate([marker.delta_t_m, marker.delta_r_rad])
+
+
+def finger_temperature_c(thermal: ThermalFeatures) -> float:
+    """Mean temperature of both fingers (°C); nan if neither is in view."""
+    means = [f.mean_c for f in thermal.fingers if math.isfinite(f.mean_c)]
+    return sum(means) / len(means) if means else math.nan
+
+
+class RcfnFeatures:
+    """Build RCFN features from a stream of poses: keeps the onset pose and a short history.
+
+    Parameters
+    ----------
+    velocity_window_s : float
+        Pose velocity is the change over this window, divided by it (s).
+    """
+
+    def __init__(self, velocity_window_s: float = 1.0) -> None:
+        if not velocity_window_s > 0:
+            raise ValueError(f"velocity window must be > 0 s, got {velocity_window_s}")
+        self.velocity_window_s = velocity_window_s
+        self._history: list[tuple[float, FloatArray]] = []
+        self.onset_pose: FloatArray | None = None
+        self.onset_t_s: float | None = None
+
+    def observe(self, t_s: float, pose: FloatArray) -> None:
+        """Record a pose (before or after the onset)."""
+        if self._history and t_s <= self._history[-1][0]:
+            return
+        self._history.append((t_s, np.asarray(pose, dtype=np.float64)))
+        horizon = t_s - 2.0 * self.velocity_window_s
+        while len(self._history) > 2 and self._history[1][0] <= horizon:
+            self._history.pop(0)
+
+    def start(self, t_s: float, pose: FloatArray) -> None:
+        """Mark the contact onset (the start of the hold)."""
+        self.observe(t_s, pose)
+        self.onset_pose = np.asarray(pose, dtype=np.float64)
+        self.onset_t_s = t_s
+
+    def velocity(self) -> FloatArray:
+        """Pose change over the last window, per second (over what history there is)."""
+        if len(self._history) < 2:
+            return np.zeros(6)
+        t_now, now = self._history[-1]
+        target = t_now - self.velocity_window_s
+        t_then, then = self._history[0]
+        for t, pose in reversed(self._history[:-1]):
+            if t <= target:
+                t_then, then = t, pose
+                break
+        out: FloatArray = (now - then) / (t_now - t_then)
+        return out
+
+    def build(self, temp_c: float) -> FloatArray | None:
+        """The feature vector in :data:`RCFN_SCHEMA` order; ``None`` before the onset."""
+        if self.onset_pose is None or not self._history or not math.isfinite(temp_c):
+            return None
+        return np.concatenate([[temp_c], self.onset_pose, self._history[-1][1], self.velocity()])

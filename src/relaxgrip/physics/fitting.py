@@ -285,13 +285,19 @@ def find_hold_start(
     return start
 
 
-def fit_reduced(t_s: ArrayLike, f_n: ArrayLike, weighting: str = "time") -> ReducedFit:
+def fit_reduced(
+    t_s: ArrayLike, f_n: ArrayLike, weighting: str = "time", f_inst_n: float | None = None
+) -> ReducedFit:
     """Least-squares fit of the reduced relaxation model (Eqs. 9–10).
 
     ``F_inst - K (1 - e^{-t/tau}) = (F_inst - K) + K e^{-t/tau}`` is a one-term
     Prony series; its ``log tau`` is searched on a dense grid over the whole
     admissible range (the variable-projection objective of one term is cheap
     to evaluate everywhere), and every local minimum of the grid is refined.
+
+    With ``f_inst_n`` given, the curve is anchored there and only ``K`` and
+    ``tau`` are fitted: the form in which Eq. 10 is used, where ``F_inst``
+    comes from elsewhere (the force at the hold onset, or the ICFN).
 
     Parameters
     ----------
@@ -301,6 +307,8 @@ def fit_reduced(t_s: ArrayLike, f_n: ArrayLike, weighting: str = "time") -> Redu
         Measured force (N).
     weighting : {"time", "sample"}
         Objective, see :func:`quadrature_weights`.
+    f_inst_n : float, optional
+        Fixed instantaneous force ``F_inst`` (N); fitted when ``None``.
 
     Returns
     -------
@@ -316,6 +324,19 @@ def fit_reduced(t_s: ArrayLike, f_n: ArrayLike, weighting: str = "time") -> Redu
     ValueError
         If the arrays are malformed or ``weighting`` is unknown.
     """
+    if f_inst_n is not None:
+        anchor = float(f_inst_n)
+        if not math.isfinite(anchor):
+            raise ValueError(f"f_inst_n must be finite, got {f_inst_n}")
+        anchored = _Problem.build(t_s, f_n, n_params=2, weighting=weighting, anchor=anchor)
+        fit = anchored.best_one_term()
+        return ReducedFit(
+            f_inst_n=anchor,
+            k_n=float(fit.coef[0]),
+            tau_s=float(np.exp(fit.log_tau[0])),
+            objective=fit.objective,
+            weighting=weighting,
+        )
     problem = _Problem.build(t_s, f_n, n_params=3, weighting=weighting)
     best = problem.best_one_term()
     f_eq, k = (float(c) for c in best.coef)
@@ -412,16 +433,29 @@ class _Projection:
 
 @dataclass(frozen=True)
 class _Problem:
-    """A weighted exponential-sum least-squares problem ``min ||sqrt(w) (A c - f)||``."""
+    """A weighted exponential-sum least-squares problem ``min ||sqrt(w) (A c - f)||``.
+
+    Free: ``A = [1, e^{-t/tau_1}, ...]`` (a constant and one column per term).
+    Anchored at ``F(0) = anchor``: the target is ``f - anchor`` and the columns
+    are ``e^{-t/tau_j} - 1``, which vanish at ``t = 0`` (no constant).
+    """
 
     t_s: FloatArray
     sqrt_w: FloatArray
     target: FloatArray
     log_tau_lo: float
     log_tau_hi: float
+    anchored: bool = False
 
     @classmethod
-    def build(cls, t_s: ArrayLike, f_n: ArrayLike, n_params: int, weighting: str) -> _Problem:
+    def build(
+        cls,
+        t_s: ArrayLike,
+        f_n: ArrayLike,
+        n_params: int,
+        weighting: str,
+        anchor: float | None = None,
+    ) -> _Problem:
         t = _as_times(t_s)
         f = np.asarray(f_n, dtype=np.float64)
         if f.shape != t.shape:
@@ -438,9 +472,10 @@ class _Problem:
         return cls(
             t_s=t,
             sqrt_w=sqrt_w,
-            target=sqrt_w * f,
+            target=sqrt_w * (f if anchor is None else f - anchor),
             log_tau_lo=math.log(float(np.min(np.diff(t)))),
             log_tau_hi=math.log(_TAU_HI_FACTOR * float(t[-1] - t[0])),
+            anchored=anchor is not None,
         )
 
     def log_grid(self, per_decade: int) -> FloatArray:
@@ -456,11 +491,15 @@ class _Problem:
         Returns the optimal amplitudes ``c``, the weighted residual
         ``r = A c - b`` and its exact derivative with respect to ``log tau``:
         ``dr/dθ_j = P⊥ D_j c - (A⁺)ᵀ D_jᵀ r``, where ``D_j = dA/dθ_j`` is
-        non-zero only in column ``j + 1``.
+        non-zero only in the column of term ``j``.
         """
         tau = np.exp(log_tau)
         decay = np.exp(-self.t_s[:, None] / tau)
-        a = np.column_stack([self.sqrt_w, self.sqrt_w[:, None] * decay])
+        if self.anchored:
+            a = self.sqrt_w[:, None] * (decay - 1.0)
+        else:
+            a = np.column_stack([self.sqrt_w, self.sqrt_w[:, None] * decay])
+        first_term = 0 if self.anchored else 1  # column of the first exponential
         # dA/dθ_j for θ_j = log tau_j: d/dθ e^{-t e^{-θ}} = (t / tau) e^{-t / tau}.
         d = self.sqrt_w[:, None] * decay * (self.t_s[:, None] / tau)
         u, s, vt = np.linalg.svd(a, full_matrices=False)
@@ -468,10 +507,10 @@ class _Problem:
         u, s, vt = u[:, :rank], s[:rank], vt[:rank]
         coef = vt.T @ ((u.T @ self.target) / s)
         resid = a @ coef - self.target
-        dc = d * coef[1:]
+        dc = d * coef[first_term:]
         first = dc - u @ (u.T @ dc)
-        # (A⁺)ᵀ e_{j+1} = U S⁻¹ Vᵀ e_{j+1}, scaled by the scalar d_jᵀ r.
-        second = (u / s) @ vt[:, 1:] * (d.T @ resid)
+        # (A⁺)ᵀ e_j = U S⁻¹ Vᵀ e_j for the term's column j, scaled by the scalar d_jᵀ r.
+        second = (u / s) @ vt[:, first_term:] * (d.T @ resid)
         return _Projection(coef=coef, resid=resid, jac=first - second)
 
     def evaluate(self, log_tau: FloatArray) -> _Solution:

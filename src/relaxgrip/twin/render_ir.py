@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -34,6 +35,10 @@ from relaxgrip.validate import ABSOLUTE_ZERO_C, check_finite, check_temp_c
 FloatArray = NDArray[np.float64]
 
 __all__ = ["IrObject", "IrRenderer", "apparent_temp_c"]
+
+#: Pre-drawn noise: banks of a frame plus this margin, sliced at a random offset per frame.
+_NOISE_BANKS = 4
+_NOISE_PAD = 32
 
 #: Surfaces nearer to the lens than this are not drawn (m).
 _NEAR_M = 0.005
@@ -200,11 +205,12 @@ class IrRenderer:
         out = np.sqrt(np.sqrt(img, out=img), out=img)
         out += np.float32(self._offset_k + ABSOLUTE_ZERO_C)
         if cfg.netd_k > 0:
-            noise = np.random.default_rng([self.seed, 2, int(seq)]).standard_normal(
-                (h, w), dtype=np.float32
-            )
-            noise *= np.float32(cfg.netd_k)
-            out += noise
+            # Pre-drawn standard normals, sliced at an offset drawn for this frame.
+            rng = np.random.default_rng([self.seed, 2, int(seq)])
+            bank = _noise_bank((h, w))
+            b = int(rng.integers(bank.shape[0]))
+            oy, ox = (int(v) for v in rng.integers(0, _NOISE_PAD, size=2))
+            out += np.float32(cfg.netd_k) * bank[b, oy : oy + h, ox : ox + w]
         return out
 
     def _check_fingers(
@@ -319,3 +325,14 @@ class IrRenderer:
             return
         img[rows, cols][seen] = np.float32(_radiance(obj.temp_c, obj.emissivity, ambient_c))
         sub_depth[seen] = t[seen]
+
+
+@lru_cache(maxsize=4)
+def _noise_bank(shape: tuple[int, int]) -> NDArray[np.float32]:
+    """Standard normal noise shared by every renderer of a frame size (read-only)."""
+    h, w = shape
+    bank = np.random.default_rng(12).standard_normal(
+        (_NOISE_BANKS, h + _NOISE_PAD, w + _NOISE_PAD), dtype=np.float32
+    )
+    bank.flags.writeable = False
+    return bank

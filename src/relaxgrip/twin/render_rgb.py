@@ -36,8 +36,10 @@ __all__ = ["RgbObject", "RgbRenderer"]
 _TEXTURE_PX_PER_MODULE = 48
 #: White margin around the black square, in modules (ArUco's quiet zone).
 _QUIET_MODULES = 1
-_TAB_WHITE = (228, 226, 220)
-_INK = (24, 24, 26)
+#: Grey levels of the tab's white and of the printed ink; the tab's colour cast.
+_TAB_WHITE = 228
+_INK = 24
+_TAB_TINT = (1.0, 0.99, 0.965)
 _NOISE_PAD = 48
 _NOISE_BANKS = 3
 #: Sub-pixel bits for OpenCV's drawing functions.
@@ -88,6 +90,7 @@ class RgbRenderer:
                 "distortion coefficients"
             )
         self._texture, self._texture_to_marker = _tab_texture(rig)
+        self._tint = np.asarray(_TAB_TINT, dtype=np.float32)
         self._background = _background(self.intrinsics.shape)
         self._noise_pos, self._noise_neg = _noise_banks(self.intrinsics.shape, config.noise_dn)
 
@@ -155,7 +158,13 @@ class RgbRenderer:
         circle(u - 0.25 * r_px, v - 0.25 * r_px, 0.55 * r_px, lit)
 
     def _draw_tab(self, img: Image, marker2cam: FloatArray) -> None:
-        """Warp the marker tab onto ``img`` at ``supersample`` times the resolution."""
+        """Warp the marker tab onto ``img`` at ``supersample`` times the resolution.
+
+        The tab is achromatic, so it is warped as one grey channel (a third of
+        the cost of colour) onto black: area-averaged back down, that is the
+        tab premultiplied by its coverage of each pixel, composited over the
+        scene with the tab outline's antialiased coverage.
+        """
         ss = self.config.supersample
         k = self.intrinsics.matrix
         tex_to_img = k @ marker2cam[:3, [0, 1, 3]] @ self._texture_to_marker
@@ -173,22 +182,26 @@ class RgbRenderer:
         y1 = min(math.ceil(corners[:, 1].max()) + 3, h)
         if x1 <= x0 or y1 <= y0:
             return
-        roi = img[y0:y1, x0:x1]
-        up = np.asarray(cv2.resize(roi, None, fx=ss, fy=ss, interpolation=cv2.INTER_NEAREST),
-                        dtype=np.uint8)
+        size = (x1 - x0, y1 - y0)
         # Supersampled pixel I covers image x in [x0 - 1/2 + I/ss, x0 - 1/2 + (I+1)/ss].
         to_up = np.array(
             [[ss, 0.0, ss * (0.5 - x0) - 0.5], [0.0, ss, ss * (0.5 - y0) - 0.5], [0.0, 0.0, 1.0]]
         )
-        cv2.warpPerspective(
-            self._texture, to_up @ tex_to_img, (up.shape[1], up.shape[0]), dst=up,
-            flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_TRANSPARENT,
+        up = cv2.warpPerspective(
+            self._texture, to_up @ tex_to_img, (ss * size[0], ss * size[1]),
+            flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0,
         )
+        tab = cv2.resize(up, size, interpolation=cv2.INTER_AREA).astype(np.float32)
+        coverage = np.zeros((size[1], size[0]), np.uint8)
+        _fill(coverage, corners - (x0, y0), 255)
+        alpha = coverage.astype(np.float32) * (1.0 / 255.0)
+        roi = img[y0:y1, x0:x1]
+        blended = roi * (1.0 - alpha)[..., None] + tab[..., None] * self._tint
+        roi[...] = np.clip(blended, 0.0, 255.0).astype(np.uint8)
         if self.config.occlusion > 0:
-            self._occlude(up, marker2cam, to_up)
-        roi[...] = cv2.resize(up, (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
+            self._occlude(roi, marker2cam, (x0, y0))
 
-    def _occlude(self, up: Image, marker2cam: FloatArray, to_up: FloatArray) -> None:
+    def _occlude(self, roi: Image, marker2cam: FloatArray, origin: tuple[int, int]) -> None:
         """Cover the left ``occlusion`` fraction of the marker (a cable, a finger beam)."""
         half = 0.5 * self.rig.marker.size_m
         quiet = half * (1.0 + 2.0 * _QUIET_MODULES / self._modules)
@@ -196,14 +209,17 @@ class RgbRenderer:
         patch = np.array([[-quiet - 1e-3, quiet + 1e-3, 0.0], [edge, quiet + 1e-3, 0.0],
                           [edge, -quiet - 1e-3, 0.0], [-quiet - 1e-3, -quiet - 1e-3, 0.0]])
         cam = patch @ marker2cam[:3, :3].T + marker2cam[:3, 3]
-        px = self.intrinsics.project(cam)
-        up_px = cv2.perspectiveTransform(px[None], to_up)[0]
-        cv2.fillConvexPoly(up, np.round(up_px * (1 << _SHIFT)).astype(np.int32), (55, 52, 50),
-                           cv2.LINE_AA, _SHIFT)
+        _fill(roi, self.intrinsics.project(cam) - origin, (55, 52, 50))
 
     @property
     def _modules(self) -> int:
         return int(self.rig.marker.aruco_dictionary.markerSize) + 2
+
+
+def _fill(image: Image, polygon_px: FloatArray, colour: float | tuple[float, ...]) -> None:
+    """Antialiased convex polygon with sub-pixel vertices (pixel centres at integers)."""
+    vertices = np.round(np.asarray(polygon_px) * (1 << _SHIFT)).astype(np.int32)
+    cv2.fillConvexPoly(image, vertices, colour, cv2.LINE_AA, _SHIFT)
 
 
 def _tab_texture(rig: RigGeometry) -> tuple[Image, FloatArray]:
@@ -215,8 +231,7 @@ def _tab_texture(rig: RigGeometry) -> tuple[Image, FloatArray]:
     gray = cv2.aruco.generateImageMarker(dictionary, marker.marker_id, side, borderBits=1)
     pad = _QUIET_MODULES * _TEXTURE_PX_PER_MODULE
     gray = cv2.copyMakeBorder(gray, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
-    ink, white = np.array(_INK, np.float64), np.array(_TAB_WHITE, np.float64)
-    texture = (ink + (white - ink) * (gray[..., None] / 255.0)).round().astype(np.uint8)
+    texture = (_INK + (_TAB_WHITE - _INK) * (gray / 255.0)).round().astype(np.uint8)
     # Texture pixel centres are integers; the black square spans [pad - 1/2, pad + side - 1/2].
     metres_per_px = marker.size_m / side
     centre = pad + 0.5 * side - 0.5

@@ -48,6 +48,8 @@ __all__ = ["GripperTwin", "TwinMaterial"]
 _REFRESH_K = 0.02
 #: Plastic set (m) from which an object counts as visibly crushed.
 _CRUSHED_M = 0.001
+#: Times closer than this are the same instant (s): clock arithmetic round-off.
+_TIME_SLACK_S = 1e-9
 
 
 @dataclass(frozen=True)
@@ -138,7 +140,8 @@ class _FingerStiffness:
 
     def step_coefficients(self, dt_s: float) -> tuple[tuple[float, ...], tuple[float, ...], float]:
         """Branch decays ``e^{-dt/tau_i}``, gains ``k_i phi1(dt/tau_i)`` and the gains' sum."""
-        if self._coeffs is None or self._coeffs[0] != dt_s:
+        # Steps of the same length up to round-off share their coefficients.
+        if self._coeffs is None or abs(self._coeffs[0] - dt_s) > 1e-12 * dt_s:
             h = dt_s / self.tau
             gain = self.k_i * phi1(h)
             decay = tuple(np.exp(-h).tolist())
@@ -306,9 +309,11 @@ class GripperTwin:
         """Integrate to ``t_s``, stopping at every camera capture on the way."""
         while True:
             t_capture = self._sensors.next_capture_s()
-            if t_capture > t_s + 1e-9:
+            if t_capture > t_s + _TIME_SLACK_S:
                 break
-            self._integrate_to(t_capture)
+            # A capture that falls on the requested time up to round-off is taken there:
+            # no sliver of a step between them.
+            self._integrate_to(t_s if t_capture > t_s - _TIME_SLACK_S else t_capture)
             self._sensors.capture(t_capture, self._scene())
         self._integrate_to(t_s)
 
@@ -429,7 +434,8 @@ class GripperTwin:
         dt = self._heat_dt
         if dt <= 0.0:
             return
-        if self._step_cache is None or self._step_cache[0] != dt:
+        # Heat steps of the same length up to round-off share their discretisation.
+        if self._step_cache is None or abs(self._step_cache[0] - dt) > 1e-12 * dt:
             ad, bd = discrete_heat_system(self.config.heat, dt)
             self._step_cache = (dt, ad.T.copy(), bd.T.copy())
         _, ad_t, bd_t = self._step_cache

@@ -1,0 +1,461 @@
+"""Datasets for the ICFN and the RCFN, generated on the twin through the real perception.
+
+Every sample comes from rendered frames passed through
+:class:`relaxgrip.perception.Perception`; labels come from the twin's truth.
+Nothing the estimators will not have at run time enters their features.
+
+* **ICFN** (paper §V-B: 8,258 samples, 25–60 °C, ≤ 8 N): *episodes*, each a
+  twin with its own object, contact position, temperature, closing speed
+  and material draw.  The tracker is zeroed on the open finger, then the
+  gripper closes and a frame is rendered each time the true force crosses the
+  next of evenly spaced levels up to the episode's maximum (plus a couple
+  before contact, at zero force).
+* **RCFN** (810 sequences of 100 s, 4 contact locations): *sequences* on a
+  grid of conditions (contact location × temperature × start force ×
+  object), each repeated with fresh scatter.  The gripper closes to the start
+  force and holds its aperture with a constant heater duty; the true force is
+  kept at ``curve_rate_hz`` and the RCFN features (temperature, onset pose,
+  pose, pose velocity) at ``feature_rate_hz``.  Labels: the reduced model
+  anchored at the onset force, fitted by least squares (``K``, ``tau``), and
+  ``kappa = K / F0``.
+
+Splits are 70/15/15 by episode (ICFN) and by *condition* (RCFN: all repeats of
+a condition fall in one split, so no test curve has a training twin).  Three
+repeatability conditions (80 mm, 5 N, 40 / 50 / 60 °C, at least six repeats
+each) are kept in the test split for the paper's repeatability figure.
+
+Units are SI except temperatures (°C).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from relaxgrip.backend import Command, Truth
+from relaxgrip.clock import VirtualClock
+from relaxgrip.errors import InputError
+from relaxgrip.perception.features import (
+    ICFN_SCHEMA,
+    RCFN_SCHEMA,
+    RcfnFeatures,
+    finger_temperature_c,
+    marker_pose,
+)
+from relaxgrip.perception.pipeline import Percept, Perception
+from relaxgrip.physics.fitting import fit_reduced
+from relaxgrip.physics.thermal import duty_for_mean_temp
+from relaxgrip.twin import GripperTwin, TwinConfig, get_object
+
+__all__ = [
+    "ICFN_OBJECTS",
+    "RCFN_OBJECTS",
+    "DatasetSpec",
+    "IcfnEpisode",
+    "RcfnSequence",
+    "UnitResult",
+    "plan_icfn",
+    "plan_rcfn",
+    "run_icfn_episode",
+    "run_rcfn_sequence",
+    "run_unit",
+]
+
+#: Objects of the ICFN episodes and their shares.
+ICFN_OBJECTS: tuple[tuple[str, float], ...] = (
+    ("force_ball", 0.40), ("orange", 0.15), ("hammer", 0.15), ("glass", 0.10),
+    ("paper_cup", 0.10), ("weight_1kg", 0.10),
+)
+#: Objects of the RCFN conditions.
+RCFN_OBJECTS: tuple[str, ...] = ("force_ball", "orange", "hammer")
+RCFN_LOCATIONS_M: tuple[float, ...] = (0.050, 0.065, 0.080, 0.095)
+RCFN_TEMPS_C: tuple[float, ...] = (25.0, 30.0, 35.0, 40.0, 45.0, 50.0, 55.0, 60.0)
+RCFN_FORCES_N: tuple[float, ...] = (2.0, 3.5, 5.0, 6.5, 8.0)
+#: The repeatability groups (paper Fig. "acc" f): contact, start force, temperatures.
+REPEAT_CONTACT_M = 0.080
+REPEAT_FORCE_N = 5.0
+REPEAT_TEMPS_C: tuple[float, ...] = (40.0, 50.0, 60.0)
+REPEATS_PER_GROUP = 6
+
+_RATE_HZ = 30.0
+_ZERO_FRAMES = 15
+_APPROACH_MM_S = 20.0
+_GAP_BEFORE_CONTACT_MM = 3.0
+_RCFN_SPEED_MM_S = 2.0
+_SPLITS = ("train", "val", "test")
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    """What to generate.
+
+    Attributes
+    ----------
+    icfn_samples : int
+        ICFN samples (paper: 8,258).
+    rcfn_sequences : int
+        RCFN relaxation sequences (paper: 810).
+    seed : int
+        Master seed: the same seed gives the same dataset, whatever the workers.
+    hold_s : float
+        Length of each RCFN hold (s).
+    curve_rate_hz, feature_rate_hz : float
+        Rates of the kept force curve and of the RCFN features (Hz).
+    samples_per_episode : int
+        ICFN samples per episode.
+    split : tuple of float
+        Train / validation / test shares.
+    """
+
+    icfn_samples: int = 8258
+    rcfn_sequences: int = 810
+    seed: int = 0
+    hold_s: float = 100.0
+    curve_rate_hz: float = 10.0
+    feature_rate_hz: float = 1.0
+    samples_per_episode: int = 20
+    split: tuple[float, float, float] = (0.70, 0.15, 0.15)
+
+    def __post_init__(self) -> None:
+        if self.icfn_samples < 0 or self.rcfn_sequences < 0:
+            raise InputError("sample and sequence counts must be >= 0")
+        if self.seed < 0:
+            raise InputError(f"seed must be >= 0, got {self.seed}")
+        if not self.hold_s >= 10.0:
+            raise InputError(f"hold must last at least 10 s, got {self.hold_s}")
+        if not (self.curve_rate_hz >= 10.0 and self.feature_rate_hz > 0):
+            raise InputError("the curve needs >= 10 Hz and the features a positive rate")
+        if self.samples_per_episode < 4:
+            raise InputError("need at least 4 samples per episode")
+        if abs(sum(self.split) - 1.0) > 1e-9 or min(self.split) <= 0:
+            raise InputError(f"split shares must be > 0 and sum to 1, got {self.split}")
+
+
+@dataclass(frozen=True)
+class IcfnEpisode:
+    """One ICFN episode: a grasp closed through a range of forces."""
+
+    index: int
+    seed: int
+    object_name: str
+    temp_c: float
+    contact_m: float
+    speed_mm_s: float
+    max_force_n: float
+    n_samples: int
+    split: str
+
+
+@dataclass(frozen=True)
+class RcfnSequence:
+    """One RCFN sequence: close to a start force, hold the aperture."""
+
+    index: int
+    seed: int
+    condition: int
+    object_name: str
+    temp_c: float
+    contact_m: float
+    force_n: float
+    repeat: int
+    split: str
+    hold_s: float = 100.0
+    curve_rate_hz: float = 10.0
+    feature_rate_hz: float = 1.0
+
+
+@dataclass
+class UnitResult:
+    """Rows produced by one episode or sequence (column name -> values)."""
+
+    kind: str
+    index: int
+    rows: dict[str, list[Any]] = field(default_factory=dict)
+    sequence: dict[str, Any] = field(default_factory=dict)
+    features: dict[str, list[Any]] = field(default_factory=dict)
+    curve: dict[str, list[Any]] = field(default_factory=dict)
+    dropped: int = 0
+
+
+def _split_of(rank: int, n: int, shares: Sequence[float]) -> str:
+    """Split of the ``rank``-th item of ``n`` in a shuffled order."""
+    cut_train = round(shares[0] * n)
+    cut_val = cut_train + round(shares[1] * n)
+    return _SPLITS[0] if rank < cut_train else _SPLITS[1] if rank < cut_val else _SPLITS[2]
+
+
+def _ranks(n: int, rng: np.random.Generator) -> list[int]:
+    order = rng.permutation(n)
+    ranks = np.empty(n, dtype=int)
+    ranks[order] = np.arange(n)
+    return ranks.tolist()
+
+
+def plan_icfn(spec: DatasetSpec) -> list[IcfnEpisode]:
+    """The ICFN episodes of a dataset (deterministic in ``spec.seed``)."""
+    rng = np.random.default_rng([spec.seed, 101])
+    n_episodes = math.ceil(spec.icfn_samples / spec.samples_per_episode)
+    names = [name for name, _ in ICFN_OBJECTS]
+    shares = np.array([w for _, w in ICFN_OBJECTS])
+    ranks = _ranks(n_episodes, rng)
+    episodes = []
+    remaining = spec.icfn_samples
+    for i in range(n_episodes):
+        name = names[int(rng.choice(len(names), p=shares / shares.sum()))]
+        obj = get_object(name)
+        ceiling = min(8.0, 0.85 * obj.yield_force_n)
+        n = min(spec.samples_per_episode, remaining)
+        remaining -= n
+        episodes.append(IcfnEpisode(
+            index=i,
+            seed=int(rng.integers(2**31)),
+            object_name=name,
+            temp_c=float(rng.uniform(25.0, 60.0)),
+            contact_m=float(rng.uniform(0.045, 0.100)),
+            speed_mm_s=float(np.exp(rng.uniform(math.log(0.5), math.log(4.0)))),
+            max_force_n=float(rng.uniform(min(2.0, ceiling), ceiling)),
+            n_samples=n,
+            split=_split_of(ranks[i], n_episodes, spec.split),
+        ))
+    return episodes
+
+
+def plan_rcfn(spec: DatasetSpec) -> list[RcfnSequence]:
+    """The RCFN sequences of a dataset: repeatability groups first, then the grid."""
+    rng = np.random.default_rng([spec.seed, 202])
+    grid = [
+        (obj, temp, loc, force)
+        for obj in RCFN_OBJECTS for temp in RCFN_TEMPS_C
+        for loc in RCFN_LOCATIONS_M for force in RCFN_FORCES_N
+        if not (obj == "force_ball" and loc == REPEAT_CONTACT_M and force == REPEAT_FORCE_N
+                and temp in REPEAT_TEMPS_C)
+    ]
+    order = rng.permutation(len(grid))
+    grid = [grid[i] for i in order]
+    ranks = _ranks(len(grid), rng)
+    n_repeat = min(spec.rcfn_sequences, REPEATS_PER_GROUP * len(REPEAT_TEMPS_C))
+    n_grid = spec.rcfn_sequences - n_repeat
+    sequences: list[RcfnSequence] = []
+
+    def add(condition: int, obj: str, temp: float, loc: float, force: float, repeat: int,
+            split: str) -> None:
+        sequences.append(RcfnSequence(
+            index=len(sequences), seed=int(rng.integers(2**31)), condition=condition,
+            object_name=obj, temp_c=temp, contact_m=loc, force_n=force, repeat=repeat,
+            split=split, hold_s=spec.hold_s, curve_rate_hz=spec.curve_rate_hz,
+            feature_rate_hz=spec.feature_rate_hz,
+        ))
+
+    for k in range(n_repeat):
+        group = k % len(REPEAT_TEMPS_C)
+        add(len(grid) + group, "force_ball", REPEAT_TEMPS_C[group], REPEAT_CONTACT_M,
+            REPEAT_FORCE_N, k // len(REPEAT_TEMPS_C), "test")
+    for k in range(n_grid):
+        c = k % len(grid)
+        obj, temp, loc, force = grid[c]
+        add(c, obj, temp, loc, force, k // len(grid), _split_of(ranks[c], len(grid), spec.split))
+    return sequences
+
+
+class _Harness:
+    """A twin in virtual time with the perception stage, driven by a test rig's script.
+
+    The rig reads truth (it is an experiment); perception never does.
+    """
+
+    def __init__(self, object_name: str, contact_m: float, temp_c: float, seed: int) -> None:
+        cfg = TwinConfig(object_name=object_name, contact_position_m=contact_m,
+                         initial_temp_c=temp_c)
+        self.clock = VirtualClock()
+        self.twin = GripperTwin(cfg, seed=seed, clock=self.clock)
+        self.duty = duty_for_mean_temp(temp_c, cfg.heat, cfg.ambient_c)
+        self.perception = Perception(cfg.rig)
+        obj = cfg.object
+        assert obj is not None
+        self.width_m = obj.width_m
+        self.dt = 1.0 / _RATE_HZ
+        self._speed = 0.0
+
+    def tick(self) -> Truth:
+        """Advance one control period without rendering; return the truth."""
+        self.clock.advance(self.dt)
+        self.twin.act(Command(self._speed, (self.duty, self.duty)))
+        return self.twin.truth()
+
+    def perceive(self) -> tuple[Percept, Truth]:
+        """Render the current frames and run perception on them."""
+        obs = self.twin.observe()
+        assert obs.truth is not None
+        return self.perception.update(obs.rgb, obs.ir, obs.motor_position_mm), obs.truth
+
+    def run(self, speed_mm_s: float) -> None:
+        """Close at ``speed_mm_s`` from now on (heaters at the holding duty)."""
+        self._speed = speed_mm_s
+        self.twin.act(Command(speed_mm_s, (self.duty, self.duty)))
+
+    def zero(self) -> None:
+        """Zero the marker on the open finger (rendered frames at the camera rate)."""
+        self.run(0.0)
+        for _ in range(_ZERO_FRAMES + 1):
+            self.tick()
+            self.perceive()
+
+    def approach(self, timeout_s: float = 30.0) -> Truth:
+        """Close fast to a few millimetres before contact (no frames needed)."""
+        self.run(_APPROACH_MM_S)
+        truth = self.twin.truth()
+        for _ in range(round(timeout_s * _RATE_HZ)):
+            if (truth.aperture_m - self.width_m) * 1e3 <= _GAP_BEFORE_CONTACT_MM:
+                break
+            truth = self.tick()
+        return truth
+
+
+def run_icfn_episode(ep: IcfnEpisode) -> UnitResult:
+    """Close through ``n_samples`` force levels and sample features at each."""
+    h = _Harness(ep.object_name, ep.contact_m, ep.temp_c, ep.seed)
+    h.zero()
+    out = UnitResult("icfn", ep.index)
+    rows: dict[str, list[Any]] = {name: [] for name in _ICFN_COLUMNS}
+    n_free = 2  # samples before contact, at zero force
+    levels = np.linspace(0.0, ep.max_force_n, ep.n_samples - n_free + 1)[1:]
+
+    def sample() -> None:
+        percept, truth = h.perceive()
+        if percept.features is None:
+            out.dropped += 1
+            return
+        meta = {
+            "episode": ep.index, "split": ep.split, "object": ep.object_name,
+            "temp_set_c": ep.temp_c, "contact_set_m": ep.contact_m,
+            "speed_mm_s": ep.speed_mm_s, "t_s": h.twin.time_s, "force_n": truth.contact_force_n,
+            "truth_temp_c": float(np.mean(truth.finger_temps_c)),
+            "truth_deflection_m": truth.marker_deflection_m[h.twin.config.rig.marker_finger],
+            "truth_contact_m": truth.contact_position_m, "ir_age_s": percept.ir_age_s,
+        }
+        for key, value in meta.items():
+            rows[key].append(value)
+        for name, value in zip(ICFN_SCHEMA.names, percept.features.tolist(), strict=True):
+            rows[name].append(value)
+
+    h.approach()
+    h.run(ep.speed_mm_s)
+    for _ in range(n_free):  # the last millimetres before contact, at the episode's speed
+        sample()
+        for _ in range(round(0.3 * _RATE_HZ)):
+            h.tick()
+    level = 0
+    for _ in range(round(120.0 * _RATE_HZ)):
+        if level >= levels.size:
+            break
+        truth = h.tick()
+        if truth.contact_force_n >= levels[level]:
+            sample()
+            level += 1
+            while level < levels.size and truth.contact_force_n >= levels[level]:
+                level += 1  # a stiff object can jump several levels in one period
+                out.dropped += 1
+    out.rows = rows
+    return out
+
+
+def run_rcfn_sequence(seq: RcfnSequence) -> UnitResult:
+    """Close to the start force, hold the aperture, keep curve, features and labels."""
+    h = _Harness(seq.object_name, seq.contact_m, seq.temp_c, seq.seed)
+    h.zero()
+    h.approach()
+    builder = RcfnFeatures()
+    h.run(_RCFN_SPEED_MM_S)
+    frame_every = max(1, round(_RATE_HZ / seq.feature_rate_hz))
+    onset: tuple[Percept, Truth] | None = None
+    for k in range(round(120.0 * _RATE_HZ)):
+        truth = h.tick()
+        if truth.contact_force_n >= seq.force_n:
+            h.run(0.0)
+            onset = h.perceive()
+            break
+        if k % frame_every == 0 and truth.contact_force_n > 0.0:
+            percept, _ = h.perceive()
+            pose = marker_pose(percept.marker)
+            if pose is not None:
+                builder.observe(h.twin.time_s, pose)
+    out = UnitResult("rcfn", seq.index)
+    if onset is None or marker_pose(onset[0].marker) is None or onset[0].features is None:
+        out.dropped = 1
+        return out
+    t0 = h.twin.time_s
+    f0 = onset[1].contact_force_n
+    pose0 = marker_pose(onset[0].marker)
+    assert pose0 is not None
+    builder.start(t0, pose0)
+    curve_t, curve_f = [0.0], [f0]
+    feats: dict[str, list[Any]] = {"sequence": [], "t_s": []}
+    feats.update({name: [] for name in RCFN_SCHEMA.names})
+
+    def keep_features(t: float, percept: Percept) -> None:
+        pose = marker_pose(percept.marker)
+        if pose is None or percept.thermal is None:
+            return
+        builder.observe(t + t0, pose)
+        x = builder.build(finger_temperature_c(percept.thermal))
+        if x is None:
+            return
+        feats["sequence"].append(seq.index)
+        feats["t_s"].append(t)
+        for name, value in zip(RCFN_SCHEMA.names, x.tolist(), strict=True):
+            feats[name].append(value)
+
+    keep_features(0.0, onset[0])
+    curve_every = max(1, round(_RATE_HZ / seq.curve_rate_hz))
+    n_ticks = round(seq.hold_s * _RATE_HZ)
+    for k in range(1, n_ticks + 1):
+        truth = h.tick()
+        t = k / _RATE_HZ
+        if k % curve_every == 0:
+            curve_t.append(t)
+            curve_f.append(truth.contact_force_n)
+        if k % frame_every == 0:
+            keep_features(t, h.perceive()[0])
+    fit = fit_reduced(np.asarray(curve_t), np.asarray(curve_f), f_inst_n=f0)
+    predicted = fit.predict(np.asarray(curve_t))
+    span = max(curve_f) - min(curve_f)
+    out.sequence = {
+        "sequence": seq.index, "condition": seq.condition, "split": seq.split,
+        "object": seq.object_name, "temp_set_c": seq.temp_c, "contact_set_m": seq.contact_m,
+        "force_set_n": seq.force_n, "repeat": seq.repeat,
+        "f0_n": f0, "f_end_n": curve_f[-1], "amp_n": f0 - curve_f[-1],
+        "k_n": fit.k_n, "tau_s": fit.tau_s, "kappa": fit.k_n / f0,
+        "fit_nrmse": float(np.sqrt(np.mean((predicted - np.asarray(curve_f)) ** 2)) / span)
+        if span > 0 else 0.0,
+        "truth_temp_c": float(np.mean(onset[1].finger_temps_c)),
+        "truth_contact_m": onset[1].contact_position_m,
+        **{f"onset_{name}": value
+           for name, value in zip(ICFN_SCHEMA.names, onset[0].features.tolist(), strict=True)},
+    }
+    out.features = feats
+    out.curve = {"sequence": [seq.index] * len(curve_t), "t_s": curve_t, "force_n": curve_f}
+    return out
+
+
+def run_unit(unit: IcfnEpisode | RcfnSequence) -> UnitResult:
+    """Run one episode or sequence (the unit of parallel work)."""
+    if isinstance(unit, IcfnEpisode):
+        return run_icfn_episode(unit)
+    return run_rcfn_sequence(unit)
+
+
+_ICFN_COLUMNS: tuple[str, ...] = (
+    "episode", "split", "object", "temp_set_c", "contact_set_m", "speed_mm_s", "t_s", "force_n",
+    "truth_temp_c", "truth_deflection_m", "truth_contact_m", "ir_age_s", *ICFN_SCHEMA.names,
+)
+
+
+def iter_units(spec: DatasetSpec) -> Iterator[IcfnEpisode | RcfnSequence]:
+    """Every unit of work of a dataset, RCFN sequences first (they take longest)."""
+    yield from plan_rcfn(spec)
+    yield from plan_icfn(spec)
+

@@ -1,0 +1,407 @@
+"""Trained ICFN and RCFN on disk: arrays and a JSON manifest, no pickle.
+
+A model directory holds three files::
+
+    icfn.npz        the ICFN's learned arrays (ICFN.to_arrays)
+    rcfn.npz        the RCFN's learned arrays (RCFN.to_arrays)
+    manifest.json   format and version, hyperparameters, the feature schemas
+                    the models read, each npz file's size and sha256, software
+                    versions, twin version, creation time, training record
+
+:func:`save_models` writes every file to a temporary name in the directory
+first and renames them into place only when all are written (manifest last),
+so an interrupted save leaves the previous model untouched; a crash between
+the renames leaves files whose checksums disagree with the manifest, which
+:func:`load_models` rejects instead of mixing two models.
+:func:`load_models` reports every problem as a one-line :class:`ModelFileError`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import sklearn  # type: ignore[import-untyped]
+
+import relaxgrip
+from relaxgrip.errors import InputError
+from relaxgrip.learning.icfn import ICFN
+from relaxgrip.learning.rcfn import RCFN
+from relaxgrip.perception.features import FeatureSchema
+
+__all__ = [
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "MANIFEST_NAME",
+    "ModelBundle",
+    "ModelFileError",
+    "load_models",
+    "save_models",
+]
+
+#: Written as the manifest's ``format``; a manifest without it is not ours.
+FORMAT_NAME = "relaxgrip-models"
+#: Newest layout this code reads and the one it writes.
+FORMAT_VERSION = 1
+#: File names inside a model directory.
+MANIFEST_NAME = "manifest.json"
+ICFN_FILE = "icfn.npz"
+RCFN_FILE = "rcfn.npz"
+
+
+class ModelFileError(InputError):
+    """A model directory that cannot be loaded; the message names the file and the problem."""
+
+
+@dataclass(frozen=True)
+class ModelBundle:
+    """The two estimators of a model directory and its manifest.
+
+    Attributes
+    ----------
+    icfn : ICFN
+        Fitted instantaneous force model.
+    rcfn : RCFN
+        Fitted relaxation model.
+    manifest : dict
+        The parsed ``manifest.json``.
+    """
+
+    icfn: ICFN
+    rcfn: RCFN
+    manifest: dict[str, Any]
+
+    @property
+    def icfn_feature_schema(self) -> FeatureSchema:
+        """The feature schema the ICFN was trained on."""
+        schema = self.manifest["icfn"]["feature_schema"]
+        return FeatureSchema(schema["version"], tuple(schema["names"]), tuple(schema["units"]))
+
+    @property
+    def rcfn_feature_names(self) -> tuple[str, ...]:
+        """The feature names the RCFN was trained on, in order."""
+        return tuple(self.manifest["rcfn"]["feature_names"])
+
+
+def _json_default(value: object) -> Any:
+    if isinstance(value, np.ndarray | np.generic):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
+
+
+def _npz_bytes(arrays: Mapping[str, Any]) -> bytes:
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    return buffer.getvalue()
+
+
+def _file_entry(name: str, data: bytes) -> dict[str, Any]:
+    return {"file": name, "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
+
+
+def _write_all_atomically(directory: Path, files: Sequence[tuple[str, bytes]]) -> None:
+    """Write each ``(name, data)`` to a temporary file, then rename all into place, in order."""
+    temporaries: list[tuple[Path, Path]] = []
+    try:
+        for name, data in files:
+            fd, tmp_name = tempfile.mkstemp(dir=directory, prefix=f".{name}.", suffix=".tmp")
+            temporaries.append((Path(tmp_name), directory / name))
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+                fh.flush()
+                os.fsync(fh.fileno())
+        for tmp, final in temporaries:
+            os.replace(tmp, final)
+    finally:
+        for tmp, _ in temporaries:
+            tmp.unlink(missing_ok=True)
+    try:  # make the renames durable; not every platform can open a directory
+        dir_fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(dir_fd)
+    except OSError:
+        pass
+    finally:
+        os.close(dir_fd)
+
+
+def save_models(
+    directory: Path,
+    icfn: ICFN,
+    rcfn: RCFN,
+    *,
+    icfn_feature_schema: FeatureSchema,
+    rcfn_feature_names: Sequence[str],
+    twin_version: str,
+    training: Mapping[str, Any],
+) -> Path:
+    """Save both fitted estimators and their manifest to ``directory``.
+
+    Parameters
+    ----------
+    directory : Path
+        Model directory; created if missing.  Existing model files in it are
+        replaced atomically, as a whole.
+    icfn, rcfn : ICFN, RCFN
+        Fitted estimators.
+    icfn_feature_schema : FeatureSchema
+        The schema of the ICFN's features (its length must match the ICFN).
+    rcfn_feature_names : sequence of str
+        The RCFN's feature names, in order (their number must match the RCFN).
+    twin_version : str
+        Version of the twin that generated the training data
+        (:data:`relaxgrip.twin.config.TWIN_VERSION`).
+    training : mapping
+        JSON-serialisable record of the training: metrics, dataset sizes and
+        seeds, selection tables (NumPy scalars and arrays are converted; NaN
+        and infinity are not allowed).
+
+    Returns
+    -------
+    Path
+        The manifest's path.
+
+    Raises
+    ------
+    sklearn.exceptions.NotFittedError
+        An estimator is not fitted.
+    ValueError
+        Feature counts that do not match the estimators, or a ``training``
+        record that is not JSON-serialisable.
+    """
+    directory = Path(directory)
+    names = [str(n) for n in rcfn_feature_names]
+    icfn_arrays = icfn.to_arrays()
+    rcfn_arrays = rcfn.to_arrays()
+    if len(icfn_feature_schema) != icfn.n_features_in_:
+        raise ValueError(
+            f"the ICFN feature schema has {len(icfn_feature_schema)} entries "
+            f"but the ICFN was fitted on {icfn.n_features_in_} features"
+        )
+    if len(names) != rcfn.n_features_in_:
+        raise ValueError(
+            f"{len(names)} RCFN feature names given but the RCFN was fitted on "
+            f"{rcfn.n_features_in_} features"
+        )
+    icfn_data = _npz_bytes(icfn_arrays)
+    rcfn_data = _npz_bytes(rcfn_arrays)
+    manifest = {
+        "format": FORMAT_NAME,
+        "format_version": FORMAT_VERSION,
+        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "relaxgrip_version": relaxgrip.__version__,
+        "numpy_version": np.__version__,
+        "sklearn_version": sklearn.__version__,
+        "twin_version": twin_version,
+        "icfn": {
+            "estimator": "ICFN",
+            "params": icfn.get_params(),
+            "feature_schema": icfn_feature_schema.to_dict(),
+            **_file_entry(ICFN_FILE, icfn_data),
+        },
+        "rcfn": {
+            "estimator": "RCFN",
+            "params": rcfn.get_params(),
+            "feature_names": names,
+            **_file_entry(RCFN_FILE, rcfn_data),
+        },
+        "training": dict(training),
+    }
+    try:
+        text = json.dumps(manifest, indent=2, allow_nan=False, default=_json_default)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"training record is not JSON-serialisable: {exc}") from exc
+    directory.mkdir(parents=True, exist_ok=True)
+    _write_all_atomically(
+        directory,
+        [(ICFN_FILE, icfn_data), (RCFN_FILE, rcfn_data), (MANIFEST_NAME, (text + "\n").encode())],
+    )
+    return directory / MANIFEST_NAME
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def _read_manifest(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        raise ModelFileError(f"{path}: missing (not a relaxgrip model directory?)")
+    try:
+        manifest = json.loads(path.read_bytes().decode("utf-8"))
+    except OSError as exc:
+        raise ModelFileError(f"{path}: cannot read: {_one_line(exc)}") from exc
+    except ValueError as exc:  # JSONDecodeError and UnicodeDecodeError
+        raise ModelFileError(f"{path}: not JSON, not a relaxgrip model directory") from exc
+    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT_NAME:
+        raise ModelFileError(f"{path}: not a relaxgrip model directory (no {FORMAT_NAME!r} format)")
+    version = manifest.get("format_version")
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise ModelFileError(f"{path}: format version {version!r} is not a positive integer")
+    if version > FORMAT_VERSION:
+        raise ModelFileError(
+            f"{path}: format version {version} is newer than this relaxgrip reads "
+            f"({FORMAT_VERSION}); upgrade relaxgrip"
+        )
+    for key, fields in (
+        ("icfn", ("params", "feature_schema", "file", "bytes", "sha256")),
+        ("rcfn", ("params", "feature_names", "file", "bytes", "sha256")),
+    ):
+        section = manifest.get(key)
+        if not isinstance(section, dict):
+            raise ModelFileError(f"{path}: manifest lacks the {key!r} section")
+        for field in fields:
+            if field not in section:
+                raise ModelFileError(f"{path}: manifest lacks '{key}.{field}'")
+        if not isinstance(section["params"], dict):
+            raise ModelFileError(f"{path}: manifest '{key}.params' is not an object")
+    schema = manifest["icfn"]["feature_schema"]
+    if not (
+        isinstance(schema, dict)
+        and isinstance(schema.get("version"), str)
+        and isinstance(schema.get("names"), list)
+        and isinstance(schema.get("units"), list)
+        and len(schema["names"]) == len(schema["units"])
+    ):
+        raise ModelFileError(f"{path}: manifest 'icfn.feature_schema' is malformed")
+    if not isinstance(manifest["rcfn"]["feature_names"], list):
+        raise ModelFileError(f"{path}: manifest 'rcfn.feature_names' is not a list")
+    return manifest
+
+
+def _first_difference(saved: Sequence[str], expected: Sequence[str]) -> str:
+    if len(saved) != len(expected):
+        return f"{len(saved)} features vs {len(expected)}"
+    for i, (a, b) in enumerate(zip(saved, expected, strict=True)):
+        if a != b:
+            return f"feature {i} is {a!r} vs {b!r}"
+    return "same names"
+
+
+def _check_features(
+    path: Path,
+    manifest: Mapping[str, Any],
+    icfn_schema: FeatureSchema | None,
+    rcfn_names: Sequence[str] | None,
+) -> None:
+    saved = manifest["icfn"]["feature_schema"]
+    if icfn_schema is not None:
+        if saved["version"] != icfn_schema.version:
+            raise ModelFileError(
+                f"{path}: ICFN trained on features {saved['version']} "
+                f"but this code computes {icfn_schema.version}"
+            )
+        if saved != icfn_schema.to_dict():
+            raise ModelFileError(
+                f"{path}: ICFN trained on features {saved['version']} with other names or units "
+                f"than this code computes under the same version "
+                f"({_first_difference(saved['names'], icfn_schema.names)})"
+            )
+    if rcfn_names is not None:
+        names = list(manifest["rcfn"]["feature_names"])
+        if names != list(rcfn_names):
+            raise ModelFileError(
+                f"{path}: RCFN trained on other features than this code computes "
+                f"({_first_difference(names, list(rcfn_names))})"
+            )
+
+
+def _load_arrays(directory: Path, section: Mapping[str, Any]) -> tuple[Path, dict[str, Any]]:
+    name = section["file"]
+    if not isinstance(name, str) or Path(name).name != name:
+        raise ModelFileError(f"{directory / MANIFEST_NAME}: bad file name {name!r}")
+    path = directory / name
+    if not path.is_file():
+        raise ModelFileError(f"{path}: missing")
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ModelFileError(f"{path}: cannot read: {_one_line(exc)}") from exc
+    if len(data) != section["bytes"]:
+        raise ModelFileError(
+            f"{path}: truncated or modified ({len(data)} bytes, the manifest says "
+            f"{section['bytes']})"
+        )
+    if hashlib.sha256(data).hexdigest() != section["sha256"]:
+        raise ModelFileError(f"{path}: truncated or modified (sha256 differs from the manifest)")
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+            arrays = {key: npz[key] for key in npz.files}
+    except Exception as exc:  # zipfile, npy-format and pickle refusals all land here
+        raise ModelFileError(f"{path}: unreadable npz: {_one_line(exc)}") from exc
+    return path, arrays
+
+
+def load_models(
+    directory: Path,
+    *,
+    icfn_feature_schema: FeatureSchema | None = None,
+    rcfn_feature_names: Sequence[str] | None = None,
+) -> ModelBundle:
+    """Load a model directory written by :func:`save_models`, checking everything.
+
+    Parameters
+    ----------
+    directory : Path
+        The model directory.
+    icfn_feature_schema : FeatureSchema, optional
+        The schema this code computes ICFN features with (normally
+        :data:`relaxgrip.perception.features.ICFN_SCHEMA`); the saved one must
+        match.  ``None`` skips the check.
+    rcfn_feature_names : sequence of str, optional
+        The RCFN feature names this code computes; the saved ones must match.
+        ``None`` skips the check.
+
+    Returns
+    -------
+    ModelBundle
+        Both estimators, fitted, and the manifest.
+
+    Raises
+    ------
+    ModelFileError
+        A missing directory or file, a manifest that is not ours or too new,
+        a file whose size or sha256 differs from the manifest, an unreadable
+        npz, arrays missing or misshapen, or features other than expected.
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise ModelFileError(f"{directory}: no such model directory")
+    manifest_path = directory / MANIFEST_NAME
+    manifest = _read_manifest(manifest_path)
+    _check_features(manifest_path, manifest, icfn_feature_schema, rcfn_feature_names)
+
+    icfn_path, icfn_arrays = _load_arrays(directory, manifest["icfn"])
+    try:
+        icfn = ICFN.from_arrays(icfn_arrays, manifest["icfn"]["params"])
+    except (TypeError, ValueError) as exc:
+        raise ModelFileError(f"{icfn_path}: {_one_line(exc)}") from exc
+    rcfn_path, rcfn_arrays = _load_arrays(directory, manifest["rcfn"])
+    try:
+        rcfn = RCFN.from_arrays(rcfn_arrays, manifest["rcfn"]["params"])
+    except (TypeError, ValueError) as exc:
+        raise ModelFileError(f"{rcfn_path}: {_one_line(exc)}") from exc
+
+    n_icfn = len(manifest["icfn"]["feature_schema"]["names"])
+    if icfn.n_features_in_ != n_icfn:
+        raise ModelFileError(
+            f"{icfn_path}: array shape wrong: {icfn.n_features_in_} features, "
+            f"the manifest's schema has {n_icfn}"
+        )
+    n_rcfn = len(manifest["rcfn"]["feature_names"])
+    if rcfn.n_features_in_ != n_rcfn:
+        raise ModelFileError(
+            f"{rcfn_path}: array shape wrong: {rcfn.n_features_in_} features, "
+            f"the manifest names {n_rcfn}"
+        )
+    return ModelBundle(icfn=icfn, rcfn=rcfn, manifest=manifest)
