@@ -101,3 +101,17 @@ def test_perfect_prediction() -> None:
 def test_invalid_input_raises(call: Callable[[], float], match: str) -> None:
     with pytest.raises(ValueError, match=match):
         call()
+
+
+def test_median_error_by_paper_force_range() -> None:
+    from relaxgrip.metrics import median_ae_by_range
+
+    gt = np.array([0.5, 0.9, 1.5, 3.0, 4.0, 6.0, 10.0])
+    pred = gt + np.array([0.1, 0.3, -0.2, 0.5, -0.1, 1.0, 2.0])
+    out = median_ae_by_range(pred, gt)
+    assert list(out) == ["0-1", "1-2", "2-5", "5-10"]
+    assert out["0-1"] == pytest.approx(0.2)
+    assert out["1-2"] == pytest.approx(0.2)
+    assert out["2-5"] == pytest.approx(0.3)
+    assert out["5-10"] == pytest.approx(1.5)  # 10 N falls in the last range
+    assert np.isnan(median_ae_by_range([3.0], [3.0], ((0.0, 1.0),))["0-1"])

@@ -18,7 +18,20 @@ from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["amplitude", "auc_rel", "curve_correlation", "mae", "nrmse", "r2", "rmse"]
+__all__ = [
+    "FORCE_RANGES_N",
+    "amplitude",
+    "auc_rel",
+    "curve_correlation",
+    "mae",
+    "median_ae_by_range",
+    "nrmse",
+    "r2",
+    "rmse",
+]
+
+#: The paper's force ranges for the ICFN's error breakdown (N), lower bound inclusive.
+FORCE_RANGES_N: tuple[tuple[float, float], ...] = ((0.0, 1.0), (1.0, 2.0), (2.0, 5.0), (5.0, 10.0))
 
 
 def nrmse(t_s: ArrayLike, f_pred: ArrayLike, f_gt: ArrayLike) -> float:
@@ -215,6 +228,36 @@ def r2(f_pred: ArrayLike, f_gt: ArrayLike) -> float:
     if ss_tot == 0.0:
         raise ValueError("f_gt is constant: R² is undefined (zero total variance)")
     return 1.0 - float(np.sum((pred - gt) ** 2)) / ss_tot
+
+
+def median_ae_by_range(
+    f_pred: ArrayLike,
+    f_gt: ArrayLike,
+    ranges_n: tuple[tuple[float, float], ...] = FORCE_RANGES_N,
+) -> dict[str, float]:
+    """Median absolute error within ranges of the true force (paper Fig. "acc" b).
+
+    Parameters
+    ----------
+    f_pred, f_gt : array_like, shape (n,)
+        Predicted and true forces (N).
+    ranges_n : tuple of (low, high)
+        Ranges of the true force, ``low <= F < high`` (the last also takes ``F == high``).
+
+    Returns
+    -------
+    dict
+        ``"low-high"`` (e.g. ``"0-1"``) to the median absolute error (N); nan
+        for a range with no samples.
+    """
+    pred, gt = _curves(f_pred, f_gt, min_size=1)
+    error = np.abs(pred - gt)
+    out = {}
+    for k, (lo, hi) in enumerate(ranges_n):
+        last = k == len(ranges_n) - 1
+        inside = (gt >= lo) & ((gt <= hi) if last else (gt < hi))
+        out[f"{lo:g}-{hi:g}"] = float(np.median(error[inside])) if inside.any() else math.nan
+    return out
 
 
 def _curves(*arrays: ArrayLike, min_size: int) -> list[FloatArray]:

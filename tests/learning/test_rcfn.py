@@ -4,6 +4,7 @@ import copy
 import json
 import math
 import pickle
+from typing import Any
 
 import numpy as np
 import pytest
@@ -23,6 +24,10 @@ from relaxgrip.physics.viscoelastic import reduced_force
 # Like the RCFN input: temperature (°C), translations (m), rotations (rad), a velocity (m/s).
 SCALES = np.array([10.0, 1.5e-3, 1e-3, 2e-2, 1e-2, 1e-4])
 OFFSETS = np.array([42.0, 2e-3, 0.0, 0.0, 0.0, 0.0])
+
+
+#: The plain polynomial model these tests describe (no temperature basis, kappa fitted as is).
+PLAIN: dict[str, Any] = {"temp_knots": 0, "log_kappa": False}
 
 
 def make_data(
@@ -45,7 +50,7 @@ def data():
 
 @pytest.fixture(scope="module")
 def fitted(data):
-    return RCFN(alpha_kappa=1e-6, alpha_log_tau=1e-6).fit(*data)
+    return RCFN(alpha_kappa=1e-6, alpha_log_tau=1e-6, **PLAIN).fit(*data)
 
 
 @pytest.mark.parametrize("degree", [1, 2, 3])
@@ -67,9 +72,10 @@ def test_recovers_a_known_quadratic(fitted):
 def test_degree_one_cannot_and_degree_two_can(data):
     X, Y = data
     X_test, Y_test = make_data(500, seed=1)
-    linear = RCFN(alpha_kappa=1e-6, alpha_log_tau=1e-6, degree=1).fit(X, Y)
+    linear = RCFN(alpha_kappa=1e-6, alpha_log_tau=1e-6, degree=1, **PLAIN).fit(X, Y)
     rmse_1 = np.sqrt(np.mean((linear.predict(X_test) - Y_test) ** 2, axis=0))
-    rmse_2 = np.sqrt(np.mean((RCFN(degree=2).fit(X, Y).predict(X_test) - Y_test) ** 2, axis=0))
+    quadratic = RCFN(degree=2, **PLAIN).fit(X, Y)
+    rmse_2 = np.sqrt(np.mean((quadratic.predict(X_test) - Y_test) ** 2, axis=0))
     assert linear.n_output_features_ == SCALES.size
     assert (rmse_1 > 0.01).all()
     assert (rmse_2 < rmse_1 / 10).all()
@@ -78,7 +84,7 @@ def test_degree_one_cannot_and_degree_two_can(data):
 @pytest.mark.parametrize("degree", [1, 2, 3])
 def test_relaxation_is_kappa_times_force_and_exp_log_tau(data, degree):
     X, Y = data
-    model = RCFN(degree=degree).fit(X[:400], Y[:400])
+    model = RCFN(degree=degree, **PLAIN).fit(X[:400], Y[:400])
     predicted = model.predict(X[400:420])
     for x, (kappa, log_tau) in zip(X[400:420], predicted, strict=True):
         k_n, tau_s = model.relaxation(x, 6.5)
@@ -150,24 +156,24 @@ def test_from_arrays_rejects_bad_arrays(fitted, change, words):
 def test_bad_inputs_raise(data, fitted):
     X, Y = data
     with pytest.raises(ValueError, match="shape"):
-        RCFN().fit(X, Y[:, 0])
+        RCFN(**PLAIN).fit(X, Y[:, 0])
     with pytest.raises(ValueError, match="shape"):
-        RCFN().fit(X, np.column_stack([Y, Y[:, 0]]))
+        RCFN(**PLAIN).fit(X, np.column_stack([Y, Y[:, 0]]))
     bad = Y.copy()
     bad[4, 1] = np.nan
     with pytest.raises(ValueError, match="NaN"):
-        RCFN().fit(X, bad)
+        RCFN(**PLAIN).fit(X, bad)
     with pytest.raises(ValueError, match="inconsistent"):
-        RCFN().fit(X[:10], Y[:9])
+        RCFN(**PLAIN).fit(X[:10], Y[:9])
     with pytest.raises(ValueError, match="degree"):
-        RCFN(degree=0).fit(X, Y)
+        RCFN(degree=0, **PLAIN).fit(X, Y)
     with pytest.raises(ValueError, match="features"):
         fitted.predict(X[:, :3])
     with pytest.raises(ValueError, match="2-D"):
         fitted.predict(X[0])
     with pytest.raises(ValueError, match="shape"):
         fitted.relaxation(X[0, :3], 1.0)
-    unfitted = RCFN()
+    unfitted = RCFN(**PLAIN)
     with pytest.raises(NotFittedError):
         unfitted.predict(X)
     with pytest.raises(NotFittedError):
@@ -179,7 +185,7 @@ def test_select_rcfn_picks_each_targets_lowest_validation_rmse():
     X, Y = make_data(60, seed=3, noise=(0.05, 0.0))
     X_val, Y_val = make_data(300, seed=4, noise=(0.05, 0.0))
     alphas = (1e-4, 1e-2, 1.0, 100.0)
-    best, table = select_rcfn(X, Y, X_val, Y_val, alphas)
+    best, table = select_rcfn(X, Y, X_val, Y_val, alphas, **PLAIN)
     assert [row["alpha"] for row in table] == list(alphas)
     i_k = int(np.argmin([row["val_rmse_kappa"] for row in table]))
     i_t = int(np.argmin([row["val_rmse_log_tau"] for row in table]))
@@ -191,4 +197,54 @@ def test_select_rcfn_picks_each_targets_lowest_validation_rmse():
     refit = RCFN(**best.get_params()).fit(X, Y)
     np.testing.assert_allclose(refit.predict(X_val), best.predict(X_val), rtol=1e-12, atol=1e-12)
     with pytest.raises(ValueError, match="alphas"):
-        select_rcfn(X, Y, X_val, Y_val, alphas=(0.0, 1.0))
+        select_rcfn(X, Y, X_val, Y_val, alphas=(0.0, 1.0), **PLAIN)
+
+
+def steep_data(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Relaxing share flat when glassy, steep above 50 °C, times an object factor."""
+    rng = np.random.default_rng(seed)
+    temp = rng.uniform(25.0, 60.0, n)
+    other = rng.normal(size=(n, 3))
+    kappa = (0.08 + 0.2 / (1 + np.exp(-(temp - 55.0) / 2.0))) * np.exp(0.3 * other[:, 0])
+    log_tau = 3.5 - 0.04 * (temp - 40.0) + 0.1 * other[:, 1]
+    return np.column_stack([temp, other]), np.column_stack([kappa, log_tau])
+
+
+def test_temperature_basis_and_log_kappa_follow_a_steep_multiplicative_share() -> None:
+    X, Y = steep_data(2000, 0)
+    X_test, Y_test = steep_data(500, 1)
+
+    def rel_error(model: RCFN) -> float:
+        return float(np.median(np.abs(model.predict(X_test)[:, 0] / Y_test[:, 0] - 1)))
+
+    plain = RCFN(alpha_kappa=1e-3, alpha_log_tau=1e-3, **PLAIN).fit(X, Y)
+    shaped = RCFN(alpha_kappa=1e-3, alpha_log_tau=1e-3, temp_knots=6).fit(X, Y)
+    assert shaped.temp_knots_.tolist() == pytest.approx(np.linspace(X[:, 0].min(),
+                                                                     X[:, 0].max(), 6).tolist())
+    assert rel_error(shaped) < 0.5 * rel_error(plain)
+    assert (shaped.predict(X_test)[:, 0] > 0).all()  # exp(log kappa): never negative
+
+
+def test_fast_path_and_round_trip_with_the_basis() -> None:
+    X, Y = steep_data(800, 2)
+    model = RCFN(temp_knots=5).fit(X, Y)
+    X_out = X[:50].copy()
+    X_out[:5, 0] = [10.0, 20.0, 70.0, 80.0, 60.0]  # held at the end knots beyond the range
+    predicted = model.predict(X_out)
+    for x, (kappa, log_tau) in zip(X_out, predicted, strict=True):
+        k_n, tau_s = model.relaxation(x, 4.0)
+        assert k_n == pytest.approx(kappa * 4.0, rel=1e-10)
+        assert tau_s == pytest.approx(np.exp(log_tau), rel=1e-10)
+    rebuilt = RCFN.from_arrays(model.to_arrays(), model.get_params())
+    assert np.allclose(rebuilt.predict(X_out), predicted, rtol=1e-12)
+    assert rebuilt.n_features_in_ == X.shape[1]
+
+
+def test_basis_and_log_kappa_validation() -> None:
+    X, Y = steep_data(100, 3)
+    with pytest.raises(ValueError, match="temp_knots"):
+        RCFN(temp_knots=1).fit(X, Y)
+    with pytest.raises(ValueError, match="kappa must be > 0"):
+        RCFN().fit(X, np.column_stack([-Y[:, 0], Y[:, 1]]))
+    with pytest.raises(ValueError, match="temp_column"):
+        RCFN(temp_column=9).fit(X, Y)

@@ -164,3 +164,30 @@ def test_bench_reports_the_issue_figures() -> None:
         assert result.headline[key] > 0.0
     assert result.headline["pose_err_mm_rms"] < 0.05
     assert result.headline["pose_err_deg_rms"] < 0.3
+
+
+def test_rcfn_features_onset_velocity_closure_ratio_and_hold_time() -> None:
+    from relaxgrip.perception.features import RCFN_SCHEMA, RcfnFeatures
+
+    builder = RcfnFeatures()
+    assert builder.build(40.0) is None  # before the onset
+    # Loading: 2 mm/s of motor closure bends the marker 0.5 mm/s once in contact at t = 1 s.
+    for k in range(31):
+        t = 0.1 * k
+        dx = max(0.0, 0.5e-3 * (t - 1.0))
+        builder.observe(t, np.array([dx, 0, 0, 0, 0.1 * dx, 0]), 2.0 * t)
+    onset = np.array([1.0e-3, 0, 0, 0, 1.0e-4, 0])
+    builder.start(3.0, onset, 6.0)
+    assert builder.closure_ratio == pytest.approx(4.0)  # 2 mm / 0.5 mm, contact frames only
+    builder.observe(4.0, onset + np.array([2e-5, 0, 0, 0, 0, 0]), 6.0)
+    x = builder.build(40.0)
+    assert x is not None
+    f = dict(zip(RCFN_SCHEMA.names, x, strict=True))
+    assert f["temp_c"] == 40.0
+    assert f["onset_dx_m"] == pytest.approx(1.0e-3)
+    assert f["dx_m"] == pytest.approx(1.02e-3)
+    assert f["vdx_m_s"] == pytest.approx(2e-5)
+    assert f["hold_time_s"] == pytest.approx(1.0)
+    from_rest = RcfnFeatures()
+    from_rest.start(0.0, onset, 6.0)
+    assert from_rest.build(40.0) is None  # no loading seen: the ratio is unknown

@@ -7,17 +7,22 @@ from typing import Any
 
 from relaxgrip.bench import core
 from relaxgrip.bench.core import BenchResult
+from relaxgrip.bench.learning import bench_estimation, bench_learning_pipeline
 from relaxgrip.bench.perception import bench_perception
 from relaxgrip.bench.twin import bench_twin_hold, bench_twin_step
 
-__all__ = ["BENCHMARKS", "BenchResult", "run_benchmarks"]
+__all__ = ["BENCHMARKS", "DEFAULT_BENCHMARKS", "BenchResult", "run_benchmarks"]
 
 #: Benchmark name -> function of the repeat count.
 BENCHMARKS: dict[str, Callable[[int], BenchResult]] = {
     "twin-hold": bench_twin_hold,
     "twin-step": bench_twin_step,
     "perception": bench_perception,
+    "estimation": bench_estimation,
+    "learning-pipeline": bench_learning_pipeline,
 }
+#: What ``relaxgrip bench`` runs without names: everything that takes seconds, not minutes.
+DEFAULT_BENCHMARKS: tuple[str, ...] = ("twin-hold", "twin-step", "perception", "estimation")
 
 
 def run_benchmarks(names: list[str], repeat: int) -> dict[str, Any]:

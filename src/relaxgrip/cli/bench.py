@@ -7,7 +7,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from relaxgrip.bench import BENCHMARKS, run_benchmarks
+from relaxgrip.bench import BENCHMARKS, DEFAULT_BENCHMARKS, run_benchmarks
 from relaxgrip.cli._app import app, console, emit_json
 from relaxgrip.errors import InputError
 
@@ -15,13 +15,14 @@ from relaxgrip.errors import InputError
 @app.command("bench")
 def bench(
     names: Annotated[
-        list[str] | None, typer.Argument(help=f"Benchmarks to run: {', '.join(BENCHMARKS)}.")
+        list[str] | None, typer.Argument(help=f"Benchmarks to run: {', '.join(BENCHMARKS)} "
+                                   f"(default: {', '.join(DEFAULT_BENCHMARKS)}).")
     ] = None,
     repeat: Annotated[int, typer.Option("--repeat", help="Timed runs per benchmark.")] = 5,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Measure how fast the twin and the pipeline run (all benchmarks by default)."""
-    chosen = names or list(BENCHMARKS)
+    chosen = names or list(DEFAULT_BENCHMARKS)
     unknown = [n for n in chosen if n not in BENCHMARKS]
     if unknown:
         raise InputError(f"unknown benchmark {unknown[0]!r}; known: {', '.join(BENCHMARKS)}")

@@ -13,7 +13,8 @@ Nothing the estimators will not have at run time enters their features.
 * **RCFN** (810 sequences of 100 s, 4 contact locations): *sequences* on a
   grid of conditions (contact location × temperature × start force ×
   object), each repeated with fresh scatter.  The gripper closes to the start
-  force and holds its aperture with a constant heater duty; the true force is
+  force, stops, and once the motor has settled holds its aperture with a
+  constant heater duty (the hold onset); the true force is
   kept at ``curve_rate_hz`` and the RCFN features (temperature, onset pose,
   pose, pose velocity) at ``feature_rate_hz``.  Labels: the reduced model
   anchored at the onset force, fitted by least squares (``K``, ``tau``), and
@@ -86,6 +87,9 @@ _ZERO_FRAMES = 15
 _APPROACH_MM_S = 20.0
 _GAP_BEFORE_CONTACT_MM = 3.0
 _RCFN_SPEED_MM_S = 2.0
+_SETTLE_S = 0.2
+#: During the loading before a hold, frames at 10 Hz (the closure ratio needs a few).
+_LOADING_FRAME_EVERY = 3
 _SPLITS = ("train", "val", "test")
 
 
@@ -279,6 +283,8 @@ class _Harness:
         self.width_m = obj.width_m
         self.dt = 1.0 / _RATE_HZ
         self._speed = 0.0
+        self.motor_mm = 0.0  # encoder at the last perceived frame
+        self.closed_aperture_m = cfg.rig.open_aperture_m - cfg.motor.stroke_mm * 1e-3
 
     def tick(self) -> Truth:
         """Advance one control period without rendering; return the truth."""
@@ -290,6 +296,7 @@ class _Harness:
         """Render the current frames and run perception on them."""
         obs = self.twin.observe()
         assert obs.truth is not None
+        self.motor_mm = obs.motor_position_mm
         return self.perception.update(obs.rgb, obs.ir, obs.motor_position_mm), obs.truth
 
     def run(self, speed_mm_s: float) -> None:
@@ -322,7 +329,6 @@ def run_icfn_episode(ep: IcfnEpisode) -> UnitResult:
     out = UnitResult("icfn", ep.index)
     rows: dict[str, list[Any]] = {name: [] for name in _ICFN_COLUMNS}
     n_free = 2  # samples before contact, at zero force
-    levels = np.linspace(0.0, ep.max_force_n, ep.n_samples - n_free + 1)[1:]
 
     def sample() -> None:
         percept, truth = h.perceive()
@@ -348,17 +354,33 @@ def run_icfn_episode(ep: IcfnEpisode) -> UnitResult:
         sample()
         for _ in range(round(0.3 * _RATE_HZ)):
             h.tick()
-    level = 0
+    # Levels spread what is left of the range over the samples left, so a level a
+    # stiff contact skips between two frames is made up later; the closing slows
+    # where one frame's force step would overshoot the next level.
+    speed = ep.speed_mm_s
+    previous = 0.0
+    spacing = ep.max_force_n / (ep.n_samples - n_free)
+    next_level = spacing
     for _ in range(round(120.0 * _RATE_HZ)):
-        if level >= levels.size:
+        remaining = ep.n_samples - len(rows["force_n"]) - out.dropped
+        if remaining <= 0:
             break
         truth = h.tick()
-        if truth.contact_force_n >= levels[level]:
+        force = truth.contact_force_n
+        if force > ep.max_force_n * 1.1:
+            out.dropped += remaining
+            break
+        # At the end of the stroke (a stiff object near the tip of a soft finger) the
+        # force cannot rise further: the last samples are taken where it stands.
+        if force >= next_level or truth.aperture_m <= h.closed_aperture_m + 1e-6:
             sample()
-            level += 1
-            while level < levels.size and truth.contact_force_n >= levels[level]:
-                level += 1  # a stiff object can jump several levels in one period
-                out.dropped += 1
+            remaining -= 1
+            spacing = max(ep.max_force_n - force, 0.0) / max(remaining, 1)
+            next_level = force + spacing
+        if force - previous > 0.5 * spacing and speed > 0.05:
+            speed *= 0.5
+            h.run(speed)
+        previous = force
     out.rows = rows
     return out
 
@@ -370,19 +392,26 @@ def run_rcfn_sequence(seq: RcfnSequence) -> UnitResult:
     h.approach()
     builder = RcfnFeatures()
     h.run(_RCFN_SPEED_MM_S)
-    frame_every = max(1, round(_RATE_HZ / seq.feature_rate_hz))
     onset: tuple[Percept, Truth] | None = None
     for k in range(round(120.0 * _RATE_HZ)):
         truth = h.tick()
-        if truth.contact_force_n >= seq.force_n:
+        # A soft finger may not reach the set force within the stroke: the hold
+        # then starts at the force reached, as it would on the real rig.
+        at_stroke_end = truth.aperture_m <= h.closed_aperture_m + 1e-6
+        if truth.contact_force_n >= seq.force_n or (at_stroke_end and truth.contact_force_n > 0.5):
+            # The hold starts once the motor has stopped (four of its lag time
+            # constants), not when it is told to: its last tenth of a millimetre
+            # would otherwise show as a rise at the start of every hold.
             h.run(0.0)
+            for _ in range(round(_SETTLE_S * _RATE_HZ)):
+                h.tick()
             onset = h.perceive()
             break
-        if k % frame_every == 0 and truth.contact_force_n > 0.0:
+        if k % _LOADING_FRAME_EVERY == 0 and truth.contact_force_n > 0.0:
             percept, _ = h.perceive()
             pose = marker_pose(percept.marker)
             if pose is not None:
-                builder.observe(h.twin.time_s, pose)
+                builder.observe(h.twin.time_s, pose, h.motor_mm)
     out = UnitResult("rcfn", seq.index)
     if onset is None or marker_pose(onset[0].marker) is None or onset[0].features is None:
         out.dropped = 1
@@ -391,7 +420,7 @@ def run_rcfn_sequence(seq: RcfnSequence) -> UnitResult:
     f0 = onset[1].contact_force_n
     pose0 = marker_pose(onset[0].marker)
     assert pose0 is not None
-    builder.start(t0, pose0)
+    builder.start(t0, pose0, h.motor_mm)
     curve_t, curve_f = [0.0], [f0]
     feats: dict[str, list[Any]] = {"sequence": [], "t_s": []}
     feats.update({name: [] for name in RCFN_SCHEMA.names})
@@ -400,7 +429,7 @@ def run_rcfn_sequence(seq: RcfnSequence) -> UnitResult:
         pose = marker_pose(percept.marker)
         if pose is None or percept.thermal is None:
             return
-        builder.observe(t + t0, pose)
+        builder.observe(t + t0, pose, h.motor_mm)
         x = builder.build(finger_temperature_c(percept.thermal))
         if x is None:
             return
@@ -411,6 +440,7 @@ def run_rcfn_sequence(seq: RcfnSequence) -> UnitResult:
 
     keep_features(0.0, onset[0])
     curve_every = max(1, round(_RATE_HZ / seq.curve_rate_hz))
+    frame_every = max(1, round(_RATE_HZ / seq.feature_rate_hz))
     n_ticks = round(seq.hold_s * _RATE_HZ)
     for k in range(1, n_ticks + 1):
         truth = h.tick()

@@ -13,15 +13,22 @@ contact onset, current pose, pose velocity).  By Eq. 7, ``K = X0 sum k_i`` and
 material state, independent of the load: the first regressor predicts
 ``kappa`` and ``K_hat = kappa_hat * F_inst_hat``.
 
-Both regressors read the same features: standardised, expanded into a
-polynomial of the chosen degree, standardised again, then fitted by
-scikit-learn's :class:`~sklearn.linear_model.Ridge`, one per target with its
-own penalty.  Coefficients are copied into arrays; prediction is NumPy only,
-and :meth:`RCFN.relaxation` is a preplanned per-frame fast path.
+Both regressors read the same features.  Temperature acts on relaxation
+strongly and non-polynomially (slowly in the glassy state, steeply through
+the transition), so the temperature column is first replaced by a
+piecewise-linear ("hat") basis over the training range; the features are
+then standardised, expanded into a polynomial of the chosen degree,
+standardised again, and fitted by scikit-learn's
+:class:`~sklearn.linear_model.Ridge`, one per target with its own penalty.
+The relaxing share scatters multiplicatively (material, object, contact), so
+its regressor fits ``log kappa``.  Coefficients are copied into arrays;
+prediction is NumPy only, and :meth:`RCFN.relaxation` is a preplanned
+per-frame fast path.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -45,7 +52,7 @@ __all__ = ["RCFN", "RCFN_ALPHAS", "RCFN_TARGETS", "n_poly_features", "reconstruc
 #: The two targets, in column order of ``Y``: relaxing share and log relaxation time.
 RCFN_TARGETS = ("kappa", "log_tau_s")
 #: Default penalties :func:`select_rcfn` tries for each target.
-RCFN_ALPHAS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0)
+RCFN_ALPHAS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0, 1000.0)
 #: Fewest samples :meth:`RCFN.fit` accepts.
 MIN_SAMPLES = 2
 
@@ -176,6 +183,32 @@ def _check_degree(degree: int) -> None:
         raise ValueError(f"degree must be an integer >= 1, got {degree!r}")
 
 
+def _hat_weights(t: FloatArray, knots: FloatArray) -> FloatArray:
+    """Piecewise-linear basis of ``t`` on ``knots``, shape ``(n, len(knots))``.
+
+    Each row holds the weights of linear interpolation between the two
+    knots around ``t`` (they sum to 1); beyond the ends it is held at the end
+    knot.
+    """
+    k = knots.size
+    clipped = np.clip(t, knots[0], knots[-1])
+    idx = np.clip(np.searchsorted(knots, clipped, side="right") - 1, 0, k - 2)
+    w = (clipped - knots[idx]) / (knots[idx + 1] - knots[idx])
+    out = np.zeros((t.size, k))
+    rows = np.arange(t.size)
+    out[rows, idx] = 1.0 - w
+    out[rows, idx + 1] = w
+    return out
+
+
+def _basis(X: FloatArray, knots: FloatArray, column: int) -> FloatArray:
+    """``X`` with column ``column`` replaced by its hat basis (first), if there are knots."""
+    if knots.size == 0:
+        return X
+    rest = np.delete(X, column, axis=1)
+    return np.hstack([_hat_weights(X[:, column], knots), rest])
+
+
 def _ridge(phi: FloatArray, y: FloatArray, alpha: float) -> tuple[FloatArray, float]:
     """Coefficients and intercept of one Ridge fit."""
     model = Ridge(alpha=alpha, fit_intercept=True).fit(phi, y)
@@ -214,6 +247,13 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
     degree : int
         Degree of the polynomial feature expansion: 1 is linear in the
         standardised features, 2 adds their squares and pairwise products.
+    temp_knots : int
+        Knots of the temperature basis, spread evenly over the training range
+        (0: temperature enters as it is).
+    temp_column : int
+        Which feature is the temperature.
+    log_kappa : bool
+        Fit ``log kappa`` rather than ``kappa`` (predictions are ``kappa`` either way).
 
     Attributes
     ----------
@@ -221,8 +261,10 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         Number of features seen in :meth:`fit`.
     n_output_features_ : int
         Number of expanded features.
-    x_mean_, x_scale_ : ndarray, shape (n_features_in_,)
-        Feature standardisation.
+    temp_knots_ : ndarray, shape (temp_knots,)
+        Knot temperatures of the basis (empty without one).
+    x_mean_, x_scale_ : ndarray, shape (n_basis_features,)
+        Standardisation of the features after the temperature basis.
     phi_mean_, phi_scale_ : ndarray, shape (n_output_features_,)
         Standardisation of the expanded features.
     coef_ : ndarray, shape (n_output_features_, 2)
@@ -238,11 +280,20 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
     """
 
     def __init__(
-        self, alpha_kappa: float = 1.0, alpha_log_tau: float = 1.0, degree: int = 2
+        self,
+        alpha_kappa: float = 1.0,
+        alpha_log_tau: float = 1.0,
+        degree: int = 2,
+        temp_knots: int = 5,
+        temp_column: int = 0,
+        log_kappa: bool = True,
     ) -> None:
         self.alpha_kappa = alpha_kappa
         self.alpha_log_tau = alpha_log_tau
         self.degree = degree
+        self.temp_knots = temp_knots
+        self.temp_column = temp_column
+        self.log_kappa = log_kappa
 
     def fit(self, X: ArrayLike, Y: ArrayLike) -> RCFN:
         """Fit both regressors.
@@ -267,24 +318,61 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         """
         _check_degree(self.degree)
         X_arr, Y_arr = _check_targets(X, Y)
-        design, phi = _Design.of(X_arr, self.degree)
+        knots = self._knots_for(X_arr)
+        design, phi = _Design.of(_basis(X_arr, knots, self.temp_column), self.degree)
+        targets = self._internal_targets(Y_arr)
         fits = [
-            _ridge(phi, Y_arr[:, k], alpha)
+            _ridge(phi, targets[:, k], alpha)
             for k, alpha in enumerate((self.alpha_kappa, self.alpha_log_tau))
         ]
-        self._set_learned(design, np.column_stack([c for c, _ in fits]), [b for _, b in fits])
+        self._set_learned(design, np.column_stack([c for c, _ in fits]), [b for _, b in fits],
+                          knots, X_arr.shape[1])
         return self
 
-    def _set_learned(self, design: _Design, coef: FloatArray, intercept: Sequence[float]) -> None:
+    def _knots_for(self, X: FloatArray) -> FloatArray:
+        """Knots spread over the training range of the temperature column."""
+        if isinstance(self.temp_knots, bool) or self.temp_knots < 0 or self.temp_knots == 1:
+            raise ValueError(f"temp_knots must be 0 or >= 2, got {self.temp_knots!r}")
+        if self.temp_knots == 0:
+            return np.zeros(0)
+        if not 0 <= self.temp_column < X.shape[1]:
+            raise ValueError(f"temp_column {self.temp_column} is not a column of X")
+        lo, hi = float(X[:, self.temp_column].min()), float(X[:, self.temp_column].max())
+        if not hi > lo:
+            raise ValueError("the temperature column is constant: no basis to spread over it")
+        return np.linspace(lo, hi, self.temp_knots)
+
+    def _internal_targets(self, Y: FloatArray) -> FloatArray:
+        """What the regressors fit: ``log kappa`` (if chosen) and ``log tau``."""
+        if not self.log_kappa:
+            return Y
+        if (Y[:, 0] <= 0).any():
+            raise ValueError("kappa must be > 0 to fit log kappa")
+        return np.column_stack([np.log(Y[:, 0]), Y[:, 1]])
+
+    def _set_learned(
+        self,
+        design: _Design,
+        coef: FloatArray,
+        intercept: Sequence[float],
+        knots: FloatArray,
+        n_features: int,
+    ) -> None:
+        self.temp_knots_ = knots
         self.x_mean_ = design.x_mean
         self.x_scale_ = design.x_scale
         self.phi_mean_ = design.phi_mean
         self.phi_scale_ = design.phi_scale
         self.coef_ = coef
         self.intercept_ = np.array(intercept, dtype=np.float64)
-        self.n_features_in_ = design.x_mean.size
+        self.n_features_in_ = n_features
         self.n_output_features_ = design.phi_mean.size
         self._plan: _RelaxationPlan | None = None
+        # The fast path's temperature basis: plain floats and a reusable vector.
+        self._knots_list = knots.tolist()
+        self._others = np.array([i for i in range(n_features)
+                                 if knots.size == 0 or i != self.temp_column])
+        self._expanded = np.zeros(design.x_mean.size)
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "coef_"):
@@ -325,10 +413,13 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
             )
         if not np.isfinite(X_arr).all():
             raise ValueError("X contains NaN or infinity")
-        phi = _poly_expand((X_arr - self.x_mean_) / self.x_scale_, self.degree)
+        Z = _basis(X_arr, self.temp_knots_, self.temp_column)
+        phi = _poly_expand((Z - self.x_mean_) / self.x_scale_, self.degree)
         phi -= self.phi_mean_
         phi /= self.phi_scale_
         result: FloatArray = phi @ self.coef_ + self.intercept_
+        if self.log_kappa:
+            result[:, 0] = np.exp(result[:, 0])
         return result
 
     def _make_plan(self) -> _RelaxationPlan | None:
@@ -375,9 +466,28 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
                 raise ValueError(f"x must have shape ({n},), got {x.shape}; use predict for 2-D")
         if plan is None:
             kappa, log_tau = self.predict(np.asarray(x, dtype=np.float64)[None, :])[0].tolist()
-        else:
-            kappa, log_tau = plan(x)
+            return kappa * f_inst_n, math.exp(log_tau)
+        kappa, log_tau = plan(self._expand_one(x))
+        if self.log_kappa:
+            kappa = math.exp(kappa)
         return kappa * f_inst_n, math.exp(log_tau)
+
+    def _expand_one(self, x: ArrayLike) -> FloatArray | ArrayLike:
+        """One vector through the temperature basis, into a reused buffer."""
+        knots = self._knots_list
+        if not knots:
+            return x
+        out = self._expanded
+        k = len(knots)
+        out[:k] = 0.0
+        temp = float(np.asarray(x)[self.temp_column])
+        t = min(max(temp, knots[0]), knots[-1])
+        i = min(bisect.bisect_right(knots, t) - 1, k - 2)
+        w = (t - knots[i]) / (knots[i + 1] - knots[i])
+        out[i] = 1.0 - w
+        out[i + 1] = w
+        np.take(x, self._others, out=out[k:])
+        return out
 
     def __getstate__(self) -> dict[str, Any]:
         # The plan holds views into its own buffers, which copying would sever.
@@ -407,6 +517,7 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
             "phi_scale": self.phi_scale_.copy(),
             "coef": self.coef_.copy(),
             "intercept": self.intercept_.copy(),
+            "temp_knots": self.temp_knots_.copy(),
         }
 
     @classmethod
@@ -435,24 +546,29 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         """
         est = cls(**params)
         _check_degree(est.degree)
-        expected = {"x_mean", "x_scale", "phi_mean", "phi_scale", "coef", "intercept"}
+        expected = {"x_mean", "x_scale", "phi_mean", "phi_scale", "coef", "intercept",
+                    "temp_knots"}
         got = _float_arrays(arrays, expected)
         if got["x_mean"].ndim != 1 or got["x_mean"].size == 0:
             shape = got["x_mean"].shape
             raise ValueError(f"array 'x_mean' must have shape (n_features,), got {shape}")
         d = got["x_mean"].size
         m = n_poly_features(d, est.degree)
+        knots = got["temp_knots"]
         shapes = {
             "x_mean": (d,), "x_scale": (d,), "phi_mean": (m,), "phi_scale": (m,),
-            "coef": (m, 2), "intercept": (2,),
+            "coef": (m, 2), "intercept": (2,), "temp_knots": (est.temp_knots,),
         }
         for name, shape in shapes.items():
             if got[name].shape != shape:
                 raise ValueError(f"array '{name}' has shape {got[name].shape}, expected {shape}")
         if (got["x_scale"] <= 0).any() or (got["phi_scale"] <= 0).any():
             raise ValueError("scales must be > 0")
+        if knots.size and not (np.diff(knots) > 0).all():
+            raise ValueError("array 'temp_knots' must be increasing")
         design = _Design(got["x_mean"], got["x_scale"], got["phi_mean"], got["phi_scale"])
-        est._set_learned(design, got["coef"], got["intercept"].tolist())
+        n_features = d - knots.size + 1 if knots.size else d
+        est._set_learned(design, got["coef"], got["intercept"].tolist(), knots, n_features)
         return est
 
 
@@ -464,6 +580,8 @@ def select_rcfn(
     alphas: Sequence[float] = RCFN_ALPHAS,
     *,
     degree: int = 2,
+    temp_knots: int = 5,
+    log_kappa: bool = True,
 ) -> tuple[RCFN, list[dict[str, Any]]]:
     """Choose each target's Ridge penalty by validation RMSE.
 
@@ -479,8 +597,8 @@ def select_rcfn(
         Validation features and targets.
     alphas : sequence of float
         Penalties to try, each ``> 0``.
-    degree : int
-        Polynomial degree of the expansion.
+    degree, temp_knots, log_kappa : int, int, bool
+        The other hyperparameters, see :class:`RCFN`.
 
     Returns
     -------
@@ -497,15 +615,18 @@ def select_rcfn(
     X_va, Y_va = _check_targets(X_val, Y_val)
     if X_va.shape[1] != X_tr.shape[1]:
         raise ValueError(f"X_val has {X_va.shape[1]} features but X_train has {X_tr.shape[1]}")
-    design, phi = _Design.of(X_tr, degree)
-    probe = RCFN(degree=degree)
+    probe = RCFN(degree=degree, temp_knots=temp_knots, log_kappa=log_kappa)
+    knots = probe._knots_for(X_tr)
+    design, phi = _Design.of(_basis(X_tr, knots, probe.temp_column), degree)
+    targets = probe._internal_targets(Y_tr)
     fits: list[list[tuple[FloatArray, float]]] = []
     table: list[dict[str, Any]] = []
     for alpha in alphas:
         start = time.perf_counter()
-        pair = [_ridge(phi, Y_tr[:, k], float(alpha)) for k in range(2)]
+        pair = [_ridge(phi, targets[:, k], float(alpha)) for k in range(2)]
         fit_s = time.perf_counter() - start
-        probe._set_learned(design, np.column_stack([c for c, _ in pair]), [b for _, b in pair])
+        probe._set_learned(design, np.column_stack([c for c, _ in pair]), [b for _, b in pair],
+                           knots, X_tr.shape[1])
         rmse = np.sqrt(np.mean((probe.predict(X_va) - Y_va) ** 2, axis=0))
         fits.append(pair)
         table.append({
@@ -517,10 +638,12 @@ def select_rcfn(
     best_k = int(np.argmin([row["val_rmse_kappa"] for row in table]))
     best_t = int(np.argmin([row["val_rmse_log_tau"] for row in table]))
     best = RCFN(
-        alpha_kappa=float(alphas[best_k]), alpha_log_tau=float(alphas[best_t]), degree=degree
+        alpha_kappa=float(alphas[best_k]), alpha_log_tau=float(alphas[best_t]), degree=degree,
+        temp_knots=temp_knots, log_kappa=log_kappa,
     )
     coef = np.column_stack([fits[best_k][0][0], fits[best_t][1][0]])
-    best._set_learned(design, coef, [fits[best_k][0][1], fits[best_t][1][1]])
+    best._set_learned(design, coef, [fits[best_k][0][1], fits[best_t][1][1]], knots,
+                      X_tr.shape[1])
     return best, table
 
 

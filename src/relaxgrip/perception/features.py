@@ -40,6 +40,8 @@ __all__ = [
 
 #: Beam temperatures read per finger (regions of interest along it).
 N_BEAMS = 5
+#: Marker deflection that counts as contact: twenty times the tracking noise (m).
+_CONTACT_DEFLECTION_M = 2e-5
 
 
 @dataclass(frozen=True)
@@ -151,11 +153,19 @@ def _rcfn_schema() -> FeatureSchema:
         for axis, unit in pose:
             names.append(f"{prefix}{axis}_{unit}{suffix}")
             units.append(f"{unit}/s" if suffix else unit)
-    return FeatureSchema("relaxgrip-rcfn-features-v1", tuple(names), tuple(units))
+    names += ["closure_ratio", "hold_time_s"]
+    units += ["", "s"]
+    return FeatureSchema("relaxgrip-rcfn-features-v2", tuple(names), tuple(units))
 
 
-#: The RCFN input (paper §IV-B): current finger temperature, marker pose at contact
-#: onset, current marker pose, and its velocity over the last second.
+#: The RCFN input: the paper's (§IV-B) current finger temperature, marker pose at
+#: contact onset, current marker pose and its velocity over the last second; and two
+#: more.  ``closure_ratio``, the motor's closure per unit of marker deflection over
+#: the last second of loading, tells a soft object from a stiff one (the fingers and
+#: the object share the closure in inverse proportion to their stiffness): for a
+#: soft object the marker's drift during the hold is then a calibrated measure of
+#: the relaxation.  ``hold_time_s``, the time since the onset, tells how much of it
+#: has happened yet.
 RCFN_SCHEMA = _rcfn_schema()
 
 
@@ -173,7 +183,9 @@ def finger_temperature_c(thermal: ThermalFeatures) -> float:
 
 
 class RcfnFeatures:
-    """Build RCFN features from a stream of poses: keeps the onset pose and a short history.
+    """Build RCFN features from a stream of poses and encoder readings.
+
+    Keeps the onset pose, the loading that led to it and a short history.
 
     Parameters
     ----------
@@ -185,33 +197,48 @@ class RcfnFeatures:
         if not velocity_window_s > 0:
             raise ValueError(f"velocity window must be > 0 s, got {velocity_window_s}")
         self.velocity_window_s = velocity_window_s
-        self._history: list[tuple[float, FloatArray]] = []
+        self._history: list[tuple[float, FloatArray, float]] = []
         self.onset_pose: FloatArray | None = None
         self.onset_t_s: float | None = None
+        self.closure_ratio = math.nan
 
-    def observe(self, t_s: float, pose: FloatArray) -> None:
-        """Record a pose (before or after the onset)."""
+    def observe(self, t_s: float, pose: FloatArray, motor_position_mm: float) -> None:
+        """Record a pose and the encoder (before or after the onset)."""
         if self._history and t_s <= self._history[-1][0]:
             return
-        self._history.append((t_s, np.asarray(pose, dtype=np.float64)))
+        self._history.append((t_s, np.asarray(pose, dtype=np.float64), motor_position_mm))
         horizon = t_s - 2.0 * self.velocity_window_s
         while len(self._history) > 2 and self._history[1][0] <= horizon:
             self._history.pop(0)
 
-    def start(self, t_s: float, pose: FloatArray) -> None:
-        """Mark the contact onset (the start of the hold)."""
-        self.observe(t_s, pose)
+    def start(self, t_s: float, pose: FloatArray, motor_position_mm: float) -> None:
+        """Mark the hold onset; the loading history before it gives the closure ratio."""
+        self.observe(t_s, pose, motor_position_mm)
         self.onset_pose = np.asarray(pose, dtype=np.float64)
         self.onset_t_s = t_s
+        self.closure_ratio = self._closure_ratio()
+
+    def _closure_ratio(self) -> float:
+        """Motor closure per marker deflection over (at most) the loading's last window."""
+        t_now, now, motor_now = self._history[-1]
+        ratio = math.nan  # no loading seen (a hold started from rest): unknown
+        for t, pose, motor in reversed(self._history[:-1]):
+            if t < t_now - self.velocity_window_s:
+                break
+            bent = now[0] - pose[0]
+            in_contact = pose[0] > _CONTACT_DEFLECTION_M  # closure before contact would count
+            if in_contact and bent > _CONTACT_DEFLECTION_M and motor_now > motor:
+                ratio = (motor_now - motor) * 1e-3 / bent  # the earliest in the window wins
+        return ratio
 
     def velocity(self) -> FloatArray:
         """Pose change over the last window, per second (over what history there is)."""
         if len(self._history) < 2:
             return np.zeros(6)
-        t_now, now = self._history[-1]
+        t_now, now, _ = self._history[-1]
         target = t_now - self.velocity_window_s
-        t_then, then = self._history[0]
-        for t, pose in reversed(self._history[:-1]):
+        t_then, then, _ = self._history[0]
+        for t, pose, _ in reversed(self._history[:-1]):
             if t <= target:
                 t_then, then = t, pose
                 break
@@ -220,6 +247,10 @@ class RcfnFeatures:
 
     def build(self, temp_c: float) -> FloatArray | None:
         """The feature vector in :data:`RCFN_SCHEMA` order; ``None`` before the onset."""
-        if self.onset_pose is None or not self._history or not math.isfinite(temp_c):
+        if self.onset_pose is None or self.onset_t_s is None or not self._history:
             return None
-        return np.concatenate([[temp_c], self.onset_pose, self._history[-1][1], self.velocity()])
+        if not (math.isfinite(temp_c) and math.isfinite(self.closure_ratio)):
+            return None
+        t_now, pose, _ = self._history[-1]
+        return np.concatenate([[temp_c], self.onset_pose, pose, self.velocity(),
+                               [self.closure_ratio, t_now - self.onset_t_s]])

@@ -1,0 +1,149 @@
+"""``relaxgrip dataset build``, ``relaxgrip train``, ``relaxgrip evaluate``."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
+from rich.table import Table
+
+from relaxgrip.cli._app import app, console, emit_json, err_console
+from relaxgrip.errors import InputError
+
+dataset_app = typer.Typer(help="Generate and convert training datasets.", no_args_is_help=True)
+app.add_typer(dataset_app, name="dataset")
+
+
+@dataset_app.command("build")
+def dataset_build(
+    out: Annotated[Path, typer.Option("--out", help="Dataset directory to write.",
+                                      show_default=False)],
+    icfn_samples: Annotated[int, typer.Option("--icfn-samples", help="ICFN samples.")] = 8258,
+    rcfn_sequences: Annotated[int, typer.Option("--rcfn-sequences",
+                                                help="RCFN relaxation sequences.")] = 810,
+    seed: Annotated[int, typer.Option("--seed", help="Master seed.")] = 0,
+    jobs: Annotated[int, typer.Option("--jobs", help="Parallel workers.")] = 2,
+    backend: Annotated[str, typer.Option("--backend", help="joblib backend: loky, dask or ray.")
+                       ] = "loky",
+    json_out: Annotated[bool, typer.Option("--json", help="Print the manifest as JSON.")] = False,
+) -> None:
+    """Generate ICFN and RCFN datasets on the twin, through the real perception pipeline."""
+    from relaxgrip.learning.build import BACKENDS, build_dataset
+    from relaxgrip.learning.datasets import DatasetSpec
+
+    if backend not in BACKENDS:
+        raise InputError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    if jobs < 1:
+        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    spec = DatasetSpec(icfn_samples=icfn_samples, rcfn_sequences=rcfn_sequences, seed=seed)
+    with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
+                  TimeElapsedColumn(), console=err_console, transient=json_out) as bar:
+        task = bar.add_task("episodes and sequences", total=None)
+
+        def progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total)
+
+        manifest = build_dataset(out, spec, jobs=jobs, backend=backend, progress=progress)
+    if json_out:
+        emit_json(manifest)
+        return
+    counts = manifest["counts"]
+    console.print(f"{out}: {counts['icfn_samples']} ICFN samples, {counts['rcfn_sequences']} "
+                  f"RCFN sequences in {manifest['build']['seconds']:.0f} s "
+                  f"({backend}, {jobs} jobs); README.md describes every column")
+
+
+@app.command("train")
+def train(
+    data: Annotated[Path, typer.Option("--data", help="Dataset directory.", show_default=False)],
+    out: Annotated[Path, typer.Option("--out", help="Model directory to write.",
+                                      show_default=False)],
+    seed: Annotated[int, typer.Option("--seed", help="Random state of the training.")] = 0,
+    json_out: Annotated[bool, typer.Option("--json", help="Print the training summary.")] = False,
+) -> None:
+    """Train the ICFN and the RCFN, selecting each on the validation split."""
+    from relaxgrip.learning.datastore import load_dataset
+    from relaxgrip.learning.training import train_models
+
+    dataset = load_dataset(data)
+    start = time.perf_counter()
+    trained = train_models(dataset, random_state=seed)
+    trained.save(out)
+    seconds = time.perf_counter() - start
+    if json_out:
+        emit_json({"models": str(out), "seconds": seconds, **trained.training})
+        return
+    table = Table(title=f"ICFN candidates (validation), trained in {seconds:.1f} s")
+    for col in ("hidden layers", "alpha", "val MAE (N)", "val RMSE (N)"):
+        table.add_column(col, justify="right")
+    for row in trained.icfn_candidates:
+        table.add_row(str(tuple(row["params"]["hidden_layer_sizes"])),
+                      f"{row['params']['alpha']:g}", f"{row['val_mae_n']:.3f}",
+                      f"{row['val_rmse_n']:.3f}")
+    console.print(table)
+    console.print(f"models written to {out}")
+
+
+@app.command("evaluate")
+def evaluate(
+    data: Annotated[Path, typer.Option("--data", help="Dataset directory.", show_default=False)],
+    models: Annotated[Path | None, typer.Option(
+        "--models", help="Model directory (default: the shipped models).", show_default=False)
+    ] = None,
+    split: Annotated[str, typer.Option("--split", help="train, val, test or all.")] = "test",
+    plot: Annotated[Path | None, typer.Option(
+        "--plot", help="Directory for the accuracy figure (accuracy.png).", show_default=False)
+    ] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Score the models with the paper's metrics (ICFN, RCFN, repeatability)."""
+    from relaxgrip.learning.datastore import load_dataset
+    from relaxgrip.learning.evaluation import evaluate as run_evaluation
+    from relaxgrip.learning.store import load_models
+    from relaxgrip.learning.training import load_default_models
+    from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
+
+    if split not in ("train", "val", "test", "all"):
+        raise InputError(f"--split must be train, val, test or all, got {split!r}")
+    if plot is not None and not plot.is_dir():
+        raise InputError(f"--plot {plot}: no such directory")
+    dataset = load_dataset(data)
+    bundle = load_default_models() if models is None else load_models(
+        models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_names=RCFN_SCHEMA.names)
+    result = run_evaluation(dataset, bundle, split)
+    figure = None
+    if plot is not None:
+        from relaxgrip.plots.accuracy import plot_accuracy
+
+        figure = plot_accuracy(result, plot / "accuracy.png")
+    if json_out:
+        emit_json(result.to_dict())
+        return
+    s = result.to_dict()
+    icfn, rcfn = s["icfn"], s["rcfn"]
+    table = Table(title=f"Accuracy on the {split} split (paper in brackets)")
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+    rows = [
+        ("ICFN MAE", f"{icfn['mae_n']:.3f} N [0.651]"),
+        ("ICFN RMSE", f"{icfn['rmse_n']:.3f} N [0.886]"),
+        ("ICFN R²", f"{icfn['r2']:.3f} [0.848]"),
+        *((f"ICFN median AE {k} N", f"{v:.3f} N") for k, v in icfn["median_ae_n"].items()),
+        ("RCFN NRMSE mean / median", f"{rcfn['nrmse_mean']:.3f} / {rcfn['nrmse_median']:.3f}"
+                                     " [0.160 / 0.118]"),
+        ("RCFN AUC_rel mean / median", f"{rcfn['auc_rel_mean']:.3f} / "
+                                       f"{rcfn['auc_rel_median']:.3f} [0.065 / 0.049]"),
+        ("RCFN curve correlation", f"{rcfn['corr_mean']:.4f} [0.990]"),
+    ]
+    for temp, g in s["repeatability"].items():
+        rows.append((f"repeatability {temp} °C", f"NRMSE {g['nrmse_mean']:.3f}±{g['nrmse_std']:.3f}"
+                     f", AUC {g['auc_rel_mean']:.3f}, corr {g['corr_mean']:.3f}, "
+                     f"GT end std {g['gt_end_std_n']:.3f} N"))
+    for name, value in rows:
+        table.add_row(name, value)
+    console.print(table)
+    if figure is not None:
+        console.print(f"figure: {figure}")

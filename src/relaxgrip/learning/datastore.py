@@ -1,0 +1,265 @@
+"""Datasets on disk: Parquet tables, a JSON manifest and a README describing every column.
+
+A dataset directory holds::
+
+    icfn.parquet            one row per ICFN sample
+    rcfn_sequences.parquet  one row per RCFN sequence (labels, onset features)
+    rcfn_features.parquet   RCFN features along each hold
+    rcfn_curves.parquet     true force along each hold
+    manifest.json           format, versions, feature schemas, spec, counts, noise levels
+    README.md               every column, its unit and meaning
+
+Everything is written into a temporary sibling directory first and moved into
+place at the end, so an interrupted build never leaves a half-written
+dataset where a complete one is expected.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from relaxgrip.errors import InputError
+from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA, FeatureSchema
+
+FloatArray = NDArray[np.float64]
+
+__all__ = ["DATASET_FORMAT", "Dataset", "load_dataset", "write_dataset"]
+
+DATASET_FORMAT = "relaxgrip-dataset"
+DATASET_VERSION = 1
+TABLES = ("icfn", "rcfn_sequences", "rcfn_features", "rcfn_curves")
+
+_META: dict[str, tuple[str, str]] = {
+    "episode": ("", "ICFN episode (one grasp closed through a range of forces)"),
+    "sequence": ("", "RCFN sequence (one hold)"),
+    "condition": ("", "RCFN condition (contact x temperature x start force x object); "
+                      "all repeats of a condition share a split"),
+    "split": ("", "train, val or test"),
+    "object": ("", "object grasped (catalogue name)"),
+    "temp_set_c": ("degC", "finger temperature the heaters were set to"),
+    "contact_set_m": ("m", "nominal contact position along the finger"),
+    "speed_mm_s": ("mm/s", "closing speed of the episode"),
+    "force_set_n": ("N", "start force the hold was closed to"),
+    "repeat": ("", "repeat index of the condition"),
+    "t_s": ("s", "time (ICFN: twin time; RCFN: since the hold onset)"),
+    "force_n": ("N", "true contact force (the label)"),
+    "truth_temp_c": ("degC", "true mean finger temperature (ground truth, not a feature)"),
+    "truth_deflection_m": ("m", "true finger deflection at the marker (ground truth)"),
+    "truth_contact_m": ("m", "true contact position of this run (ground truth)"),
+    "ir_age_s": ("s", "age of the infrared frame the thermal features came from"),
+    "f0_n": ("N", "true force at the hold onset (F_inst of Eq. 9)"),
+    "f_end_n": ("N", "true force at the end of the hold"),
+    "amp_n": ("N", "relaxation amplitude Amp = F0 - F_end"),
+    "k_n": ("N", "label: K of the reduced model anchored at F0, least squares"),
+    "tau_s": ("s", "label: tau of the same fit"),
+    "kappa": ("", "label: K / F0"),
+    "fit_nrmse": ("", "NRMSE of that fit against the true curve"),
+}
+
+
+def _describe(name: str, unit: str) -> str:
+    """A sentence for a feature column, from its name."""
+    if name.startswith("onset_"):
+        return f"at the hold onset: {_describe(name[6:], unit)}"
+    axis = {"x": "x", "y": "y", "z": "z"}
+    if name.startswith("marker_d") and name.endswith("2_m2"):
+        return f"square of the marker translation along camera {axis[name[8]]}"
+    if name.startswith("marker_d"):
+        return f"marker translation from the zero pose along camera {axis[name[8]]}"
+    if name.startswith("marker_r"):
+        return f"marker rotation from the zero pose, Rodrigues component {axis[name[8]]}"
+    if name[:2] in ("dx", "dy", "dz"):
+        return f"marker translation from the zero pose along camera {name[1]}"
+    if name[:2] in ("rx", "ry", "rz"):
+        return f"marker rotation from the zero pose, Rodrigues component {name[1]}"
+    if name.startswith("vd") or name.startswith("vr"):
+        return f"rate of change over the last second of {_describe(name[1:3] + '_', unit)}"
+    if name == "temp_c":
+        return "mean temperature of both fingers from the infrared camera"
+    finger = f"finger {name[1]}"
+    if "_beam" in name:
+        return f"{finger}, infrared temperature of beam region {name.split('beam')[1][0]}"
+    what = {"mean": "mean", "max": "maximum", "min": "minimum", "std": "spread (std)"}
+    for key, word in what.items():
+        if f"_temp_{key}" in name:
+            return f"{finger}, {word} of the infrared temperature over its top face"
+    if "_grad_" in name:
+        return f"{finger}, temperature gradient from root to tip"
+    return name
+
+
+def _columns_table(columns: list[str]) -> str:
+    units = dict(zip(ICFN_SCHEMA.names, ICFN_SCHEMA.units, strict=True))
+    units.update(zip(RCFN_SCHEMA.names, RCFN_SCHEMA.units, strict=True))
+    lines = ["| column | unit | meaning |", "|---|---|---|"]
+    for col in columns:
+        if col in _META:
+            unit, text = _META[col]
+        else:
+            base = col[6:] if col.startswith("onset_") else col
+            unit = units.get(base, "")
+            text = _describe(col, unit)
+        lines.append(f"| `{col}` | {unit} | {text} |")
+    return "\n".join(lines)
+
+
+def _readme(tables: dict[str, pd.DataFrame], manifest: dict[str, Any]) -> str:
+    counts = manifest["counts"]
+    intro = {
+        "icfn": "ICFN samples: frames rendered while a grasp closes, perceived by the real "
+                "pipeline; label `force_n`, features in the ICFN schema order.",
+        "rcfn_sequences": "RCFN sequences: a grasp closed to a start force, its aperture held "
+                          "for the hold length; labels `k_n`, `tau_s`, `kappa`, and the ICFN "
+                          "features at the onset (`onset_*`).",
+        "rcfn_features": "RCFN features along each hold (RCFN schema order), "
+                         f"{manifest['spec']['feature_rate_hz']:g} Hz.",
+        "rcfn_curves": f"True force along each hold, {manifest['spec']['curve_rate_hz']:g} Hz.",
+    }
+    parts = [
+        "# relaxgrip dataset",
+        "",
+        f"Generated by relaxgrip {manifest['relaxgrip_version']} on the digital twin "
+        f"`{manifest['twin_version']}`, seed {manifest['spec']['seed']}. Features come from "
+        "rendered frames through the perception pipeline; labels from the twin's truth. "
+        "Open any table with `pandas.read_parquet(path)`.",
+        "",
+        f"ICFN features: `{ICFN_SCHEMA.version}`; RCFN features: `{RCFN_SCHEMA.version}`.",
+        f"Sizes: {counts['icfn_samples']} ICFN samples, {counts['rcfn_sequences']} RCFN "
+        "sequences; splits by episode / condition: "
+        + ", ".join(f"{k} {v}" for k, v in counts["splits"].items()) + ".",
+        "",
+        "Noise and scatter kept on (see `manifest.json`, `noise`): "
+        + "; ".join(f"{k} {v}" for k, v in manifest["noise"].items()) + ".",
+    ]
+    for name in TABLES:
+        parts += ["", f"## {name}.parquet", "", intro[name], "",
+                  _columns_table(list(tables[name].columns))]
+    return "\n".join(parts) + "\n"
+
+
+def write_dataset(out_dir: Path, tables: dict[str, pd.DataFrame], manifest: dict[str, Any]) -> Path:
+    """Write a dataset atomically (a previous relaxgrip dataset there is replaced).
+
+    Raises
+    ------
+    InputError
+        If ``out_dir`` exists, is not empty and is not a relaxgrip dataset.
+    """
+    out = Path(out_dir)
+    if out.exists() and (not out.is_dir() or (any(out.iterdir())
+                                               and not (out / "manifest.json").is_file())):
+        raise InputError(f"{out} exists and is not a relaxgrip dataset: choose another --out")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        for name in TABLES:
+            tables[name].to_parquet(tmp / f"{name}.parquet", index=False)
+        (tmp / "manifest.json").write_text(json.dumps(manifest, indent=2) + "\n")
+        (tmp / "README.md").write_text(_readme(tables, manifest))
+        if out.exists():
+            old = out.with_name(f".{out.name}.old")
+            shutil.rmtree(old, ignore_errors=True)
+            os.replace(out, old)
+            os.replace(tmp, out)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """A loaded dataset.
+
+    Attributes
+    ----------
+    icfn, sequences, rcfn_features, curves : pandas.DataFrame
+        The four tables.
+    manifest : dict
+        Its manifest.
+    """
+
+    icfn: pd.DataFrame
+    sequences: pd.DataFrame
+    rcfn_features: pd.DataFrame
+    curves: pd.DataFrame
+    manifest: dict[str, Any]
+
+    def icfn_xy(self, split: str) -> tuple[FloatArray, FloatArray]:
+        """ICFN features and force labels of a split (``"all"``: every row)."""
+        rows = self.icfn if split == "all" else self.icfn[self.icfn["split"] == split]
+        return (rows[list(ICFN_SCHEMA.names)].to_numpy(np.float64),
+                rows["force_n"].to_numpy(np.float64))
+
+    def rcfn_xy(self, split: str) -> tuple[FloatArray, FloatArray]:
+        """RCFN features along the holds of a split and their sequences' ``[kappa, log tau]``."""
+        labels = self.sequences.set_index("sequence")
+        rows = self.rcfn_features
+        if split != "all":
+            rows = rows[rows["sequence"].map(labels["split"]) == split]
+        y = np.column_stack([
+            rows["sequence"].map(labels["kappa"]).to_numpy(np.float64),
+            np.log(rows["sequence"].map(labels["tau_s"]).to_numpy(np.float64)),
+        ])
+        return rows[list(RCFN_SCHEMA.names)].to_numpy(np.float64), y
+
+
+def _check_schema(manifest: dict[str, Any], key: str, schema: FeatureSchema, path: Path) -> None:
+    stored = manifest.get(key, {})
+    if stored.get("version") != schema.version or tuple(stored.get("names", ())) != schema.names:
+        raise InputError(
+            f"{path}: built with features {stored.get('version')!r} but this relaxgrip computes "
+            f"{schema.version!r}; rebuild the dataset"
+        )
+
+
+def load_dataset(directory: Path) -> Dataset:
+    """Load and check a dataset directory.
+
+    Raises
+    ------
+    InputError
+        On a missing directory or table, a foreign or damaged manifest, or a
+        dataset built with other feature schemas.
+    """
+    d = Path(directory)
+    manifest_path = d / "manifest.json"
+    if not d.is_dir():
+        raise InputError(f"{d}: no such dataset directory")
+    try:
+        manifest = json.loads(manifest_path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"{d}: no manifest.json, not a relaxgrip dataset") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{manifest_path}: unreadable manifest ({exc})") from None
+    if not isinstance(manifest, dict) or manifest.get("format") != DATASET_FORMAT:
+        raise InputError(f"{manifest_path}: not a relaxgrip dataset manifest")
+    if int(manifest.get("format_version", 0)) > DATASET_VERSION:
+        raise InputError(f"{manifest_path}: dataset format {manifest.get('format_version')} "
+                         f"is newer than this relaxgrip reads ({DATASET_VERSION})")
+    _check_schema(manifest, "icfn_schema", ICFN_SCHEMA, d)
+    _check_schema(manifest, "rcfn_schema", RCFN_SCHEMA, d)
+    tables = {}
+    for name in TABLES:
+        path = d / f"{name}.parquet"
+        try:
+            tables[name] = pd.read_parquet(path)
+        except FileNotFoundError:
+            raise InputError(f"{path}: missing table") from None
+        except Exception as exc:  # pyarrow raises several types for damaged files
+            raise InputError(f"{path}: unreadable Parquet table ({type(exc).__name__})") from None
+    return Dataset(tables["icfn"], tables["rcfn_sequences"], tables["rcfn_features"],
+                   tables["rcfn_curves"], manifest)

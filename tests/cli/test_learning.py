@@ -1,0 +1,79 @@
+"""``relaxgrip dataset build``, ``train``, ``evaluate`` end to end on a small dataset."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from tests.clitools import assert_one_error_line, run_cli, run_main
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    root = tmp_path_factory.mktemp("cli")
+    data, models = root / "data", root / "models"
+    proc = run_cli("dataset", "build", "--out", data, "--icfn-samples", "300",
+                   "--rcfn-sequences", "30", "--seed", "5", "--jobs", "2", "--json")
+    assert proc.returncode == 0, proc.stderr
+    manifest = json.loads(proc.stdout)
+    assert manifest["counts"]["icfn_samples"] == 300
+    assert manifest["counts"]["rcfn_sequences"] == 30
+    proc = run_cli("train", "--data", data, "--out", models, "--json")
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["icfn"]["train_rows"] > 100
+    return data, models
+
+
+def test_evaluate_json_has_the_paper_metrics(trained: tuple[Path, Path], tmp_path: Path) -> None:
+    data, models = trained
+    proc = run_cli("evaluate", "--data", data, "--models", models, "--json", "--plot", tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout)
+    assert set(out["icfn"]) >= {"mae_n", "rmse_n", "r2", "median_ae_n"}
+    assert set(out["icfn"]["median_ae_n"]) == {"0-1", "1-2", "2-5", "5-10"}
+    assert set(out["rcfn"]) >= {"nrmse_mean", "nrmse_median", "auc_rel_mean", "auc_rel_median",
+                                "corr_mean"}
+    assert set(out["repeatability"]) == {"40", "50", "60"}
+    for group in out["repeatability"].values():
+        assert set(group) >= {"nrmse_mean", "nrmse_std", "auc_rel_mean", "corr_mean",
+                              "gt_end_std_n"}
+    assert (tmp_path / "accuracy.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_evaluate_table(
+    trained: tuple[Path, Path], monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    data, models = trained
+    code, out, _ = run_main(["evaluate", "--data", data, "--models", models], monkeypatch, capsys)
+    assert code == 0
+    assert "ICFN MAE" in out
+    assert "repeatability 50 °C" in out
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["dataset", "build", "--out", "{tmp}/d", "--jobs", "0"], "--jobs must be >= 1"),
+        (["dataset", "build", "--out", "{tmp}/d", "--backend", "spark"],
+         "--backend must be one of"),
+        (["dataset", "build", "--out", "{tmp}/d", "--seed", "-2"], "seed must be >= 0"),
+        (["train", "--data", "{tmp}/none", "--out", "{tmp}/m"], "no such dataset directory"),
+        (["evaluate", "--data", "{tmp}/none"], "no such dataset directory"),
+        (["evaluate", "--data", "{data}", "--models", "{tmp}"], "not a relaxgrip model directory"),
+        (["evaluate", "--data", "{data}", "--split", "holdout"], "--split must be"),
+        (["evaluate", "--data", "{data}", "--plot", "{tmp}/nowhere"], "no such directory"),
+    ],
+)
+def test_bad_input(
+    trained: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str], args: list[str], expected: str,
+) -> None:
+    (tmp_path / "manifest.json").write_text('{"hello": 1}')
+    argv: list[str | Path] = [
+        a.replace("{tmp}", str(tmp_path)).replace("{data}", str(trained[0])) for a in args
+    ]
+    code, out, err = run_main(argv, monkeypatch, capsys)
+    assert_one_error_line(code, out, err, expected)

@@ -1,0 +1,129 @@
+"""Datasets from the twin: plans, splits, determinism across workers and backends, storage."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from relaxgrip.errors import InputError
+from relaxgrip.learning.build import build_dataset
+from relaxgrip.learning.datasets import (
+    REPEAT_TEMPS_C,
+    REPEATS_PER_GROUP,
+    DatasetSpec,
+    plan_icfn,
+    plan_rcfn,
+)
+from relaxgrip.learning.datastore import TABLES, load_dataset
+from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
+
+SMALL = DatasetSpec(icfn_samples=60, rcfn_sequences=6, seed=3)
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("data") / "small"
+    build_dataset(out, SMALL, jobs=2)
+    return out
+
+
+def test_plans_cover_the_paper_ranges_and_split_by_condition() -> None:
+    spec = DatasetSpec()
+    episodes = plan_icfn(spec)
+    assert sum(e.n_samples for e in episodes) == 8258
+    temps = [e.temp_c for e in episodes]
+    assert 25.0 <= min(temps) < 27.0
+    assert 58.0 < max(temps) <= 60.0
+    assert max(e.max_force_n for e in episodes) <= 8.0
+    sequences = plan_rcfn(spec)
+    assert len(sequences) == 810
+    assert len({s.contact_m for s in sequences}) == 4
+    by_condition: dict[int, set[str]] = {}
+    for s in sequences:
+        by_condition.setdefault(s.condition, set()).add(s.split)
+    assert all(len(splits) == 1 for splits in by_condition.values())
+    shares = {k: sum(s.split == k for s in sequences) / 810 for k in ("train", "val", "test")}
+    assert shares["train"] == pytest.approx(0.70, abs=0.03)
+    assert shares["val"] == pytest.approx(0.15, abs=0.03)
+    repeats = [s for s in sequences if s.object_name == "force_ball" and s.contact_m == 0.08
+               and s.force_n == 5.0 and s.temp_c in REPEAT_TEMPS_C]
+    assert len(repeats) == REPEATS_PER_GROUP * len(REPEAT_TEMPS_C)
+    assert {s.split for s in repeats} == {"test"}
+
+
+def test_tables_readme_and_manifest(small: Path) -> None:
+    data = load_dataset(small)
+    assert len(data.icfn) >= 55  # a stiff object may skip a force level or two
+    assert set(ICFN_SCHEMA.names) <= set(data.icfn.columns)
+    assert set(RCFN_SCHEMA.names) <= set(data.rcfn_features.columns)
+    assert len(data.sequences) == 6
+    curve = data.curves[data.curves["sequence"] == data.sequences["sequence"].iloc[0]]
+    assert np.allclose(np.diff(curve["t_s"]), 0.1)  # 10 Hz
+    assert curve["t_s"].iloc[-1] == pytest.approx(100.0)
+    assert (data.sequences["k_n"] > 0).all()
+    assert np.allclose(data.sequences["kappa"], data.sequences["k_n"] / data.sequences["f0_n"])
+    readme = (small / "README.md").read_text()
+    for name in TABLES:
+        for column in pd.read_parquet(small / f"{name}.parquet").columns:
+            assert f"`{column}`" in readme
+    manifest = json.loads((small / "manifest.json").read_text())
+    assert manifest["icfn_schema"]["version"] == ICFN_SCHEMA.version
+    assert manifest["noise"]["ir_netd_k"] == 0.05
+    x, y = data.icfn_xy("train")
+    assert x.shape[1] == len(ICFN_SCHEMA)
+    assert np.all(np.isfinite(x))
+    assert y.min() == 0.0  # the free-air samples
+    assert y.max() <= 8.5
+
+
+def test_same_seed_same_dataset_whatever_the_workers(small: Path, tmp_path: Path) -> None:
+    serial = tmp_path / "serial"
+    build_dataset(serial, SMALL, jobs=1)
+    for name in TABLES:
+        pd.testing.assert_frame_equal(pd.read_parquet(small / f"{name}.parquet"),
+                                      pd.read_parquet(serial / f"{name}.parquet"))
+
+
+def test_dask_backend_gives_the_same_dataset(small: Path, tmp_path: Path) -> None:
+    pytest.importorskip("dask.distributed")
+    spec = DatasetSpec(icfn_samples=20, rcfn_sequences=0, seed=3)
+    build_dataset(tmp_path / "loky", spec, jobs=2)
+    build_dataset(tmp_path / "dask", spec, jobs=2, backend="dask")
+    pd.testing.assert_frame_equal(pd.read_parquet(tmp_path / "loky" / "icfn.parquet"),
+                                  pd.read_parquet(tmp_path / "dask" / "icfn.parquet"))
+
+
+def test_bad_inputs_and_damaged_datasets(small: Path, tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="no such dataset directory"):
+        load_dataset(tmp_path / "nope")
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine\n")
+    with pytest.raises(InputError, match="not a relaxgrip dataset"):
+        build_dataset(foreign, SMALL, jobs=1)
+    assert (foreign / "notes.txt").read_text() == "mine\n"  # nothing lost
+    with pytest.raises(InputError, match=r"no manifest\.json"):
+        load_dataset(foreign)
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    for f in small.iterdir():
+        (broken / f.name).write_bytes(f.read_bytes())
+    data = (broken / "icfn.parquet").read_bytes()
+    (broken / "icfn.parquet").write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match="unreadable Parquet"):
+        load_dataset(broken)
+    manifest = json.loads((small / "manifest.json").read_text())
+    manifest["icfn_schema"]["version"] = "relaxgrip-icfn-features-v0"
+    (broken / "manifest.json").write_text(json.dumps(manifest))
+    with pytest.raises(InputError, match="rebuild the dataset"):
+        load_dataset(broken)
+    with pytest.raises(InputError, match="jobs must be"):
+        build_dataset(tmp_path / "x", SMALL, jobs=0)
+    with pytest.raises(InputError, match="unknown backend"):
+        build_dataset(tmp_path / "x", SMALL, backend="spark")
+    with pytest.raises(InputError, match="seed"):
+        DatasetSpec(seed=-1)
