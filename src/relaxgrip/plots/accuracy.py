@@ -50,10 +50,9 @@ def plot_accuracy(result: Evaluation, path: str | Path) -> Path:
         ax = fig.add_subplot(grid[0, 2 + col])
         values = np.array([getattr(c, key) for c in result.curves])
         ax.hist(values, bins=30, color="tab:orange", alpha=0.8)
-        ax.axvline(float(np.median(values)), color="k", lw=1, ls="--", label="median")
-        ax.set(xlabel=label, ylabel="sequences",
-               title=f"({tag}) RCFN {label}: mean {rcfn[key + '_mean']:.3f}, "
-                     f"median {rcfn[key + '_median']:.3f}")
+        ax.axvline(float(np.median(values)), color="k", lw=1, ls="--",
+                   label=f"median {rcfn[key + '_median']:.3f}\nmean {rcfn[key + '_mean']:.3f}")
+        ax.set(xlabel=label, ylabel="sequences", title=f"({tag}) RCFN {label}")
         ax.legend(frameon=False)
 
     ax = fig.add_subplot(grid[1, 0:2])
