@@ -6,6 +6,7 @@ from collections.abc import Callable
 from typing import Any
 
 from relaxgrip.bench import core
+from relaxgrip.bench.control import bench_control_hold
 from relaxgrip.bench.core import BenchResult
 from relaxgrip.bench.learning import bench_estimation, bench_learning_pipeline
 from relaxgrip.bench.perception import bench_perception
@@ -20,6 +21,7 @@ BENCHMARKS: dict[str, Callable[[int], BenchResult]] = {
     "perception": bench_perception,
     "estimation": bench_estimation,
     "learning-pipeline": bench_learning_pipeline,
+    "control-hold": bench_control_hold,
 }
 #: What ``relaxgrip bench`` runs without names: everything that takes seconds, not minutes.
 DEFAULT_BENCHMARKS: tuple[str, ...] = ("twin-hold", "twin-step", "perception", "estimation")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 
-from relaxgrip.cli import bench, characterize, fit, learning, perceive  # noqa: F401  (registers commands)
+from relaxgrip.cli import bench, characterize, fit, hold, learning, perceive  # noqa: F401  (registers commands)
 from relaxgrip.cli._app import app, err_console
 from relaxgrip.errors import InputError
 

@@ -25,6 +25,8 @@ def dataset_build(
     rcfn_sequences: Annotated[int, typer.Option("--rcfn-sequences",
                                                 help="RCFN relaxation sequences.")] = 810,
     seed: Annotated[int, typer.Option("--seed", help="Master seed.")] = 0,
+    hold_s: Annotated[float, typer.Option(
+        "--hold-s", help="Length of each RCFN hold (s); the paper recorded 100 s.")] = 280.0,
     jobs: Annotated[int, typer.Option("--jobs", help="Parallel workers.")] = 2,
     backend: Annotated[str, typer.Option("--backend", help="joblib backend: loky, dask or ray.")
                        ] = "loky",
@@ -38,7 +40,8 @@ def dataset_build(
         raise InputError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     if jobs < 1:
         raise InputError(f"--jobs must be >= 1, got {jobs}")
-    spec = DatasetSpec(icfn_samples=icfn_samples, rcfn_sequences=rcfn_sequences, seed=seed)
+    spec = DatasetSpec(icfn_samples=icfn_samples, rcfn_sequences=rcfn_sequences, seed=seed,
+                       hold_s=hold_s)
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), console=err_console, transient=json_out) as bar:
         task = bar.add_task("episodes and sequences", total=None)

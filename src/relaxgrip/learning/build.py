@@ -104,6 +104,8 @@ def _noise_levels() -> dict[str, Any]:
     assert cfg.force_sensor is not None
     sc = cfg.scatter
     return {
+        "unit": cfg.unit,
+        "unit_scatter": "stiffness, Tg and the infrared camera offset are drawn once per unit",
         "rgb_pixel_noise_dn": cfg.rgb.noise_dn,
         "rgb_supersample": cfg.rgb.supersample,
         "ir_netd_k": cfg.ir.netd_k,

@@ -10,7 +10,8 @@ Nothing the estimators will not have at run time enters their features.
   gripper closes and a frame is rendered each time the true force crosses the
   next of evenly spaced levels up to the episode's maximum (plus a couple
   before contact, at zero force).
-* **RCFN** (810 sequences of 100 s, 4 contact locations): *sequences* on a
+* **RCFN** (paper: 810 sequences of 100 s; here 280 s, the hold's horizon; 4 contact
+  locations): *sequences* on a
   grid of conditions (contact location × temperature × start force ×
   object), each repeated with fresh scatter.  The gripper closes to the start
   force, stops, and once the motor has settled holds its aperture with a
@@ -106,7 +107,11 @@ class DatasetSpec:
     seed : int
         Master seed: the same seed gives the same dataset, whatever the workers.
     hold_s : float
-        Length of each RCFN hold (s).
+        Length of each RCFN hold (s).  The paper records 100 s and holds for
+        280 s; Eq. 10 fitted over 100 s has relaxed fully by then and misses the
+        slow relaxation that goes on through the hold (0.08–0.13 N of the
+        fixed-aperture force at 100–280 s, 40–50 °C), so the sequences cover
+        the holding experiment's horizon.
     curve_rate_hz, feature_rate_hz : float
         Rates of the kept force curve and of the RCFN features (Hz).
     samples_per_episode : int
@@ -118,9 +123,9 @@ class DatasetSpec:
     icfn_samples: int = 8258
     rcfn_sequences: int = 810
     seed: int = 0
-    hold_s: float = 100.0
+    hold_s: float = 280.0
     curve_rate_hz: float = 10.0
-    feature_rate_hz: float = 1.0
+    feature_rate_hz: float = 0.5
     samples_per_episode: int = 20
     split: tuple[float, float, float] = (0.70, 0.15, 0.15)
 
@@ -167,9 +172,9 @@ class RcfnSequence:
     force_n: float
     repeat: int
     split: str
-    hold_s: float = 100.0
+    hold_s: float = 280.0
     curve_rate_hz: float = 10.0
-    feature_rate_hz: float = 1.0
+    feature_rate_hz: float = 0.5
 
 
 @dataclass

@@ -211,6 +211,11 @@ class RcfnFeatures:
         while len(self._history) > 2 and self._history[1][0] <= horizon:
             self._history.pop(0)
 
+    @property
+    def last_pose(self) -> FloatArray | None:
+        """The latest pose observed, if any."""
+        return self._history[-1][1] if self._history else None
+
     def start(self, t_s: float, pose: FloatArray, motor_position_mm: float) -> None:
         """Mark the hold onset; the loading history before it gives the closure ratio."""
         self.observe(t_s, pose, motor_position_mm)

@@ -17,7 +17,7 @@ from relaxgrip.validate import check_positive, check_temp_c
 __all__ = ["TWIN_VERSION", "MotorParams", "ScatterParams", "TwinConfig"]
 
 #: Bumped whenever the twin's behaviour changes; every result records it.
-TWIN_VERSION = "relaxgrip-twin-v2"
+TWIN_VERSION = "relaxgrip-twin-v3"
 
 
 @dataclass(frozen=True)
@@ -44,27 +44,34 @@ class MotorParams:
 
 @dataclass(frozen=True)
 class ScatterParams:
-    """Run-to-run variability, drawn once per :meth:`GripperTwin.reset`.
+    """Variability of the twin: between grippers (units) and between runs of one gripper.
 
-    Standard deviations; ``*_rel`` are log-normal sigmas of a factor.
+    Standard deviations; ``*_rel`` are log-normal sigmas of a factor.  Two
+    levels, as on real hardware: a *unit* (one built gripper with its
+    cameras, :attr:`TwinConfig.unit`) fixes the calibration of its fingers
+    (``stiffness_rel``, ``tg_k``) and of its infrared camera
+    (:attr:`IrSensorConfig.max_offset_k`); a *run* (the seed of
+    :meth:`GripperTwin.reset`) draws everything else.  Models trained on one
+    unit's data (the paper's protocol, and a lab's own recordings) learn its
+    calibration; another unit needs its own data.
 
     Attributes
     ----------
     contact_position_m : float
-        Placement of the object along the finger (m).
+        Placement of the object along the finger (m), per run.
     stiffness_rel : float
-        Instantaneous stiffness of each finger.
+        Instantaneous stiffness of each finger, per unit.
     relax_fraction_rel : float
-        Relaxing share of each finger's stiffness (material scatter).
+        Relaxing share of each finger's stiffness (material scatter), per run.
     relax_fraction_rel_rubbery : float
         Extra relaxing-share scatter in the rubbery state (grows with the
         relaxation onset), where the SMP's network state varies most.
     tau_rel : float
         Relaxation times of each finger.
     tg_k : float
-        Glass-transition temperature of the batch (K).
+        Glass-transition temperature of the unit's SMP batch (K).
     ambient_k : float
-        Ambient temperature (K).
+        Ambient temperature (K), per run.
     """
 
     contact_position_m: float = 0.002
@@ -97,7 +104,9 @@ class TwinConfig:
     motor : MotorParams
         Closing motor.
     scatter : ScatterParams
-        Run-to-run variability.
+        Unit-to-unit and run-to-run variability.
+    unit : int
+        Which gripper unit (with its cameras): seeds its calibration scatter.
     object_name : str or None
         Object between the fingers (see :data:`relaxgrip.twin.objects.CATALOGUE`).
     contact_position_m : float
@@ -134,6 +143,7 @@ class TwinConfig:
     adhesion: AdhesionParams = field(default_factory=AdhesionParams)
     motor: MotorParams = field(default_factory=MotorParams)
     scatter: ScatterParams = field(default_factory=ScatterParams)
+    unit: int = 0
     object_name: str | None = "force_ball"
     contact_position_m: float = 0.080
     object_distance_m: float = 0.0
@@ -148,6 +158,8 @@ class TwinConfig:
     thermal_step_s: float = 0.1
 
     def __post_init__(self) -> None:
+        if isinstance(self.unit, bool) or not isinstance(self.unit, int) or self.unit < 0:
+            raise InputError(f"unit must be a non-negative integer, got {self.unit!r}")
         if self.object_name is not None:
             get_object(self.object_name)
         check_temp_c(self.ambient_c, "ambient temperature")

@@ -121,11 +121,14 @@ class IrRenderer:
     config : IrSensorConfig
         Noise, offset, emissivities and blur.
     seed : int
-        Seed of this camera: fixes its offset, and frame ``seq`` of a seed is
-        always the same image, whatever other frames were rendered.
+        Seed of the run: frame ``seq`` of a seed is always the same image,
+        whatever other frames were rendered.
+    unit : int
+        The gripper unit this camera belongs to: fixes its offset.
     """
 
-    def __init__(self, rig: RigGeometry, config: IrSensorConfig, seed: int) -> None:
+    def __init__(self, rig: RigGeometry, config: IrSensorConfig, seed: int,
+                 unit: int = 0) -> None:
         if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
             raise InputError(f"seed must be a non-negative integer, got {seed!r}")
         self.rig = rig
@@ -134,7 +137,7 @@ class IrRenderer:
         self.intrinsics = rig.ir.intrinsics
         self._gripper2cam = rig.ir.gripper2cam
         self._offset_k = float(
-            np.random.default_rng([self.seed, 3]).uniform(-config.max_offset_k, config.max_offset_k)
+            np.random.default_rng([int(unit), 3]).uniform(-config.max_offset_k, config.max_offset_k)
         )
         # Direction (x/z, y/z, 1) of the ray through each pixel centre, distortion included.
         h, w = self.intrinsics.shape
@@ -145,7 +148,7 @@ class IrRenderer:
 
     @property
     def offset_k(self) -> float:
-        """This camera's fixed offset (K), drawn once from the seed in ``±max_offset_k``."""
+        """This camera's fixed offset (K), drawn once from its unit in ``±max_offset_k``."""
         return self._offset_k
 
     def render(

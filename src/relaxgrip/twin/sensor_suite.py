@@ -97,7 +97,7 @@ class SensorSuite:
         rig = config.rig
         self._nodes_m = node_positions_m
         self._rgb = None if config.rgb is None else RgbRenderer(rig, config.rgb, seed)
-        self._ir = None if config.ir is None else IrRenderer(rig, config.ir, seed)
+        self._ir = None if config.ir is None else IrRenderer(rig, config.ir, seed, config.unit)
         self._rgb_stream = None if config.rgb is None else _Stream(rig.rgb.rate_hz, t0_s)
         self._ir_stream = None if config.ir is None else _Stream(rig.ir.rate_hz, t0_s)
         self._finger2cam_by_aperture: tuple[float, FloatArray] | None = None

@@ -63,7 +63,7 @@ class IrSensorConfig:
     netd_k : float
         Noise-equivalent temperature difference: per-pixel noise std (K).
     max_offset_k : float
-        Each camera (each seed) has a fixed offset drawn uniformly in
+        Each camera (each gripper unit) has a fixed offset drawn uniformly in
         ``±max_offset_k`` (K): the absolute accuracy of an uncalibrated core.
     finger_emissivity : float
         Emissivity of the finger skin.

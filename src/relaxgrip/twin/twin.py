@@ -52,9 +52,13 @@ _CRUSHED_M = 0.001
 _TIME_SLACK_S = 1e-9
 
 
+#: Stream of the unit's random draws (apart from every run's).
+_UNIT_STREAM = 0x756E6974
+
+
 @dataclass(frozen=True)
 class TwinMaterial:
-    """Per-run draw of the twin's scatter (what one seed fixes).
+    """Per-run draw of the twin's scatter (what one seed fixes, on its unit).
 
     Attributes
     ----------
@@ -81,11 +85,13 @@ class TwinMaterial:
 
     @classmethod
     def draw(cls, config: TwinConfig, rng: np.random.Generator) -> TwinMaterial:
-        """Draw one run's scatter from ``rng``."""
+        """Draw one run's scatter from ``rng`` (the unit's calibration from ``config.unit``)."""
         sc = config.scatter
         smp = config.finger.smp
-        tg_c = smp.tg_c + sc.tg_k * rng.standard_normal()
+        unit_rng = np.random.default_rng([config.unit, _UNIT_STREAM])
+        tg_c = smp.tg_c + sc.tg_k * unit_rng.standard_normal()
         batch = replace(config.finger, smp=replace(smp, tg_c=tg_c))
+        stiffness = np.exp(sc.stiffness_rel * unit_rng.standard_normal(2))
 
         def pair(sigma: float) -> tuple[float, float]:
             a, b = np.exp(sigma * rng.standard_normal(2))
@@ -95,7 +101,7 @@ class TwinMaterial:
         contact = float(np.clip(contact, 0.2 * config.finger.length_m, config.finger.length_m))
         return cls(
             finger=(batch, batch),
-            stiffness_scale=pair(sc.stiffness_rel),
+            stiffness_scale=(float(stiffness[0]), float(stiffness[1])),
             relax_scale=pair(sc.relax_fraction_rel),
             relax_scale_rubbery=pair(sc.relax_fraction_rel_rubbery),
             tau_scale=pair(sc.tau_rel),

@@ -1,0 +1,152 @@
+"""``relaxgrip hold``: the paper's 280 s force-controlled hold, one estimator or all three."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.table import Table
+
+from relaxgrip.cli._app import app, console, emit_json, err_console
+from relaxgrip.errors import InputError
+
+#: The paper's figures (§V-C): MAE, mean signed error, RMSE of the true force from 5 N.
+PAPER = {
+    "fixed": {"mae_n": 0.333, "mean_signed_error_n": 0.606, "rmse_n": 0.643},
+    "icfn": {"mae_n": 1.327, "mean_signed_error_n": 1.019, "rmse_n": 1.035},
+    "relax": {"mae_n": 0.066, "mean_signed_error_n": -0.036, "rmse_n": 0.102,
+              "median_signed_error_n": -0.041},
+}
+PAPER_REDUCTION = {"vs_fixed": 0.802, "vs_icfn": 0.950}
+DEFAULT_COMPARE_PLOT = Path("relaxgrip-hold.png")
+
+
+def _paper(name: str, key: str) -> str:
+    value = PAPER.get(name, {}).get(key)
+    return "" if value is None else f" [{value:+.3f}]" if "signed" in key else f" [{value:.3f}]"
+
+
+@app.command("hold")
+def hold(
+    estimator: Annotated[str, typer.Option(
+        "--estimator", help="fixed, icfn or relax.")] = "relax",
+    target_n: Annotated[float, typer.Option("--target-n", help="Target force (N), 0-10.")] = 5.0,
+    duration_s: Annotated[float, typer.Option("--duration-s", help="Hold length (s).")] = 280.0,
+    temp_c: Annotated[float, typer.Option("--temp-c", help="Finger temperature (°C).")] = 40.0,
+    seed: Annotated[int, typer.Option("--seed", help="Twin seed.")] = 0,
+    models: Annotated[Path | None, typer.Option(
+        "--models", help="Model directory (default: the shipped models).", show_default=False)
+    ] = None,
+    compare: Annotated[bool, typer.Option(
+        "--compare", help="Run fixed, icfn and relax on the same seed.")] = False,
+    plot: Annotated[Path | None, typer.Option(
+        "--plot", help=f"Figure file (.png/.pdf/.svg); --compare default: {DEFAULT_COMPARE_PLOT}.",
+        show_default=False)] = None,
+    jobs: Annotated[int, typer.Option("--jobs", help="Parallel holds with --compare.")] = 2,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Close on the force ball to the target and hold it, scoring the steady state (100-280 s)."""
+    from relaxgrip.control import EstimatorKind, check_target_n
+    from relaxgrip.experiments.controlled_hold import (
+        check_hold_temp_c,
+        compare_holds,
+        run_hold,
+    )
+    from relaxgrip.learning.store import load_models
+    from relaxgrip.learning.training import load_default_models
+    from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
+    from relaxgrip.plots.common import check_plot_path
+    from relaxgrip.validate import check_positive
+
+    # Everything is checked before anything starts.
+    if estimator not in {k.value for k in EstimatorKind}:
+        raise InputError(f"--estimator must be fixed, icfn or relax, got {estimator!r}")
+    check_target_n(target_n)
+    check_hold_temp_c(temp_c)
+    check_positive(duration_s, "--duration-s")
+    if seed < 0:
+        raise InputError(f"--seed must be >= 0, got {seed}")
+    if jobs < 1:
+        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    if plot is None and compare:
+        plot = DEFAULT_COMPARE_PLOT
+    if plot is not None:
+        check_plot_path(plot)
+    bundle = load_default_models() if models is None else load_models(
+        models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_names=RCFN_SCHEMA.names)
+    start = time.perf_counter()
+    if compare:
+        with console.status("holding with fixed, icfn and relax …") if not json_out \
+                else _nothing():
+            comparison = compare_holds(target_n=target_n, duration_s=duration_s, temp_c=temp_c,
+                                       seed=seed, models=bundle, n_jobs=jobs)
+        figure = None
+        if plot is not None:
+            from relaxgrip.plots.holding import plot_hold_comparison
+
+            figure = plot_hold_comparison(comparison, plot)
+        first = next(iter(comparison.holds.values()))
+        if json_out:
+            emit_json({"twin_version": first.twin_version, "target_n": target_n,
+                       "temp_c": temp_c, "seed": seed, "duration_s": duration_s,
+                       **comparison.to_dict()})
+            return
+        _print_table({k: v.to_dict() for k, v in comparison.holds.items()},
+                     comparison.reductions(), first.to_dict(), time.perf_counter() - start)
+        if figure is not None:
+            console.print(f"figure: {figure}")
+        return
+    with console.status(f"holding with {estimator} …") if not json_out else _nothing():
+        result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle)
+    figure = None
+    if plot is not None:
+        from relaxgrip.plots.holding import plot_hold
+
+        figure = plot_hold(result, plot)
+    if json_out:
+        emit_json(result.to_dict())
+        return
+    _print_table({estimator: result.to_dict()}, {}, result.to_dict(),
+                 time.perf_counter() - start)
+    if figure is not None:
+        console.print(f"figure: {figure}")
+
+
+class _nothing:
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+
+def _print_table(rows: dict[str, dict[str, Any]], reductions: dict[str, float],
+                 first: dict[str, Any], seconds: float) -> None:
+    lo, hi = first["window_s"]
+    table = Table(title=f"{first['duration_s']:g} s hold at {first['target_n']:g} N, "
+                        f"{first['temp_c']:g} °C, seed {first['seed']}: true force − target over "
+                        f"{lo:g}–{hi:g} s (paper in brackets)")
+    for col in ("estimator", "MAE (N)", "mean (N)", "median (N)", "RMSE (N)", "IQR (N)",
+                "estimate − true: mean / RMSE (N)"):
+        table.add_column(col, justify="left" if col == "estimator" else "right")
+    for name, d in rows.items():
+        q25, q75 = d["iqr_n"]
+        table.add_row(
+            name, f"{d['mae_n']:.3f}{_paper(name, 'mae_n')}",
+            f"{d['mean_signed_error_n']:+.3f}{_paper(name, 'mean_signed_error_n')}",
+            f"{d['median_signed_error_n']:+.3f}{_paper(name, 'median_signed_error_n')}",
+            f"{d['rmse_n']:.3f}{_paper(name, 'rmse_n')}", f"[{q25:+.3f}, {q75:+.3f}]",
+            f"{d['est_error_mean_n']:+.3f} / {d['est_rmse_n']:.3f}")
+    console.print(table)
+    for key, value in reductions.items():
+        paper = PAPER_REDUCTION.get(key)
+        ref = f" [paper {paper:.1%}]" if paper is not None else ""
+        console.print(f"MAE reduction of relax {key.replace('_', ' ')}: {value:.1%}{ref}")
+    for name, d in rows.items():
+        for event in d["events"]:
+            if event["kind"] not in ("contact", "hold_onset"):
+                err_console.print(f"{name}: {event['kind']} at {event['t_s']:.1f} s "
+                                  f"{event['detail']}")
+    console.print(f"{first['twin_version']}, {seconds:.1f} s")

@@ -1,0 +1,417 @@
+"""The host of the paper's Fig. "network" c: perception, estimation, force and temperature control.
+
+:class:`GraspController` turns each :class:`~relaxgrip.backend.Observation` into
+a :class:`~relaxgrip.backend.Command`.  It reads the frames and the encoder
+(never ``Observation.truth`` or ``force_ref``), runs perception and a force
+estimator, and steps the grasp phases:
+
+* **Open**: fingers open and still; the tracker zeroes on the unloaded
+  finger, the heaters bring the fingers to the plan's temperature.  The marker
+  is zeroed again once the temperature has settled (heating moves it).
+* **Close**: the motor closes at the approach speed until perception sees
+  contact (marker deflection beyond a threshold on consecutive frames), then
+  the force PID drives the motor up to the target force.
+* **Hold**: entered when the estimate reaches the target; the motor stops for
+  a settling time (its lag), then the estimator's hold starts (Eq. 8's onset)
+  and the PID regulates the estimate, or, for the fixed baseline, the
+  aperture is held.
+* **Lift** / **Sustain**: the arm lifts and waits with the force held.
+* **Release**: the motor opens until the marker is back at rest.
+
+Whatever the phase: a lost marker stops the motor until it is back; an
+estimate beyond the force limit backs the motor off; the temperature loop
+cuts heaters that are too hot or blind.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+from relaxgrip.backend import Command, Observation
+from relaxgrip.control.estimators import ForceEstimate, ForceEstimator
+from relaxgrip.control.phases import EventKind, GraspPhase, PhaseLog
+from relaxgrip.control.pid import PID, PIDGains
+from relaxgrip.control.temperature import (
+    StiffnessMode,
+    TemperatureLoop,
+    TemperatureStatus,
+    ThermalLimits,
+)
+from relaxgrip.errors import InputError
+from relaxgrip.perception.features import marker_pose
+from relaxgrip.perception.marker import TrackStatus
+from relaxgrip.perception.pipeline import Percept, Perception
+from relaxgrip.physics.thermal import HeatParams
+from relaxgrip.rig import RigGeometry
+
+__all__ = ["MAX_TARGET_N", "ForceControlConfig", "GraspController", "GraspPlan", "check_target_n"]
+
+#: Largest force target the controller accepts (N): the paper's range is 0–10 N.
+MAX_TARGET_N = 10.0
+
+
+@dataclass(frozen=True)
+class GraspPlan:
+    """What one grasp is asked to do.
+
+    Attributes
+    ----------
+    target_n : float
+        Force to hold (N), in (0, 10].
+    mode : StiffnessMode or None
+        Stiffness mode; ``None`` uses ``temp_c``.
+    temp_c : float or None
+        Finger temperature setpoint (°C) when no mode is given; ``None`` with
+        no mode: heaters off.
+    wait_for_temp : bool
+        Stay open until the fingers are within :attr:`ForceControlConfig.temp_band_k`
+        of the setpoint.
+    hold_s : float
+        Time in Hold before lifting or releasing (s); ``inf`` holds until told.
+    lift_mm : float
+        Arm lift after the hold (mm); 0: no Lift or Sustain.
+    sustain_s : float
+        Time in Sustain (s).
+    release : bool
+        Open the fingers at the end (else stay in the last phase).
+    """
+
+    target_n: float = 5.0
+    mode: StiffnessMode | None = None
+    temp_c: float | None = None
+    wait_for_temp: bool = True
+    hold_s: float = math.inf
+    lift_mm: float = 0.0
+    sustain_s: float = 0.0
+    release: bool = True
+
+    def __post_init__(self) -> None:
+        check_target_n(self.target_n)
+        if not self.hold_s > 0 or math.isnan(self.hold_s):
+            raise InputError(f"hold time must be > 0 s, got {self.hold_s}")
+        if not (math.isfinite(self.lift_mm) and self.lift_mm >= 0):
+            raise InputError(f"lift must be >= 0 mm, got {self.lift_mm}")
+        if not (math.isfinite(self.sustain_s) and self.sustain_s >= 0):
+            raise InputError(f"sustain time must be >= 0 s, got {self.sustain_s}")
+
+
+def check_target_n(value: float) -> float:
+    """Return a force target if it is within (0, 10] N."""
+    v = float(value)
+    if not (math.isfinite(v) and 0.0 < v <= MAX_TARGET_N):
+        raise InputError(f"target force {value} N is outside (0, {MAX_TARGET_N:g}] N")
+    return v
+
+
+@dataclass(frozen=True)
+class ForceControlConfig:
+    """Gains, speeds and thresholds of the force loop and the phases.
+
+    Attributes
+    ----------
+    gains : PIDGains
+        Force PID: motor velocity (mm/s) per newton of error; its output limits
+        are the velocity limits under force control.
+    approach_mm_s : float
+        Closing speed before contact (mm/s).
+    release_mm_s : float
+        Opening speed on release (mm/s).
+    lift_mm_s : float
+        Arm speed while lifting (mm/s).
+    max_force_n : float
+        Force limit: an estimate above it backs the motor off (N).
+    contact_deflection_m : float
+        Marker deflection that means contact (m).
+    contact_frames : int
+        Consecutive frames beyond it before contact is declared.
+    hold_tolerance_rel : float
+        The hold starts once the estimate is within this share of the target.
+    settle_s : float
+        Motor stop at the hold onset before the estimator's hold starts (s):
+        four lag constants of the motor, as in the RCFN dataset.
+    temp_band_k : float
+        Temperature within this of the setpoint counts as reached (K).
+    temp_settle_s : float
+        Time the temperature must stay in band before closing (s).
+    slip_drop_rel : float
+        A fall of the estimate by this share of the target within
+        ``slip_window_s`` while lifted is a slip.
+    slip_window_s : float
+        Window of the slip test (s).
+    stroke_mm : float
+        Motor travel available (mm).
+    """
+
+    gains: PIDGains = field(default_factory=lambda: PIDGains(
+        kp=2.5, ki=1.0, kd=0.0, out_min=-3.0, out_max=3.0, derivative_tau_s=0.1))
+    approach_mm_s: float = 10.0
+    release_mm_s: float = 10.0
+    lift_mm_s: float = 20.0
+    max_force_n: float = 12.0
+    contact_deflection_m: float = 3e-5
+    contact_frames: int = 2
+    hold_tolerance_rel: float = 0.005
+    settle_s: float = 0.2
+    temp_band_k: float = 1.5
+    temp_settle_s: float = 3.0
+    slip_drop_rel: float = 0.3
+    slip_window_s: float = 0.5
+    stroke_mm: float = 148.0
+
+
+class GraspController:
+    """Observation in, command out: the whole host loop for one grasp at a time.
+
+    Parameters
+    ----------
+    rig : RigGeometry
+        Cameras, marker and fingers (for perception).
+    estimator : ForceEstimator
+        Force estimator (``fixed``, ``icfn``, ``relax``, …).
+    config : ForceControlConfig
+        Force loop and phase settings.
+    heat : HeatParams, optional
+        Heat model for the temperature loop's feed-forward.
+    limits : ThermalLimits, optional
+        Temperature safety limits.
+    """
+
+    def __init__(self, rig: RigGeometry, estimator: ForceEstimator,
+                 config: ForceControlConfig | None = None, heat: HeatParams | None = None,
+                 limits: ThermalLimits | None = None) -> None:
+        self.rig = rig
+        self.estimator = estimator
+        self.config = config if config is not None else ForceControlConfig()
+        self.perception = Perception(rig)
+        self.temperature = TemperatureLoop(heat, limits)
+        self.pid = PID(self.config.gains)
+        self.plan = GraspPlan()
+        self.log = PhaseLog()
+        self.phase = GraspPhase.DONE
+        self.percept: Percept | None = None
+        self.estimate = ForceEstimate(math.nan, math.nan)
+        self.command = Command()
+        self._reset_state()
+
+    def _reset_state(self) -> None:
+        self._phase_t = 0.0
+        self._t_prev: float | None = None
+        self._contact_count = 0
+        self._in_contact = False
+        self._marker_lost = False
+        self._temp_ok_since: float | None = None
+        self._rezeroed = False
+        self._hold_started = False
+        self._lift_start_mm = 0.0
+        self._recent: list[tuple[float, float]] = []
+        self._temp_status = TemperatureStatus.OFF
+
+    # -- operator requests ---------------------------------------------------------------
+
+    def start(self, plan: GraspPlan, t_s: float = 0.0) -> None:
+        """Begin a grasp from the open gripper."""
+        self.plan = plan
+        self.log = PhaseLog()
+        self.perception.reset()
+        self.estimator.reset()
+        self.pid.reset()
+        self._reset_state()
+        if plan.mode is not None:
+            self.temperature.set_mode(plan.mode)
+        else:
+            self.temperature.set_temperature(plan.temp_c)
+        self._enter(t_s, GraspPhase.OPEN)
+
+    def set_target(self, target_n: float) -> None:
+        """Change the force target from now on."""
+        self.plan = replace(self.plan, target_n=check_target_n(target_n))
+
+    def release(self, t_s: float) -> None:
+        """Open the fingers now."""
+        self._enter(t_s, GraspPhase.RELEASE)
+
+    def stop(self, t_s: float, reason: str = "operator") -> None:
+        """Stop the motor and switch the heaters off."""
+        self.temperature.set_temperature(None)
+        self.log.event(t_s, EventKind.STOP, reason)
+        self._enter(t_s, GraspPhase.STOPPED)
+
+    # -- the loop ------------------------------------------------------------------------
+
+    def step(self, obs: Observation) -> Command:
+        """One control period: perceive, estimate, decide."""
+        t = obs.t_s
+        dt = 1.0 / 30.0 if self._t_prev is None else max(t - self._t_prev, 1e-4)
+        self._t_prev = t
+        motor = obs.motor_position_mm
+        percept = self.perception.update(obs.rgb, obs.ir, motor)
+        self.percept = percept
+        self.estimate = self.estimator.update(percept, motor)
+        duty = self._heaters(percept, t)
+        velocity, arm = self._motor(t, dt, motor, obs.arm_height_mm, percept)
+        self.command = Command(velocity, duty, arm)
+        return self.command
+
+    def _heaters(self, percept: Percept, t: float) -> tuple[float, float]:
+        if self.phase is GraspPhase.STOPPED:
+            return (0.0, 0.0)
+        duty = self.temperature.update(percept.thermal, t)
+        status = self.temperature.status
+        if status is not self._temp_status:
+            if status is TemperatureStatus.OVER_TEMPERATURE:
+                self.log.event(t, EventKind.OVER_TEMPERATURE,
+                               f"above {self.temperature.limits.max_temp_c:g} °C: heater cut")
+            elif status is TemperatureStatus.STALE:
+                self.log.event(t, EventKind.IR_STALE,
+                               f"no infrared frame for {percept.ir_age_s:.1f} s: heaters off")
+            self._temp_status = status
+        return duty
+
+    def _enter(self, t: float, phase: GraspPhase) -> None:
+        self.phase = phase
+        self._phase_t = t
+        self.log.enter(t, phase)
+
+    def _contact(self, t: float, percept: Percept) -> None:
+        pose = marker_pose(percept.marker)
+        bent = pose is not None and pose[0] > self.config.contact_deflection_m
+        self._contact_count = self._contact_count + 1 if bent else 0
+        if not self._in_contact and self._contact_count >= self.config.contact_frames:
+            self._in_contact = True
+            self.pid.reset(0.0)
+            self.log.event(t, EventKind.CONTACT, f"marker deflection {pose[0] * 1e3:.3f} mm"
+                           if pose is not None else "")
+
+    def _temperature_ready(self, t: float, percept: Percept) -> bool:
+        setpoint = self.temperature.setpoint_c
+        if setpoint is None or not self.plan.wait_for_temp:
+            return True
+        thermal = percept.thermal
+        if thermal is None:
+            return False
+        readings = [self.temperature.reading_c(f) for f in thermal.fingers]
+        ok = all(math.isfinite(r) and abs(r - setpoint) <= self.config.temp_band_k
+                 for r in readings)
+        if not ok:
+            self._temp_ok_since = None
+            return False
+        if self._temp_ok_since is None:
+            self._temp_ok_since = t
+        return t - self._temp_ok_since >= self.config.temp_settle_s
+
+    def _motor(self, t: float, dt: float, motor: float, arm_mm: float,
+               percept: Percept) -> tuple[float, float]:
+        """Motor and arm velocity for this period, stepping the phases."""
+        cfg = self.config
+        phase = self.phase
+        if phase in (GraspPhase.DONE, GraspPhase.STOPPED):
+            return 0.0, 0.0
+        if phase is GraspPhase.OPEN:
+            return self._open(t, percept)
+        if phase is GraspPhase.RELEASE:
+            pose = marker_pose(percept.marker)
+            free = pose is not None and pose[0] < cfg.contact_deflection_m
+            if (free and t - self._phase_t > 0.5) or motor <= 0.0:
+                self._enter(t, GraspPhase.DONE)
+                return 0.0, 0.0
+            return -cfg.release_mm_s, 0.0
+        est = self.estimate
+        tracking = percept.marker.status is TrackStatus.TRACKING
+        if not tracking or not est.valid:
+            if not self._marker_lost:
+                self._marker_lost = True
+                self.log.event(t, EventKind.MARKER_LOST,
+                               percept.marker.message or percept.marker.status.value)
+            return 0.0, 0.0  # hold position until the marker is back
+        if self._marker_lost:
+            self._marker_lost = False
+            self.pid.reset(0.0)
+            self.log.event(t, EventKind.MARKER_BACK)
+        if est.force_n > cfg.max_force_n:
+            self.log.event(t, EventKind.FORCE_LIMIT, f"estimate {est.force_n:.2f} N")
+            self.pid.reset(0.0)
+            return -cfg.approach_mm_s, 0.0
+        self._contact(t, percept)
+        target = self.plan.target_n
+        if phase is GraspPhase.CLOSE:
+            if not self._in_contact:
+                if motor >= cfg.stroke_mm:
+                    self.log.event(t, EventKind.STROKE_END, "no contact within the stroke")
+                    self._enter(t, GraspPhase.RELEASE)
+                    return 0.0, 0.0
+                return cfg.approach_mm_s, 0.0
+            if est.force_n >= target * (1.0 - cfg.hold_tolerance_rel) or motor >= cfg.stroke_mm:
+                if motor >= cfg.stroke_mm:
+                    self.log.event(t, EventKind.STROKE_END, f"estimate {est.force_n:.2f} N")
+                self._enter(t, GraspPhase.HOLD)
+                self._hold_started = False
+                return 0.0, 0.0
+            return self.pid.update(target, est.force_n, dt), 0.0
+        # Hold, Lift, Sustain: the force is held.
+        if not self._hold_started:
+            if t - self._phase_t < cfg.settle_s:
+                return 0.0, 0.0
+            self._hold_started = True
+            self.estimator.start_hold(t, motor)
+            self.pid.reset(0.0)
+            self.log.event(t, EventKind.HOLD_ONSET, f"estimate {est.force_n:.3f} N")
+            return 0.0, 0.0
+        velocity = (self.pid.update(target, est.force_n, dt)
+                    if self.estimator.regulates_hold else 0.0)
+        if motor >= cfg.stroke_mm:
+            velocity = min(velocity, 0.0)
+        arm = 0.0
+        if phase is GraspPhase.HOLD:
+            if t - self._phase_t >= self.plan.hold_s + cfg.settle_s:
+                self._after_hold(t, arm_mm)
+        elif phase is GraspPhase.LIFT:
+            self._watch_slip(t, est)
+            if arm_mm - self._lift_start_mm >= self.plan.lift_mm:
+                self._enter(t, GraspPhase.SUSTAIN)
+            else:
+                arm = cfg.lift_mm_s
+        elif phase is GraspPhase.SUSTAIN:
+            self._watch_slip(t, est)
+            if t - self._phase_t >= self.plan.sustain_s:
+                self._finish(t)
+        return velocity, arm
+
+    def _open(self, t: float, percept: Percept) -> tuple[float, float]:
+        zeroed = percept.marker.status is TrackStatus.TRACKING
+        if not (zeroed and percept.thermal is not None):
+            return 0.0, 0.0
+        if not self._temperature_ready(t, percept):
+            return 0.0, 0.0
+        if self.temperature.setpoint_c is not None and not self._rezeroed \
+                and t - self._phase_t > 1.0:
+            # The marker zeroed while the fingers were heating: zero it at temperature.
+            self._rezeroed = True
+            self.perception.tracker.reset()
+            return 0.0, 0.0
+        self._enter(t, GraspPhase.CLOSE)
+        return self.config.approach_mm_s, 0.0
+
+    def _after_hold(self, t: float, arm_mm: float) -> None:
+        if self.plan.lift_mm > 0:
+            self._lift_start_mm = arm_mm
+            self._recent.clear()
+            self._enter(t, GraspPhase.LIFT)
+        else:
+            self._finish(t)
+
+    def _finish(self, t: float) -> None:
+        if self.plan.release:
+            self._enter(t, GraspPhase.RELEASE)
+        else:
+            self._enter(t, GraspPhase.DONE)
+
+    def _watch_slip(self, t: float, est: ForceEstimate) -> None:
+        self._recent.append((t, est.force_n))
+        while self._recent and self._recent[0][0] < t - self.config.slip_window_s:
+            self._recent.pop(0)
+        peak = max(f for _, f in self._recent)
+        if peak - est.force_n > self.config.slip_drop_rel * self.plan.target_n:
+            self.log.event(t, EventKind.SLIP, f"estimate fell {peak - est.force_n:.2f} N "
+                           f"in {self.config.slip_window_s:g} s")
+            self._recent.clear()

@@ -1,0 +1,236 @@
+"""The temperature loop: infrared beam temperatures in, heater duty (the L298N's PWM) out.
+
+One PID per finger on what the infrared camera reads of it (the finger's mean
+over its top face, or the tip beams for the adhesive pads), with a
+feed-forward duty from the heat model; the stiffness modes of the paper are
+named setpoints.  Two guards come before any control:
+
+* **over-temperature**: a finger whose hottest reading passes
+  :attr:`ThermalLimits.max_temp_c` gets no power until it has cooled
+  :attr:`ThermalLimits.hysteresis_k` below the limit;
+* **stale infrared**: with no infrared frame for more than
+  :attr:`ThermalLimits.stale_after_s`, every heater is off (a loop that cannot
+  see the temperature must not heat).
+
+The PID runs when a new infrared frame arrives (1 Hz) and its duty is held
+between frames.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+from relaxgrip.control.pid import PID, PIDGains
+from relaxgrip.errors import InputError
+from relaxgrip.perception.thermal import FingerThermal, ThermalFeatures
+from relaxgrip.physics.thermal import HeatParams, duty_for_mean_temp
+
+__all__ = [
+    "MODE_SETPOINTS_C",
+    "StiffnessMode",
+    "TemperatureLoop",
+    "TemperatureStatus",
+    "ThermalLimits",
+]
+
+
+class StiffnessMode(enum.StrEnum):
+    """The paper's stiffness modes (§III, Fig. "modes")."""
+
+    COMPLIANT = "compliant"
+    MEDIUM = "medium"
+    STIFF = "stiff"
+    ADHESIVE = "adhesive"
+
+
+#: Setpoint of each mode (°C; ``None``: heaters off, the fingers cool to ambient).
+#: Compliant and medium sit either side of Tg ≈ 48 °C; the adhesive mode heats
+#: the pads at the fingertips well past their activation.
+MODE_SETPOINTS_C: dict[StiffnessMode, float | None] = {
+    StiffnessMode.COMPLIANT: 58.0,
+    StiffnessMode.MEDIUM: 40.0,
+    StiffnessMode.STIFF: None,
+    StiffnessMode.ADHESIVE: 58.0,
+}
+
+
+class TemperatureStatus(enum.StrEnum):
+    """Why the heaters have the duty they have."""
+
+    OFF = "off"
+    """No setpoint (stiff mode, or stopped)."""
+    REGULATING = "regulating"
+    """The PID drives both heaters."""
+    OVER_TEMPERATURE = "over_temperature"
+    """At least one finger is cut off above the limit."""
+    STALE = "stale"
+    """No recent infrared frame: all heaters off."""
+
+
+@dataclass(frozen=True)
+class ThermalLimits:
+    """Safety limits of the temperature loop.
+
+    Attributes
+    ----------
+    max_temp_c : float
+        Hottest reading allowed on a finger (°C); above it the heater is off.
+    hysteresis_k : float
+        How far below the limit a finger must cool before heating again (K).
+    stale_after_s : float
+        Infrared age beyond which every heater is off (s).
+    min_setpoint_c, max_setpoint_c : float
+        Setpoints accepted (°C).
+    """
+
+    max_temp_c: float = 70.0
+    hysteresis_k: float = 2.0
+    stale_after_s: float = 3.0
+    min_setpoint_c: float = 20.0
+    max_setpoint_c: float = 65.0
+
+    def __post_init__(self) -> None:
+        if not self.min_setpoint_c < self.max_setpoint_c < self.max_temp_c:
+            raise InputError("temperature limits must satisfy min setpoint < max setpoint < "
+                             f"cut-off, got {self.min_setpoint_c}, {self.max_setpoint_c}, "
+                             f"{self.max_temp_c}")
+        if not (self.hysteresis_k >= 0 and self.stale_after_s > 0):
+            raise InputError("hysteresis must be >= 0 K and the stale age > 0 s")
+
+    def check_setpoint(self, temp_c: float) -> float:
+        """Return ``temp_c`` if it is a setpoint the loop accepts."""
+        if not (math.isfinite(temp_c) and self.min_setpoint_c <= temp_c <= self.max_setpoint_c):
+            raise InputError(f"temperature setpoint {temp_c} °C is outside the safe range "
+                             f"{self.min_setpoint_c:g}-{self.max_setpoint_c:g} °C")
+        return float(temp_c)
+
+
+#: Default gains: duty per kelvin, per kelvin-second.  A finger heats with a time
+#: constant of about 2.5 min and about 80 K per unit duty (the default heat
+#: model); these give a closed loop of about 20 s with the feed-forward doing
+#: the bulk of the work.
+DEFAULT_GAINS = PIDGains(kp=0.08, ki=0.002, kd=0.0, out_min=0.0, out_max=1.0)
+
+
+class TemperatureLoop:
+    """Heater duties from infrared features.
+
+    Parameters
+    ----------
+    heat : HeatParams
+        Heat model of a finger, for the feed-forward duty (the rig's, or the
+        twin's defaults).
+    limits : ThermalLimits
+        Safety limits.
+    gains : PIDGains
+        PID gains (output: duty in [0, 1]).
+    """
+
+    def __init__(self, heat: HeatParams | None = None, limits: ThermalLimits | None = None,
+                 gains: PIDGains = DEFAULT_GAINS) -> None:
+        self.heat = heat if heat is not None else HeatParams()
+        self.limits = limits if limits is not None else ThermalLimits()
+        self._pids = (PID(gains), PID(gains))
+        self.mode: StiffnessMode | None = StiffnessMode.STIFF
+        self.setpoint_c: float | None = None
+        self.status = TemperatureStatus.OFF
+        self._cut = [False, False]
+        self._duty = (0.0, 0.0)
+        self._last_ir_t: float | None = None
+
+    def set_mode(self, mode: StiffnessMode | str) -> None:
+        """Switch to a stiffness mode's setpoint."""
+        try:
+            self.mode = StiffnessMode(mode)
+        except ValueError:
+            known = ", ".join(m.value for m in StiffnessMode)
+            raise InputError(f"unknown stiffness mode {mode!r}; known: {known}") from None
+        self._set(MODE_SETPOINTS_C[self.mode])
+
+    def set_temperature(self, temp_c: float | None) -> None:
+        """Hold the fingers at ``temp_c`` (°C); ``None`` switches the heaters off."""
+        if temp_c is not None:
+            self.limits.check_setpoint(temp_c)
+        self.mode = None
+        self._set(temp_c)
+
+    def _set(self, temp_c: float | None) -> None:
+        if temp_c != self.setpoint_c:
+            self.setpoint_c = temp_c
+            self._last_ir_t = None  # re-seed the integrators on the next frame
+
+    def reading_c(self, finger: FingerThermal) -> float:
+        """What the loop regulates: the pads (tip beams) in adhesive mode, else the mean (°C)."""
+        if self.mode is StiffnessMode.ADHESIVE:
+            tip = [b for b in finger.beam_temps_c[-2:] if math.isfinite(b)]
+            if tip:
+                return sum(tip) / len(tip)
+        return finger.mean_c
+
+    def update(self, thermal: ThermalFeatures | None, t_s: float) -> tuple[float, float]:
+        """Heater duties at ``t_s`` given the latest infrared features.
+
+        Parameters
+        ----------
+        thermal : ThermalFeatures or None
+            The latest infrared features (the same object again between frames).
+        t_s : float
+            Current time on the loop's clock (s).
+
+        Returns
+        -------
+        tuple of float
+            Duty of each finger's heater, in [0, 1].
+        """
+        if thermal is None or t_s - thermal.t_s > self.limits.stale_after_s:
+            self.status = TemperatureStatus.STALE if self.setpoint_c is not None else \
+                TemperatureStatus.OFF
+            self._duty = (0.0, 0.0)
+            self._last_ir_t = None
+            return self._duty
+        for j, finger in enumerate(thermal.fingers):
+            hottest = finger.max_c
+            if math.isfinite(hottest):
+                if hottest > self.limits.max_temp_c:
+                    self._cut[j] = True
+                elif hottest < self.limits.max_temp_c - self.limits.hysteresis_k:
+                    self._cut[j] = False
+        if self.setpoint_c is None:
+            self.status = TemperatureStatus.OFF
+            self._duty = (0.0, 0.0)
+            return self._duty
+        if thermal.t_s != self._last_ir_t:
+            self._duty = self._regulate(thermal, self.setpoint_c)
+        duties = tuple(0.0 if cut else d for cut, d in zip(self._cut, self._duty, strict=True))
+        self.status = (TemperatureStatus.OVER_TEMPERATURE if any(self._cut)
+                       else TemperatureStatus.REGULATING)
+        return duties[0], duties[1]
+
+    def _regulate(self, thermal: ThermalFeatures, setpoint_c: float) -> tuple[float, float]:
+        ambient = thermal.background_c if math.isfinite(thermal.background_c) else 25.0
+        feedforward = duty_for_mean_temp(setpoint_c, self.heat, ambient)
+        first = self._last_ir_t is None
+        dt = 1.0 if first else max(thermal.t_s - (self._last_ir_t or 0.0), 1e-3)
+        self._last_ir_t = thermal.t_s
+        out = []
+        for pid, finger in zip(self._pids, thermal.fingers, strict=True):
+            reading = self.reading_c(finger)
+            if not math.isfinite(reading):
+                out.append(0.0)  # a finger out of view is not heated blind
+                continue
+            if first:
+                pid.reset(0.0)
+            # The PID corrects around the feed-forward; its limits keep the sum in [0, 1].
+            pid.gains = _shifted(pid.gains, feedforward)
+            out.append(feedforward + pid.update(setpoint_c, reading, dt))
+        return out[0], out[1]
+
+
+def _shifted(gains: PIDGains, feedforward: float) -> PIDGains:
+    """Gains whose output limits leave ``feedforward + output`` within [0, 1]."""
+    lo, hi = -feedforward, 1.0 - feedforward
+    if gains.out_min == lo and gains.out_max == hi:
+        return gains
+    return PIDGains(gains.kp, gains.ki, gains.kd, lo, hi, gains.derivative_tau_s, gains.rate_limit)

@@ -1,0 +1,288 @@
+"""The paper's holding experiment (§V-C, Fig. "sphere"): a 280 s force-controlled hold.
+
+The gripper closes on the force-measurement ball to the target force and
+holds it for ``duration_s`` under one of the estimators (``fixed``: no
+holding control; ``icfn``: instantaneous estimate only; ``relax``: ICFN +
+RCFN).  The controller never reads the truth; this experiment does, to score
+the hold over the steady-state interval (100–280 s of a 280 s hold, scaled
+with the duration): the true force against the target, and the estimate
+against the true force.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from relaxgrip.clock import VirtualClock
+from relaxgrip.control import (
+    EstimatorKind,
+    GraspController,
+    GraspPlan,
+    LoopResult,
+    check_target_n,
+    make_estimator,
+    run_loop,
+)
+from relaxgrip.errors import InputError
+from relaxgrip.learning.store import ModelBundle
+from relaxgrip.learning.training import load_default_models
+from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
+from relaxgrip.validate import check_positive
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "HOLD_TEMP_RANGE_C",
+    "HoldComparison",
+    "HoldResult",
+    "check_hold_temp_c",
+    "compare_holds",
+    "run_hold",
+    "steady_window_s",
+]
+
+#: The paper's hold and its steady-state interval (s).
+PAPER_DURATION_S = 280.0
+PAPER_WINDOW_S = (100.0, 280.0)
+#: Hold temperatures the experiment accepts (°C): from a few kelvin above ambient
+#: (the heaters cannot cool) to below the temperature loop's largest setpoint.
+HOLD_TEMP_RANGE_C = (28.0, 65.0)
+#: Time allowed to reach the hold (zeroing, heating, closing), on top of the hold (s).
+SETUP_ALLOWANCE_S = 120.0
+
+
+def check_hold_temp_c(temp_c: float) -> float:
+    """Return a hold temperature if the experiment can hold it."""
+    lo, hi = HOLD_TEMP_RANGE_C
+    if not (math.isfinite(temp_c) and lo <= temp_c <= hi):
+        raise InputError(f"hold temperature {temp_c} °C is outside the safe range "
+                         f"{lo:g}-{hi:g} °C")
+    return float(temp_c)
+
+
+def steady_window_s(duration_s: float) -> tuple[float, float]:
+    """The steady-state interval of a hold: the paper's 100–280 s, scaled with the duration."""
+    scale = duration_s / PAPER_DURATION_S
+    return PAPER_WINDOW_S[0] * scale, PAPER_WINDOW_S[1] * scale
+
+
+@dataclass(frozen=True)
+class HoldResult:
+    """One controlled hold, sampled at the control rate from the hold onset.
+
+    Attributes
+    ----------
+    estimator : str
+        ``fixed``, ``icfn`` or ``relax``.
+    target_n, temp_c, duration_s : float
+        Target force (N), finger temperature (°C), hold length (s).
+    seed : int
+        Twin seed.
+    t_s : ndarray
+        Time since the hold onset (s).
+    truth_n, estimate_n : ndarray
+        True contact force and the controller's estimate (N).
+    loop : LoopResult
+        The whole run (every series, phase log).
+    twin_version : str
+        Twin that produced it.
+    """
+
+    estimator: str
+    target_n: float
+    temp_c: float
+    duration_s: float
+    seed: int
+    t_s: FloatArray
+    truth_n: FloatArray
+    estimate_n: FloatArray
+    loop: LoopResult
+    twin_version: str = TWIN_VERSION
+
+    @property
+    def window(self) -> tuple[float, float]:
+        """The steady-state interval (s since the onset)."""
+        return steady_window_s(self.duration_s)
+
+    def _mask(self) -> NDArray[np.bool_]:
+        lo, hi = self.window
+        return (self.t_s >= lo - 1e-9) & (self.t_s <= hi + 1e-9)
+
+    def metrics(self) -> dict[str, Any]:
+        """The paper's hold statistics over the steady-state interval."""
+        mask = self._mask()
+        if not mask.any():
+            raise InputError("the hold ended before its steady-state interval")
+        err = self.truth_n[mask] - self.target_n
+        est = self.estimate_n[mask] - self.truth_n[mask]
+        est = est[np.isfinite(est)]
+        q25, q75 = np.percentile(err, [25, 75])
+        return {
+            "mae_n": float(np.mean(np.abs(err))),
+            "rmse_n": float(np.sqrt(np.mean(err * err))),
+            "mean_signed_error_n": float(np.mean(err)),
+            "median_signed_error_n": float(np.median(err)),
+            "iqr_n": [float(q25), float(q75)],
+            "est_error_mean_n": float(np.mean(est)) if est.size else math.nan,
+            "est_rmse_n": float(np.sqrt(np.mean(est * est))) if est.size else math.nan,
+        }
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``relaxgrip hold --json`` object."""
+        lo, hi = self.window
+        return {
+            "twin_version": self.twin_version, "estimator": self.estimator,
+            "target_n": self.target_n, "temp_c": self.temp_c, "seed": self.seed,
+            "duration_s": self.duration_s, "window_s": [lo, hi], **self.metrics(),
+            "events": [e.to_dict() for e in self.loop.log.events],
+        }
+
+
+def _setup(estimator: EstimatorKind | str, models: ModelBundle | None, target_n: float,
+           temp_c: float, duration_s: float) -> tuple[EstimatorKind, ModelBundle]:
+    try:
+        kind = EstimatorKind(estimator)
+    except ValueError:
+        known = ", ".join(k.value for k in EstimatorKind)
+        raise InputError(f"unknown estimator {estimator!r}; known: {known}") from None
+    check_target_n(target_n)
+    check_hold_temp_c(temp_c)
+    check_positive(duration_s, "hold duration")
+    return kind, models if models is not None else load_default_models()
+
+
+def run_hold(
+    estimator: EstimatorKind | str = EstimatorKind.RELAX,
+    target_n: float = 5.0,
+    duration_s: float = PAPER_DURATION_S,
+    temp_c: float = 40.0,
+    seed: int = 0,
+    models: ModelBundle | None = None,
+    config: TwinConfig | None = None,
+) -> HoldResult:
+    """Close on the force ball to ``target_n`` at ``temp_c`` and hold it for ``duration_s``.
+
+    Parameters
+    ----------
+    estimator : {"fixed", "icfn", "relax"}
+        Force estimator (and, for ``fixed``, no regulation during the hold).
+    target_n : float
+        Target force (N), in (0, 10].
+    duration_s : float
+        Hold length after the onset (s).
+    temp_c : float
+        Finger temperature (°C), held by the temperature loop on the infrared
+        readings; the fingers start there.
+    seed : int
+        Twin seed (the run's scatter and noise).
+    models : ModelBundle, optional
+        ICFN and RCFN (default: the shipped models).
+    config : TwinConfig, optional
+        Twin (default: the force ball at 80 mm, cameras on).
+
+    Returns
+    -------
+    HoldResult
+
+    Raises
+    ------
+    InputError
+        A target, temperature or estimator out of range; or the hold never
+        started (no contact, target out of reach).
+    """
+    kind, bundle = _setup(estimator, models, target_n, temp_c, duration_s)
+    base = config if config is not None else TwinConfig()
+    cfg = replace(base, initial_temp_c=temp_c)
+    clock = VirtualClock()
+    twin = GripperTwin(cfg, seed=seed, clock=clock)
+    controller = GraspController(cfg.rig, make_estimator(kind, bundle.icfn, bundle.rcfn),
+                                 heat=cfg.heat)
+    plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False)
+    try:
+        loop = run_loop(twin, controller, clock, plan, duration_s + SETUP_ALLOWANCE_S)
+    finally:
+        twin.close()
+    onset = loop.hold_onset_s()
+    if onset is None:
+        events = "; ".join(f"{e.kind.value} {e.detail}".strip() for e in loop.log.events)
+        raise InputError(f"the hold never started ({events or 'no contact'})")
+    t = loop["t_s"] - onset
+    keep = (t >= 0.0) & (t <= duration_s + 1e-9)
+    return HoldResult(kind.value, target_n, temp_c, duration_s, seed, t[keep],
+                      loop["truth_force_n"][keep], loop["estimate_n"][keep], loop)
+
+
+@dataclass(frozen=True)
+class HoldComparison:
+    """The three estimators on the same seed (the paper's Fig. "sphere" b–f).
+
+    Attributes
+    ----------
+    holds : dict of str to HoldResult
+        By estimator name, in the paper's order.
+    """
+
+    holds: dict[str, HoldResult]
+
+    def reductions(self) -> dict[str, float]:
+        """MAE reduction of ``relax`` over each baseline (share, 0.8 = 80 %)."""
+        if "relax" not in self.holds:
+            return {}
+        ours = self.holds["relax"].metrics()["mae_n"]
+        return {f"vs_{name}": 1.0 - ours / hold.metrics()["mae_n"]
+                for name, hold in self.holds.items() if name != "relax"}
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-Python form: each hold's figures and the reductions."""
+        return {"holds": {name: hold.to_dict() for name, hold in self.holds.items()},
+                "mae_reduction": self.reductions()}
+
+
+def _run_one(args: tuple[str, float, float, float, int, ModelBundle | None]) -> HoldResult:
+    """One hold in a worker: OpenCV on one thread (the parallelism is across holds)."""
+    import cv2
+
+    cv2.setNumThreads(1)
+    kind, target, duration, temp, seed, models = args
+    return run_hold(kind, target, duration, temp, seed, models)
+
+
+def compare_holds(
+    estimators: Sequence[str] = ("fixed", "icfn", "relax"),
+    target_n: float = 5.0,
+    duration_s: float = PAPER_DURATION_S,
+    temp_c: float = 40.0,
+    seed: int = 0,
+    models: ModelBundle | None = None,
+    n_jobs: int = 1,
+) -> HoldComparison:
+    """Run every estimator on the same seed (in parallel with ``n_jobs`` > 1)."""
+    for kind in estimators:
+        _setup(kind, models, target_n, temp_c, duration_s)
+    jobs = [(k, target_n, duration_s, temp_c, seed, models) for k in estimators]
+    if n_jobs > 1 and len(jobs) > 1:
+        from joblib import Parallel, delayed
+
+        results = Parallel(n_jobs=min(n_jobs, len(jobs)))(delayed(_run_one)(job) for job in jobs)
+    else:
+        results = [_run_one(job) for job in jobs]
+    return HoldComparison({r.estimator: r for r in results})
+
+
+def summarize_grid(rows: Sequence[dict[str, Any]]) -> dict[str, float]:
+    """Median and worst of the MAEs of a grid of holds."""
+    maes = [r["mae_n"] for r in rows]
+    return {"mae_median_n": statistics.median(maes), "mae_max_n": max(maes)}
+
+
+def default_figure_path(out: Path) -> Path:
+    """Where ``--plot`` writes when given a directory."""
+    return out / "hold.png" if out.suffix == "" else out

@@ -1,0 +1,79 @@
+"""``relaxgrip hold``: JSON figures, the comparison table and figure, bad input."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from tests.clitools import run_main
+
+KEYS = {"twin_version", "estimator", "target_n", "temp_c", "seed", "mae_n", "rmse_n",
+        "mean_signed_error_n", "median_signed_error_n", "iqr_n", "est_error_mean_n",
+        "est_rmse_n"}
+
+
+def test_hold_json_has_the_paper_statistics(monkeypatch, capsys, tmp_path: Path):
+    plot = tmp_path / "hold.png"
+    code, out, err = run_main(["hold", "--estimator", "icfn", "--duration-s", "14",
+                               "--target-n", "3", "--seed", "1", "--plot", plot, "--json"],
+                              monkeypatch, capsys)
+    assert code == 0, err
+    d = json.loads(out)
+    assert KEYS <= d.keys()
+    assert d["estimator"] == "icfn" and d["target_n"] == 3.0 and d["seed"] == 1
+    assert d["window_s"] == pytest.approx([5.0, 14.0])
+    q25, q75 = d["iqr_n"]
+    assert q25 <= d["median_signed_error_n"] <= q75
+    assert 0.0 <= d["mae_n"] <= d["rmse_n"] + 1e-12
+    assert plot.stat().st_size > 10_000
+
+
+def test_compare_prints_the_table_and_draws_the_figure(monkeypatch, capsys, tmp_path: Path):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_main(["hold", "--compare", "--duration-s", "10", "--jobs", "1"],
+                              monkeypatch, capsys)
+    assert code == 0, err
+    for name in ("fixed", "icfn", "relax"):
+        assert name in out
+    assert "MAE reduction of relax vs fixed" in out and "vs icfn" in out
+    assert (tmp_path / "relaxgrip-hold.png").stat().st_size > 10_000
+
+
+def test_compare_json_is_one_object_with_every_hold(monkeypatch, capsys, tmp_path: Path):
+    code, out, err = run_main(["hold", "--compare", "--duration-s", "8", "--jobs", "1",
+                               "--plot", tmp_path / "c.svg", "--json"], monkeypatch, capsys)
+    assert code == 0, err
+    d = json.loads(out)
+    assert set(d["holds"]) == {"fixed", "icfn", "relax"}
+    assert set(d["mae_reduction"]) == {"vs_fixed", "vs_icfn"}
+    for hold in d["holds"].values():
+        assert KEYS <= hold.keys()
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--target-n", "12"], "target force"),
+    (["--target-n", "0"], "target force"),
+    (["--temp-c", "90"], "safe range"),
+    (["--temp-c", "-300"], "safe range"),
+    (["--estimator", "magic"], "--estimator"),
+    (["--duration-s", "0"], "duration"),
+    (["--seed", "-1"], "--seed"),
+    (["--plot", "out.gif"], "plot format"),
+    (["--plot", "/no/such/dir/x.png"], "does not exist"),
+])
+def test_bad_input_is_refused_before_anything_starts(monkeypatch, capsys, args, message):
+    code, out, err = run_main(["hold", *args], monkeypatch, capsys)
+    assert code == 2
+    assert message in err and err.count("\n") == 1
+    assert out == ""
+
+
+def test_missing_or_foreign_models_are_refused(monkeypatch, capsys, tmp_path: Path):
+    code, _, err = run_main(["hold", "--models", tmp_path / "none"], monkeypatch, capsys)
+    assert code == 2 and "error:" in err
+    (tmp_path / "foreign").mkdir()
+    (tmp_path / "foreign" / "manifest.json").write_text('{"format": "something else"}')
+    code, _, err = run_main(["hold", "--models", tmp_path / "foreign"], monkeypatch, capsys)
+    assert code == 2 and "error:" in err

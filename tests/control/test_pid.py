@@ -1,0 +1,91 @@
+"""The PID: limits, anti-windup, derivative on the measurement, injected time."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from relaxgrip.control.pid import PID, PIDGains
+from relaxgrip.errors import InputError
+
+
+def integrate(pid: PID, setpoint: float, y0: float, steps: int, dt: float = 0.02,
+              gain: float = 1.0) -> list[float]:
+    """An integrating plant dy/dt = gain * u, like force under a velocity command."""
+    y, out = y0, []
+    for _ in range(steps):
+        y += gain * pid.update(setpoint, y, dt) * dt
+        out.append(y)
+    return out
+
+
+def test_pi_on_an_integrator_settles_on_the_setpoint():
+    pid = PID(PIDGains(kp=2.0, ki=0.5))
+    ys = integrate(pid, 5.0, 0.0, 1000)
+    assert ys[-1] == pytest.approx(5.0, abs=0.01)
+    assert max(ys) < 5.5  # no wild overshoot
+
+
+def test_output_stays_within_limits():
+    pid = PID(PIDGains(kp=10.0, ki=5.0, out_min=-1.0, out_max=2.0))
+    outs = [pid.update(100.0, 0.0, 0.05) for _ in range(50)]
+    outs += [pid.update(-100.0, 0.0, 0.05) for _ in range(50)]
+    assert max(outs) == 2.0 and min(outs) == -1.0
+
+
+def test_anti_windup_recovers_at_once_after_saturation():
+    gains = PIDGains(kp=1.0, ki=1.0, out_min=-1.0, out_max=1.0)
+    pid = PID(gains)
+    for _ in range(1000):  # 100 s against the limit
+        pid.update(10.0, 0.0, 0.1)
+    assert pid.integral <= gains.out_max
+    # The error changes sign: the output follows within one step instead of
+    # unwinding a huge integral for tens of seconds.
+    assert pid.update(-10.0, 0.0, 0.1) < 0.0
+
+
+def test_no_derivative_kick_on_a_setpoint_step():
+    pid = PID(PIDGains(kp=0.0, kd=1.0))
+    pid.update(0.0, 1.0, 0.01)
+    assert pid.update(50.0, 1.0, 0.01) == 0.0  # the measurement did not move
+
+
+def test_derivative_acts_on_the_filtered_measurement():
+    pid = PID(PIDGains(kp=0.0, kd=1.0, derivative_tau_s=0.1))
+    pid.update(0.0, 0.0, 0.01)
+    first = pid.update(0.0, 1.0, 0.01)  # a unit jump of the measurement
+    assert first < 0.0
+    assert abs(first) < 1.0 / 0.01  # filtered: far below the raw difference quotient
+
+
+def test_rate_limit_bounds_the_output_change_per_second():
+    pid = PID(PIDGains(kp=100.0, out_min=-10, out_max=10, rate_limit=2.0))
+    outs = [pid.update(1.0, 0.0, 0.1) for _ in range(5)]
+    assert outs == pytest.approx([0.2, 0.4, 0.6, 0.8, 1.0])
+
+
+def test_time_is_injected_and_checked():
+    pid = PID(PIDGains(kp=1.0, ki=1.0))
+    a = [pid.update(1.0, 0.0, 0.5) for _ in range(4)]
+    pid.reset()
+    b = [pid.update(1.0, 0.0, 0.5) for _ in range(4)]
+    assert a == b  # nothing depends on the wall clock
+    with pytest.raises(ValueError, match="step"):
+        pid.update(1.0, 0.0, 0.0)
+
+
+def test_reset_starts_from_a_given_output():
+    pid = PID(PIDGains(kp=0.0, ki=1.0, out_min=-5, out_max=5))
+    pid.reset(3.0)
+    assert pid.update(0.0, 0.0, 0.1) == pytest.approx(3.0)
+
+
+@pytest.mark.parametrize("bad", [
+    {"kp": -1.0}, {"kp": math.nan}, {"kp": 1.0, "ki": -0.1},
+    {"kp": 1.0, "out_min": 1.0, "out_max": 1.0}, {"kp": 1.0, "rate_limit": 0.0},
+    {"kp": 1.0, "derivative_tau_s": -1.0},
+])
+def test_bad_gains_are_refused(bad):
+    with pytest.raises(InputError):
+        PIDGains(**bad)

@@ -1,0 +1,142 @@
+"""The temperature loop: modes, regulation on a heat model, over-temperature and stale-IR guards."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from relaxgrip.control.temperature import (
+    MODE_SETPOINTS_C,
+    StiffnessMode,
+    TemperatureLoop,
+    TemperatureStatus,
+    ThermalLimits,
+)
+from relaxgrip.errors import InputError
+from relaxgrip.perception.thermal import FingerThermal, ThermalFeatures
+from relaxgrip.physics.thermal import HeatParams, heat_step
+
+HEAT = HeatParams()
+AMBIENT_C = 25.0
+
+
+def finger(temps: np.ndarray, offset_k: float = 0.0) -> FingerThermal:
+    beams = tuple(float(t) + offset_k for t in temps)
+    return FingerThermal(beams, float(np.mean(beams)), max(beams), min(beams),
+                         float(np.std(beams)), 0.0)
+
+
+def features(t_s: float, temps: np.ndarray, offset_k: float = 0.0) -> ThermalFeatures:
+    return ThermalFeatures(t_s, (finger(temps[0], offset_k), finger(temps[1], offset_k)),
+                           AMBIENT_C + offset_k, ())
+
+
+def simulate(loop: TemperatureLoop, seconds: float, start_c: float = AMBIENT_C,
+             offset_k: float = 0.0) -> tuple[np.ndarray, list[tuple[float, float]]]:
+    """Both fingers on the heat model, read at 1 Hz, the loop stepped at 10 Hz."""
+    temps = np.full((2, HEAT.n_nodes), start_c)
+    latest = features(0.0, temps, offset_k)
+    duties = []
+    for k in range(round(seconds * 10)):
+        t = k / 10
+        if k % 10 == 0:
+            latest = features(t, temps, offset_k)
+        duty = loop.update(latest, t)
+        duties.append(duty)
+        temps = np.vstack([heat_step(temps[j], duty[j], 0.1, HEAT, AMBIENT_C) for j in range(2)])
+    return temps, duties
+
+
+@pytest.mark.parametrize("mode", [StiffnessMode.MEDIUM, StiffnessMode.COMPLIANT])
+def test_a_mode_heats_to_its_setpoint_and_holds_it(mode):
+    loop = TemperatureLoop(HEAT)
+    loop.set_mode(mode)
+    temps, duties = simulate(loop, 600.0)
+    setpoint = MODE_SETPOINTS_C[mode]
+    assert setpoint is not None
+    assert temps.mean(axis=1) == pytest.approx([setpoint, setpoint], abs=0.3)
+    assert loop.status is TemperatureStatus.REGULATING
+    assert all(0.0 <= d <= 1.0 for pair in duties for d in pair)
+
+
+def test_it_reaches_a_setpoint_within_three_minutes():
+    loop = TemperatureLoop(HEAT)
+    loop.set_temperature(58.0)
+    temps, _ = simulate(loop, 180.0)
+    assert temps.mean() > 56.5
+
+
+def test_the_loop_regulates_what_the_camera_reads():
+    loop = TemperatureLoop(HEAT)
+    loop.set_temperature(40.0)
+    temps, _ = simulate(loop, 600.0, offset_k=-1.0)  # the camera reads 1 K low
+    assert temps.mean() == pytest.approx(41.0, abs=0.3)
+
+
+def test_stiff_mode_switches_the_heaters_off():
+    loop = TemperatureLoop(HEAT)
+    loop.set_mode("stiff")
+    temps = np.full((2, HEAT.n_nodes), 50.0)
+    assert loop.update(features(0.0, temps), 0.0) == (0.0, 0.0)
+    assert loop.status is TemperatureStatus.OFF
+
+
+def test_adhesive_mode_regulates_the_pads_at_the_tip():
+    loop = TemperatureLoop(HEAT)
+    loop.set_mode(StiffnessMode.ADHESIVE)
+    temps = np.array([[40.0, 45.0, 50.0, 55.0, 57.0]] * 2)
+    assert loop.reading_c(finger(temps[0])) == pytest.approx(56.0)
+    loop.set_mode(StiffnessMode.MEDIUM)
+    assert loop.reading_c(finger(temps[0])) == pytest.approx(temps[0].mean())
+
+
+def test_over_temperature_cuts_that_heater_until_it_cools_past_the_hysteresis():
+    loop = TemperatureLoop(HEAT, ThermalLimits(max_temp_c=60.0, max_setpoint_c=59.0,
+                                               hysteresis_k=2.0))
+    loop.set_temperature(59.0)
+    cold = np.full(HEAT.n_nodes, 30.0)
+    hot = np.array([50.0, 55.0, 58.0, 61.0, 59.0])  # one beam above the limit
+    duty = loop.update(features(0.0, np.vstack([hot, cold])), 0.0)
+    assert duty[0] == 0.0 and duty[1] > 0.5
+    assert loop.status is TemperatureStatus.OVER_TEMPERATURE
+    cooler = hot - 1.5  # below the limit but within the hysteresis: still cut
+    assert loop.update(features(1.0, np.vstack([cooler, cold])), 1.0)[0] == 0.0
+    cooled = hot - 3.5
+    assert loop.update(features(2.0, np.vstack([cooled, cold])), 2.0)[0] > 0.0
+    assert loop.status is TemperatureStatus.REGULATING
+
+
+def test_stale_infrared_switches_every_heater_off():
+    loop = TemperatureLoop(HEAT)
+    loop.set_temperature(50.0)
+    temps = np.full((2, HEAT.n_nodes), 30.0)
+    frame = features(0.0, temps)
+    assert min(loop.update(frame, 2.9)) > 0.0  # 2.9 s old: still acted on
+    assert loop.update(frame, 3.1) == (0.0, 0.0)  # 3.1 s old: stale
+    assert loop.status is TemperatureStatus.STALE
+    assert loop.update(None, 5.0) == (0.0, 0.0)
+    assert min(loop.update(features(6.0, temps), 6.0)) > 0.0  # back
+
+
+def test_a_finger_out_of_view_is_not_heated_blind():
+    loop = TemperatureLoop(HEAT)
+    loop.set_temperature(50.0)
+    temps = np.full((2, HEAT.n_nodes), 30.0)
+    frame = features(0.0, temps)
+    blind = FingerThermal((np.nan,) * 5, np.nan, np.nan, np.nan, np.nan, np.nan)
+    frame = ThermalFeatures(0.0, (frame.fingers[0], blind), AMBIENT_C, ())
+    duty = loop.update(frame, 0.0)
+    assert duty[0] > 0.0 and duty[1] == 0.0
+
+
+@pytest.mark.parametrize("bad", [80.0, 10.0, float("nan")])
+def test_setpoints_outside_the_safe_range_are_refused(bad):
+    loop = TemperatureLoop(HEAT)
+    with pytest.raises(InputError, match="safe range"):
+        loop.set_temperature(bad)
+    assert loop.setpoint_c is None
+
+
+def test_unknown_mode_is_refused():
+    with pytest.raises(InputError, match="unknown stiffness mode"):
+        TemperatureLoop(HEAT).set_mode("squishy")
