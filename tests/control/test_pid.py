@@ -31,7 +31,8 @@ def test_output_stays_within_limits():
     pid = PID(PIDGains(kp=10.0, ki=5.0, out_min=-1.0, out_max=2.0))
     outs = [pid.update(100.0, 0.0, 0.05) for _ in range(50)]
     outs += [pid.update(-100.0, 0.0, 0.05) for _ in range(50)]
-    assert max(outs) == 2.0 and min(outs) == -1.0
+    assert max(outs) == 2.0
+    assert min(outs) == -1.0
 
 
 def test_anti_windup_recovers_at_once_after_saturation():

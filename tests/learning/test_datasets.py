@@ -63,7 +63,7 @@ def test_tables_readme_and_manifest(small: Path) -> None:
     assert len(data.sequences) == 6
     curve = data.curves[data.curves["sequence"] == data.sequences["sequence"].iloc[0]]
     assert np.allclose(np.diff(curve["t_s"]), 0.1)  # 10 Hz
-    assert curve["t_s"].iloc[-1] == pytest.approx(100.0)
+    assert curve["t_s"].iloc[-1] == pytest.approx(DatasetSpec().hold_s)
     assert (data.sequences["k_n"] > 0).all()
     assert np.allclose(data.sequences["kappa"], data.sequences["k_n"] / data.sequences["f0_n"])
     readme = (small / "README.md").read_text()
