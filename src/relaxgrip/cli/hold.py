@@ -142,7 +142,7 @@ def _print_table(rows: dict[str, dict[str, Any]], reductions: dict[str, float],
     console.print(table)
     for key, value in reductions.items():
         paper = PAPER_REDUCTION.get(key)
-        ref = f" [paper {paper:.1%}]" if paper is not None else ""
+        ref = f" (paper {paper:.1%})" if paper is not None else ""
         console.print(f"MAE reduction of relax {key.replace('_', ' ')}: {value:.1%}{ref}")
     for name, d in rows.items():
         for event in d["events"]:
