@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from contextlib import nullcontext
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -79,7 +80,7 @@ def hold(
     start = time.perf_counter()
     if compare:
         with console.status("holding with fixed, icfn and relax …") if not json_out \
-                else _nothing():
+                else nullcontext():
             comparison = compare_holds(target_n=target_n, duration_s=duration_s, temp_c=temp_c,
                                        seed=seed, models=bundle, n_jobs=jobs)
         figure = None
@@ -98,7 +99,7 @@ def hold(
         if figure is not None:
             console.print(f"figure: {figure}")
         return
-    with console.status(f"holding with {estimator} …") if not json_out else _nothing():
+    with console.status(f"holding with {estimator} …") if not json_out else nullcontext():
         result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle)
     figure = None
     if plot is not None:
@@ -112,14 +113,6 @@ def hold(
                  time.perf_counter() - start)
     if figure is not None:
         console.print(f"figure: {figure}")
-
-
-class _nothing:
-    def __enter__(self) -> None:
-        return None
-
-    def __exit__(self, *exc: object) -> None:
-        return None
 
 
 def _print_table(rows: dict[str, dict[str, Any]], reductions: dict[str, float],

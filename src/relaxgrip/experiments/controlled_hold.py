@@ -12,10 +12,8 @@ against the true force.
 from __future__ import annotations
 
 import math
-import statistics
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -146,8 +144,9 @@ class HoldResult:
         }
 
 
-def _setup(estimator: EstimatorKind | str, models: ModelBundle | None, target_n: float,
-           temp_c: float, duration_s: float) -> tuple[EstimatorKind, ModelBundle]:
+def _check(estimator: EstimatorKind | str, target_n: float, temp_c: float,
+           duration_s: float) -> EstimatorKind:
+    """The estimator named, once every argument of a hold is checked."""
     try:
         kind = EstimatorKind(estimator)
     except ValueError:
@@ -156,7 +155,7 @@ def _setup(estimator: EstimatorKind | str, models: ModelBundle | None, target_n:
     check_target_n(target_n)
     check_hold_temp_c(temp_c)
     check_positive(duration_s, "hold duration")
-    return kind, models if models is not None else load_default_models()
+    return kind
 
 
 def run_hold(
@@ -198,7 +197,8 @@ def run_hold(
         A target, temperature or estimator out of range; or the hold never
         started (no contact, target out of reach).
     """
-    kind, bundle = _setup(estimator, models, target_n, temp_c, duration_s)
+    kind = _check(estimator, target_n, temp_c, duration_s)
+    bundle = models if models is not None else load_default_models()
     base = config if config is not None else TwinConfig()
     cfg = replace(base, initial_temp_c=temp_c)
     clock = VirtualClock()
@@ -246,7 +246,7 @@ class HoldComparison:
                 "mae_reduction": self.reductions()}
 
 
-def _run_one(args: tuple[str, float, float, float, int, ModelBundle | None]) -> HoldResult:
+def _run_one(args: tuple[str, float, float, float, int, ModelBundle]) -> HoldResult:
     """One hold in a worker: OpenCV on one thread (the parallelism is across holds)."""
     import cv2
 
@@ -266,8 +266,9 @@ def compare_holds(
 ) -> HoldComparison:
     """Run every estimator on the same seed (in parallel with ``n_jobs`` > 1)."""
     for kind in estimators:
-        _setup(kind, models, target_n, temp_c, duration_s)
-    jobs = [(k, target_n, duration_s, temp_c, seed, models) for k in estimators]
+        _check(kind, target_n, temp_c, duration_s)
+    bundle = models if models is not None else load_default_models()
+    jobs = [(k, target_n, duration_s, temp_c, seed, bundle) for k in estimators]
     if n_jobs > 1 and len(jobs) > 1:
         from joblib import Parallel, delayed
 
@@ -275,14 +276,3 @@ def compare_holds(
     else:
         results = [_run_one(job) for job in jobs]
     return HoldComparison({r.estimator: r for r in results})
-
-
-def summarize_grid(rows: Sequence[dict[str, Any]]) -> dict[str, float]:
-    """Median and worst of the MAEs of a grid of holds."""
-    maes = [r["mae_n"] for r in rows]
-    return {"mae_median_n": statistics.median(maes), "mae_max_n": max(maes)}
-
-
-def default_figure_path(out: Path) -> Path:
-    """Where ``--plot`` writes when given a directory."""
-    return out / "hold.png" if out.suffix == "" else out

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from relaxgrip.experiments.controlled_hold import HoldComparison, HoldResult
 from relaxgrip.plots.common import check_plot_path, new_figure, save_figure
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 __all__ = ["plot_hold", "plot_hold_comparison"]
 
@@ -85,10 +89,7 @@ def plot_hold_comparison(comparison: HoldComparison, path: str | Path) -> Path:
     return save_figure(fig, path)
 
 
-def _force_panel(ax: object, name: str, hold: HoldResult) -> None:
-    from matplotlib.axes import Axes
-
-    assert isinstance(ax, Axes)
+def _force_panel(ax: Axes, name: str, hold: HoldResult) -> None:
     idx = _thin(hold.t_s)
     lo, hi = hold.window
     ax.axvspan(lo, hi, color="0.93", zorder=0)
