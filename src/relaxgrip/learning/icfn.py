@@ -74,6 +74,26 @@ def _check_fit_data(X: ArrayLike, y: ArrayLike) -> tuple[FloatArray, FloatArray]
     return np.asarray(X_arr, dtype=np.float64), np.asarray(y_arr, dtype=np.float64)
 
 
+def _check_predict_X(X: ArrayLike, n_features: int, model: str, one_path: str) -> FloatArray:
+    """``X`` as a finite float matrix of ``n_features`` columns, or a ValueError saying why.
+
+    ``one_path`` names the model's method for a single feature vector.
+    """
+    X_arr = np.asarray(X, dtype=np.float64)
+    if X_arr.ndim != 2:
+        raise ValueError(
+            f"X must be 2-D (n_samples, n_features), got shape {X_arr.shape}; "
+            f"use {one_path} for one feature vector"
+        )
+    if X_arr.shape[1] != n_features:
+        raise ValueError(
+            f"X has {X_arr.shape[1]} features, but {model} was fitted with {n_features}"
+        )
+    if not np.isfinite(X_arr).all():
+        raise ValueError("X contains NaN or infinity")
+    return X_arr
+
+
 class _ForwardPlan:
     """Preallocated single-vector forward pass of a ReLU network.
 
@@ -259,18 +279,7 @@ class ICFN(RegressorMixin, BaseEstimator):  # type: ignore[misc]
             ``X`` not 2-D, of the wrong width, or not finite.
         """
         self._check_fitted()
-        X_arr = np.asarray(X, dtype=np.float64)
-        if X_arr.ndim != 2:
-            raise ValueError(
-                f"X must be 2-D (n_samples, n_features), got shape {X_arr.shape}; "
-                "use predict_one for one feature vector"
-            )
-        if X_arr.shape[1] != self.n_features_in_:
-            raise ValueError(
-                f"X has {X_arr.shape[1]} features, but ICFN was fitted with {self.n_features_in_}"
-            )
-        if not np.isfinite(X_arr).all():
-            raise ValueError("X contains NaN or infinity")
+        X_arr = _check_predict_X(X, self.n_features_in_, "ICFN", "predict_one")
         h = (X_arr - self.x_mean_) / self.x_scale_
         for w, b in zip(self.coefs_[:-1], self.intercepts_[:-1], strict=True):
             h = h @ w

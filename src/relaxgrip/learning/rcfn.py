@@ -43,7 +43,7 @@ from sklearn.exceptions import NotFittedError  # type: ignore[import-untyped]
 from sklearn.linear_model import Ridge  # type: ignore[import-untyped]
 from sklearn.utils.validation import check_X_y  # type: ignore[import-untyped]
 
-from relaxgrip.learning.icfn import _float_arrays, _location_scale
+from relaxgrip.learning.icfn import _check_predict_X, _float_arrays, _location_scale
 
 FloatArray = NDArray[np.float64]
 
@@ -401,18 +401,7 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
             ``X`` not 2-D, of the wrong width, or not finite.
         """
         self._check_fitted()
-        X_arr = np.asarray(X, dtype=np.float64)
-        if X_arr.ndim != 2:
-            raise ValueError(
-                f"X must be 2-D (n_samples, n_features), got shape {X_arr.shape}; "
-                "use relaxation for one feature vector"
-            )
-        if X_arr.shape[1] != self.n_features_in_:
-            raise ValueError(
-                f"X has {X_arr.shape[1]} features, but RCFN was fitted with {self.n_features_in_}"
-            )
-        if not np.isfinite(X_arr).all():
-            raise ValueError("X contains NaN or infinity")
+        X_arr = _check_predict_X(X, self.n_features_in_, "RCFN", "relaxation")
         Z = _basis(X_arr, self.temp_knots_, self.temp_column)
         phi = _poly_expand((Z - self.x_mean_) / self.x_scale_, self.degree)
         phi -= self.phi_mean_
