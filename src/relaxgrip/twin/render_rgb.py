@@ -90,7 +90,7 @@ class RgbRenderer:
                 "distortion coefficients"
             )
         self._texture, self._texture_to_marker = _tab_texture(rig)
-        self._tint = np.asarray(_TAB_TINT, dtype=np.float32)
+        self._tint = tuple(np.float32(c) for c in _TAB_TINT)
         self._background = _background(self.intrinsics.shape)
         self._noise_pos, self._noise_neg = _noise_banks(self.intrinsics.shape, config.noise_dn)
 
@@ -194,10 +194,14 @@ class RgbRenderer:
         tab = cv2.resize(up, size, interpolation=cv2.INTER_AREA).astype(np.float32)
         coverage = np.zeros((size[1], size[0]), np.uint8)
         _fill(coverage, corners - (x0, y0), 255)
-        alpha = coverage.astype(np.float32) * (1.0 / 255.0)
+        transmit = 1.0 - coverage.astype(np.float32) * (1.0 / 255.0)
         roi = img[y0:y1, x0:x1]
-        blended = roi * (1.0 - alpha)[..., None] + tab[..., None] * self._tint
-        roi[...] = np.clip(blended, 0.0, 255.0).astype(np.uint8)
+        # OpenCV's per-channel arithmetic: numpy's broadcast over a last axis
+        # of 3 costs five times as much here.
+        blended = cv2.multiply(roi, cv2.merge((transmit,) * 3), dtype=cv2.CV_32F)
+        blended += cv2.merge(tuple(tab * c for c in self._tint))
+        np.clip(blended, 0.0, 255.0, out=blended)
+        roi[...] = blended
         if self.config.occlusion > 0:
             self._occlude(roi, marker2cam, (x0, y0))
 
