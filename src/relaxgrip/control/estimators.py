@@ -19,8 +19,8 @@ motor encoder, never ground truth.  Each frame it reports a
   RCFN was trained on holds at a fixed aperture, so Eq. 10 predicts the force
   *if the motor stayed where it was at the onset*; the closure the controller
   adds since then adds force through the stiffness of the closed chain
-  (finger – object – finger), which the estimator measures on the last
-  second of loading (ICFN increase per millimetre of motor travel).  So
+  (finger – object – finger), which the estimator measures on the upper half
+  of the loading (ICFN increase per millimetre of motor travel).  So
   ``F(t) = F_inst - K (1 - exp(-t / tau)) + s_close (m(t) - m_onset)``,
   superposing the onset step (Eq. 6) and the controller's later steps.  The
   RCFN is shown the pose the fixed-aperture hold would have (the pose change
@@ -58,6 +58,8 @@ __all__ = [
 ]
 
 NAN = math.nan
+#: The closure slopes are measured where the loading estimate is above this share of its end.
+_SLOPE_FORCE_SHARE = 0.5
 FloatArray = NDArray[np.float64]
 
 
@@ -293,6 +295,10 @@ def _closure_slopes(
 ) -> tuple[float, FloatArray]:
     """Least-squares slopes over motor travel of the ICFN (N/mm) and of the pose (per mm).
 
+    The slopes are taken where the estimate is above half its latest value:
+    the contact stiffens with force, so the hold needs the chain's tangent
+    near the hold force, and at low targets the window would otherwise
+    include travel before contact (where the force does not rise at all).
     Zero if the motor did not move (a hold started from rest).
     """
     if len(loading) < 3:
@@ -300,6 +306,9 @@ def _closure_slopes(
     m = np.array([row[1] for row in loading])
     f = np.array([row[2] for row in loading])
     poses = np.array([row[3] for row in loading])
+    upper = f >= _SLOPE_FORCE_SHARE * float(np.median(f[-5:]))
+    if np.count_nonzero(upper) >= 3:
+        m, f, poses = m[upper], f[upper], poses[upper]
     spread = m - m.mean()
     denom = float(spread @ spread)
     if denom < 1e-6:  # under 1 µm of travel: no slope to measure
