@@ -16,12 +16,11 @@ __all__ = ["bench_estimation", "bench_learning_pipeline"]
 
 #: The paper's ICFN and RCFN inference times (Fig. "network" b): 1.3 ms + 0.14 ms.
 PAPER_INFERENCE_MS = 1.44
-_HOLD_ONSET_S = 9.1
 
 
 def bench_estimation(repeat: int) -> BenchResult:
     """ICFN + RCFN per frame on the features of a rendered grasp, shipped models."""
-    from relaxgrip.bench.perception import render_grasp
+    from relaxgrip.experiments.timing import HOLD_ONSET_S, render_grasp
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import RcfnFeatures, finger_temperature_c, marker_pose
     from relaxgrip.perception.pipeline import Perception
@@ -44,7 +43,7 @@ def bench_estimation(repeat: int) -> BenchResult:
     for _ in range(max(1, repeat)):
         builder = RcfnFeatures()
         # render_grasp's motor stops at 9 s: the loading before, the hold after.
-        onset = next(i for i, frame in enumerate(frames) if frame[0] >= _HOLD_ONSET_S)
+        onset = next(i for i, frame in enumerate(frames) if frame[0] >= HOLD_ONSET_S)
         for t_s, _, pose, _, motor_mm in frames[:onset]:
             builder.observe(t_s, pose, motor_mm)
         builder.start(frames[onset][0], frames[onset][2], frames[onset][4])

@@ -15,16 +15,14 @@ import math
 import statistics
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from relaxgrip.backend import Command, Frame
 from relaxgrip.bench.core import BenchResult
-from relaxgrip.clock import VirtualClock
+from relaxgrip.experiments.timing import GraspFrames, render_grasp
 from relaxgrip.perception.features import build_icfn_features
 from relaxgrip.perception.marker import (
     MarkerState,
@@ -38,71 +36,14 @@ from relaxgrip.perception.marker import (
 )
 from relaxgrip.perception.pipeline import Perception
 from relaxgrip.perception.thermal import ThermalFeatures, ThermalPerception
-from relaxgrip.physics.thermal import node_positions_m
-from relaxgrip.twin import GripperTwin, TwinConfig
-from relaxgrip.twin.render_ir import IrObject, IrRenderer
-from relaxgrip.twin.sensors import IrSensorConfig
+from relaxgrip.twin import TwinConfig
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["GraspFrames", "bench_perception", "render_grasp"]
+__all__ = ["bench_perception"]
 
 #: The paper's measured ArUco pose extraction time (Fig. "network" b).
 PAPER_ARUCO_MS = 3.5
-
-
-@dataclass(frozen=True)
-class GraspFrames:
-    """Frames of a rendered grasp with the truth needed to score perception.
-
-    Attributes
-    ----------
-    rgb : list of Frame
-        RGB frames, one per 30 Hz tick.
-    ir : list of Frame
-        Infrared frames rendered at every tick (the twin's own stream is 1 Hz).
-    motor_mm : list of float
-        Encoder position at each tick (mm).
-    marker2cam : list of ndarray
-        True marker pose at each tick.
-    rest2cam : ndarray
-        True marker pose of the unloaded finger.
-    """
-
-    rgb: list[Frame]
-    ir: list[Frame]
-    motor_mm: list[float]
-    marker2cam: list[FloatArray]
-    rest2cam: FloatArray
-
-
-def render_grasp(n_frames: int = 600, seed: int = 0) -> GraspFrames:
-    """Render a grasp of the force ball: open for 1 s, close, squeeze, hold, heaters on."""
-    cfg = TwinConfig(initial_temp_c=35.0, ir=None)
-    clock = VirtualClock()
-    twin = GripperTwin(cfg, seed=seed, clock=clock)
-    rig = cfg.rig
-    ir_renderer = IrRenderer(rig, IrSensorConfig(), seed)
-    nodes_m = node_positions_m(cfg.heat)
-    j = rig.marker_finger
-    rgb, ir, motor, poses = [], [], [], []
-    for k in range(n_frames):
-        t = k / 30.0
-        speed = 0.0 if t < 1.0 else 20.0 if t < 5.3 else 2.0 if t < 9.0 else 0.0
-        twin.act(Command(speed, (0.6, 0.6)))
-        clock.advance(1.0 / 30.0)
-        obs = twin.observe()
-        truth = obs.truth
-        assert obs.rgb is not None
-        assert truth is not None
-        rgb.append(obs.rgb)
-        motor.append(obs.motor_position_mm)
-        poses.append(rig.marker2cam(truth.marker_deflection_m[j], truth.marker_slope_rad[j]))
-        ball = IrObject((truth.contact_position_m, 0.0, 0.0), 0.03, 25.0, 0.95)
-        image = ir_renderer.render(k, np.asarray(truth.finger_temps_c), nodes_m,
-                                   truth.aperture_m, [ball], twin.material.ambient_c)
-        ir.append(Frame(obs.t_s, k, image))
-    return GraspFrames(rgb, ir, motor, poses, rig.marker2cam())
 
 
 def _per_item(fn: Callable[[int], Any], n: int) -> tuple[list[float], list[Any]]:

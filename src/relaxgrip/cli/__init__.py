@@ -10,7 +10,15 @@ from __future__ import annotations
 
 import sys
 
-from relaxgrip.cli import bench, characterize, fit, hold, learning, perceive  # noqa: F401  (registers commands)
+from relaxgrip.cli import (  # noqa: F401  (registers commands)
+    bench,
+    characterize,
+    experiments,
+    fit,
+    hold,
+    learning,
+    perceive,
+)
 from relaxgrip.cli._app import app, err_console
 from relaxgrip.errors import InputError
 
