@@ -1,0 +1,126 @@
+"""Transports: in-memory link, a real pseudo-terminal through pyserial, and the optional extra."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+import tty
+from collections.abc import Iterator
+
+import pytest
+
+from relaxgrip.clock import VirtualClock, WallClock
+from relaxgrip.hardware.protocol import (
+    FdTransport,
+    LinkError,
+    McuClient,
+    McuEndpoint,
+    MemoryLink,
+    SerialTransport,
+    Transport,
+)
+
+
+def test_memory_link_moves_bytes_both_ways_and_waits_on_its_clock() -> None:
+    clock = VirtualClock()
+    link = MemoryLink(clock)
+    assert isinstance(link.host, Transport)
+    link.host.write(b"abc")
+    link.host.write(b"def")
+    assert link.device.read(0.0) == b"abcdef"
+    assert link.device.read(0.0) == b""
+    assert clock.now() == 0.0
+    assert link.device.read(0.05) == b""
+    assert clock.now() == pytest.approx(0.05)
+    link.device.write(b"\x00\x01")
+    assert link.host.read(1.0) == b"\x00\x01"
+    assert clock.now() == pytest.approx(0.05)  # data was there: no wait
+
+
+def test_memory_link_cut_and_close() -> None:
+    link = MemoryLink(VirtualClock())
+    link.cut()
+    link.host.write(b"lost")
+    link.restore()
+    assert link.device.read(0.0) == b""
+    link.host.close()
+    with pytest.raises(LinkError, match="write on closed in-memory transport 'host'"):
+        link.host.write(b"x")
+
+
+@pytest.fixture
+def pty_pair() -> Iterator[tuple[int, str]]:
+    master, slave = os.openpty()
+    tty.setraw(master)
+    path = os.ttyname(slave)
+    yield master, path
+    os.close(master)
+    os.close(slave)
+
+
+def test_client_talks_to_mcu_thread_over_a_real_pty(pty_pair: tuple[int, str]) -> None:
+    master, path = pty_pair
+    clock = WallClock()
+    mcu = McuEndpoint(FdTransport(master), clock)
+    stop = threading.Event()
+    thread = threading.Thread(target=mcu.serve, args=(stop,), daemon=True)
+    thread.start()
+    host = SerialTransport(path)
+    try:
+        client = McuClient(host, clock, reply_timeout_s=0.5)
+        ack = client.handshake()
+        assert ack.firmware_id == "relaxgrip-emu 1"
+        assert client.set_enabled(True).enabled
+        for _ in range(10):
+            st = client.command(3.0, (0.5, 0.0))
+            assert st.velocity_mm_s == 3.0
+            assert st.heater_duty == (0.5, 0.0)
+        assert client.stats.decode_errors == 0
+        assert client.stats.frames_received == client.stats.frames_sent == 12
+        client.set_enabled(False)
+    finally:
+        stop.set()
+        thread.join(timeout=2.0)
+        host.close()
+    assert not thread.is_alive()
+    assert mcu.core.outputs.velocity_um_s == 0
+
+
+def test_serial_transport_on_a_pty_reads_with_timeout(pty_pair: tuple[int, str]) -> None:
+    master, path = pty_pair
+    port = SerialTransport(path)
+    try:
+        assert port.read(0.01) == b""
+        os.write(master, b"\x00hello\x00")
+        data = b""
+        for _ in range(50):
+            data += port.read(0.05)
+            if len(data) == 7:
+                break
+        assert data == b"\x00hello\x00"
+        port.write(b"\x01\x02")
+        assert FdTransport(master).read(1.0) == b"\x01\x02"
+    finally:
+        port.close()
+
+
+def test_serial_transport_bad_port_is_one_line() -> None:
+    with pytest.raises(LinkError, match="cannot open serial port /nonexistent/tty"):
+        SerialTransport("/nonexistent/tty")
+
+
+def test_core_imports_without_pyserial_and_says_how_to_install() -> None:
+    code = (
+        "import sys; sys.modules['serial'] = None\n"
+        "import relaxgrip.hardware.protocol as p\n"
+        "try:\n"
+        "    p.SerialTransport('/dev/null')\n"
+        "except p.DependencyNotInstalledError as e:\n"
+        "    print(e)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=60
+    ).stdout
+    assert "pip install 'relaxgrip[hardware]'" in out
