@@ -135,6 +135,11 @@ class TwinConfig:
         bounds how coarsely motor motion and contact are sampled.
     thermal_step_s : float
         Step of the heat model (s), driven by the mean heater duty over it.
+    rigid_finger : int or None
+        Finger (0 or 1) replaced by a rigid jaw that never bends, so that the
+        object is pressed against the other finger alone (the paper's
+        single-finger contacts, Fig. "grasp" a-c, with the motor driving the
+        jaw as an indenter); ``None`` (the default): both fingers are soft.
     """
 
     finger: FingerParams = field(default_factory=FingerParams)
@@ -156,6 +161,7 @@ class TwinConfig:
     initial_temp_c: float | None = None
     max_step_s: float = 1.0 / 30.0
     thermal_step_s: float = 0.1
+    rigid_finger: int | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.unit, bool) or not isinstance(self.unit, int) or self.unit < 0:
@@ -167,6 +173,8 @@ class TwinConfig:
             check_temp_c(self.initial_temp_c, "initial finger temperature")
         check_positive(self.max_step_s, "max_step_s")
         check_positive(self.thermal_step_s, "thermal_step_s")
+        if self.rigid_finger is not None and self.rigid_finger not in (0, 1):
+            raise InputError(f"rigid_finger must be 0, 1 or None, got {self.rigid_finger!r}")
         if not 0.0 < self.contact_position_m <= self.finger.length_m:
             raise InputError(
                 f"contact position {self.contact_position_m} m is outside the finger "

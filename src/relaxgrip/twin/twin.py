@@ -39,6 +39,7 @@ from relaxgrip.physics.viscoelastic import phi1
 from relaxgrip.twin.config import TWIN_VERSION, TwinConfig
 from relaxgrip.twin.objects import ObjectSpec, get_object
 from relaxgrip.twin.sensor_suite import SceneState, SensorSuite
+from relaxgrip.twin.sensors import SceneObject
 
 FloatArray = NDArray[np.float64]
 
@@ -203,6 +204,8 @@ class GripperTwin:
         self._plastic_m = 0.0
         self._slipping = False
         self._force_n = 0.0
+        self._external_n = 0.0
+        self._scene_objects = cfg.scene
         ambient = self.material.ambient_c
         if cfg.initial_temp_c is None:
             start = np.full(cfg.heat.n_nodes, ambient)
@@ -272,13 +275,50 @@ class GripperTwin:
         """How far ahead of its grasp position the object stands (m); 0 between the fingers."""
         return (self._object_x_mm - self._forward_mm) * 1e-3
 
-    def set_object(self, name: str | None) -> None:
-        """Place another catalogue object between the (open) fingers."""
+    def set_object(self, name: str | None, ahead_m: float = 0.0) -> None:
+        """Place another catalogue object between the (open) fingers, or ahead of them.
+
+        Parameters
+        ----------
+        name : str or None
+            Catalogue key; ``None`` removes the object.
+        ahead_m : float
+            How far beyond the grasp position it stands on the table (m), at
+            the arm's current height; 0 puts it between the fingers.
+        """
+        if not (math.isfinite(ahead_m) and ahead_m >= 0.0):
+            raise InputError(f"object distance must be >= 0 m, got {ahead_m}")
         self._object = None if name is None else get_object(name)
-        self._engaged = self._object is not None
+        self._engaged = self._object is not None and ahead_m == 0.0
         self._object_height_mm = self._arm_mm
-        self._object_x_mm = self._forward_mm
+        self._object_x_mm = self._forward_mm + ahead_m * 1e3
         self._plastic_m = 0.0
+        self._external_n = 0.0
+
+    def set_object_mass(self, mass_kg: float) -> None:
+        """Change the mass of the current object from now on (water poured out of a cup)."""
+        if self._object is None:
+            raise InputError("there is no object whose mass could change")
+        if not (math.isfinite(mass_kg) and mass_kg > 0.0):
+            raise InputError(f"object mass must be > 0 kg, got {mass_kg}")
+        self._object = replace(self._object, mass_kg=float(mass_kg))
+
+    def set_external_force(self, force_n: float) -> None:
+        """Push the held object towards finger 1 with ``force_n`` (a hand taking it), from now on.
+
+        While the grip is closed the push shifts load from finger 0 (which
+        carries the marker) to finger 1: finger 0 presses with the squeeze
+        ``F`` (the truth's contact force), finger 1 with ``F + force_n``.  Once
+        the grip opens, the hand carries the object and the fingers are free.
+        0 (the default) is no push.
+        """
+        if not math.isfinite(force_n):
+            raise InputError(f"external force must be finite, got {force_n}")
+        self._external_n = float(force_n)
+
+    def set_scene(self, scene: tuple[SceneObject, ...]) -> None:
+        """Replace the objects standing in view (the config's ``scene``) from now on."""
+        self._scene_objects = tuple(scene)
 
     def truth(self) -> Truth:
         """Ground truth at the integrated time."""
@@ -353,7 +393,7 @@ class GripperTwin:
         objects = [
             (get_object(o.name), (o.position_m[0] - fwd_m, o.position_m[1],
                                   o.position_m[2] - arm_m))
-            for o in cfg.scene
+            for o in self._scene_objects
         ]
         if self._object is not None:
             centre = (self.material.contact_position_m + self.object_ahead_m, 0.0,
@@ -411,14 +451,23 @@ class GripperTwin:
             k_eff.append(stiffen * (self._stiff[j].k_e + gain_sum))
             offset.append(stiffen * (memory - gain_sum * x))
             coeffs.append((decay, gain))
+        rigid = cfg.rigid_finger
+        if rigid is not None:
+            # A rigid jaw in place of that finger: infinitely stiff, it never bends.
+            k_eff[rigid], offset[rigid] = math.inf, 0.0
 
         obj = self._object
         if obj is not None and self._engaged:
             delta = obj.width_m - self._plastic_m - self.aperture_m
-            sol = series_contact(delta, k_eff, offset, obj.stiffness_n_per_m, obj.yield_force_n)
+            # A hand's push: F_1 = F_0 + push, the chain with finger 1's offset lowered by it.
+            push = self._external_n
+            loaded = offset if push == 0.0 else [offset[0], offset[1] - push]
+            sol = series_contact(delta, k_eff, loaded, obj.stiffness_n_per_m, obj.yield_force_n)
             self._plastic_m += sol.plastic_m
             x_new = sol.finger_deflection_m
             force = sol.force_n
+            if push != 0.0 and force == 0.0:  # off finger 0: the hand has it, both fingers free
+                x_new = (-offset[0] / k_eff[0], -offset[1] / k_eff[1])
         else:
             x_new = (-offset[0] / k_eff[0], -offset[1] / k_eff[1])
             force = 0.0
@@ -481,6 +530,9 @@ class GripperTwin:
     def _lift(self, obj: ObjectSpec, force_n: float) -> None:
         """Carry the object with the arm if friction and adhesion hold its weight."""
         if self._arm_mm <= self._object_height_mm:
+            if force_n > 0.0 and self._object_height_mm > 0.0:
+                # Lowered while held: it goes down with the fingers, to the table at most.
+                self._object_height_mm = self._arm_mm
             self._slipping = False
             return
         s0, s1 = self._stiff
