@@ -191,3 +191,25 @@ def test_rcfn_features_onset_velocity_closure_ratio_and_hold_time() -> None:
     from_rest = RcfnFeatures()
     from_rest.start(0.0, onset, 6.0)
     assert from_rest.build(40.0) is None  # no loading seen: the ratio is unknown
+
+
+def test_rcfn_closure_ratio_of_a_loading_that_crept_in_at_the_end() -> None:
+    from relaxgrip.perception.features import RcfnFeatures
+
+    # A stiff object: 4 s at 1 mm/s bending the marker 0.25 mm/s, then 2 s of creeping
+    # (0.02 mm/s of motor, 5 µm/s of marker) before the onset: the last second alone
+    # bends the marker under the contact threshold.
+    builder = RcfnFeatures()
+    t_s, motor_mm, dx_m = 0.0, 0.0, 1e-4
+    for _ in range(41):
+        builder.observe(t_s, np.array([dx_m, 0, 0, 0, 0, 0]), motor_mm)
+        t_s, motor_mm, dx_m = t_s + 0.1, motor_mm + 0.1, dx_m + 0.25e-4
+    for _ in range(20):
+        builder.observe(t_s, np.array([dx_m, 0, 0, 0, 0, 0]), motor_mm)
+        t_s, motor_mm, dx_m = t_s + 0.1, motor_mm + 0.002, dx_m + 0.5e-6
+    builder.start(t_s, np.array([dx_m, 0, 0, 0, 0, 0]), motor_mm)
+    # The span reaches back to the latest sample bent 20 µm or more before the onset
+    # (motor over marker is 4 in the loading and in the creep alike); within the last
+    # second alone the ratio would be unknown and the RCFN silent.
+    assert builder.closure_ratio == pytest.approx(4.0, rel=0.05)
+    assert builder.build(40.0) is not None

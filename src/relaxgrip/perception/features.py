@@ -15,7 +15,9 @@ kelvin at most.
 
 from __future__ import annotations
 
+import itertools
 import math
+from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
@@ -42,6 +44,8 @@ __all__ = [
 N_BEAMS = 5
 #: Marker deflection that counts as contact: twenty times the tracking noise (m).
 _CONTACT_DEFLECTION_M = 2e-5
+#: How much of the loading before a hold onset the RCFN features keep (s).
+LOADING_HISTORY_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -197,7 +201,7 @@ class RcfnFeatures:
         if not velocity_window_s > 0:
             raise ValueError(f"velocity window must be > 0 s, got {velocity_window_s}")
         self.velocity_window_s = velocity_window_s
-        self._history: list[tuple[float, FloatArray, float]] = []
+        self._history: deque[tuple[float, FloatArray, float]] = deque()
         self.onset_pose: FloatArray | None = None
         self.onset_t_s: float | None = None
         self.closure_ratio = math.nan
@@ -207,9 +211,13 @@ class RcfnFeatures:
         if self._history and t_s <= self._history[-1][0]:
             return
         self._history.append((t_s, np.asarray(pose, dtype=np.float64), motor_position_mm))
-        horizon = t_s - 2.0 * self.velocity_window_s
+        # Before the onset the loading is kept long enough for the closure ratio of a slow
+        # approach; in the hold, two velocity windows suffice.
+        keep_s = 2.0 * self.velocity_window_s if self.onset_t_s is not None else max(
+            2.0 * self.velocity_window_s, LOADING_HISTORY_S)
+        horizon = t_s - keep_s
         while len(self._history) > 2 and self._history[1][0] <= horizon:
-            self._history.pop(0)
+            self._history.popleft()
 
     @property
     def last_pose(self) -> FloatArray | None:
@@ -224,16 +232,25 @@ class RcfnFeatures:
         self.closure_ratio = self._closure_ratio()
 
     def _closure_ratio(self) -> float:
-        """Motor closure per marker deflection over (at most) the loading's last window."""
+        """Motor closure per marker deflection over the loading's last window.
+
+        The span is the last velocity window (its earliest usable sample).  A
+        loading that crept in at the end (a stiff object approached slowly)
+        may bend the marker too little within it; the span then reaches back
+        to the latest sample the marker has measurably bent since, within
+        :data:`LOADING_HISTORY_S`.
+        """
         t_now, now, motor_now = self._history[-1]
         ratio = math.nan  # no loading seen (a hold started from rest): unknown
-        for t, pose, motor in reversed(self._history[:-1]):
-            if t < t_now - self.velocity_window_s:
+        for t, pose, motor in itertools.islice(reversed(self._history), 1, None):
+            if t < t_now - self.velocity_window_s and math.isfinite(ratio):
                 break
             bent = now[0] - pose[0]
             in_contact = pose[0] > _CONTACT_DEFLECTION_M  # closure before contact would count
             if in_contact and bent > _CONTACT_DEFLECTION_M and motor_now > motor:
                 ratio = (motor_now - motor) * 1e-3 / bent  # the earliest in the window wins
+                if t < t_now - self.velocity_window_s:
+                    break  # beyond the window: the first measurable bend is the span
         return ratio
 
     def velocity(self) -> FloatArray:
@@ -243,7 +260,7 @@ class RcfnFeatures:
         t_now, now, _ = self._history[-1]
         target = t_now - self.velocity_window_s
         t_then, then, _ = self._history[0]
-        for t, pose, _ in reversed(self._history[:-1]):
+        for t, pose, _ in itertools.islice(reversed(self._history), 1, None):
             if t <= target:
                 t_then, then = t, pose
                 break
