@@ -128,10 +128,11 @@ class CupDemoSettings:
     cup_estimator, glass_estimator : str
         Force estimator of each grasp.  The glass is grasped with the ICFN
         alone: in the stiff state relaxation over a few seconds is small, and
-        the ``relax`` estimator's closure ratio needs the marker to bend
-        during the last second of closing, which a 200 N/mm glass, approached
-        slowly by the PID near its target, may not give (its estimate then
-        stays undefined and the controller waits).
+        the hand-over must be seen.  Eq. 10 builds the estimate from the onset
+        and the motor's own closure, so a hand taking the glass (which unloads
+        the marker finger) leaves the ``relax`` estimate where it was: with it
+        the glass is held as well (0.03-0.16 N from 6 N, seeds 0-1) but the
+        hand-over is never detected.
     quick : bool
         Whether these are the quick settings.
     """
