@@ -198,8 +198,9 @@ class RgbRenderer:
         roi = img[y0:y1, x0:x1]
         # OpenCV's per-channel arithmetic: numpy's broadcast over a last axis
         # of 3 costs five times as much here.
-        blended = cv2.multiply(roi, cv2.merge((transmit,) * 3), dtype=cv2.CV_32F)
-        blended += cv2.merge(tuple(tab * c for c in self._tint))
+        blended = np.asarray(cv2.multiply(roi, cv2.merge((transmit,) * 3), dtype=cv2.CV_32F),
+                             dtype=np.float32)
+        blended += np.asarray(cv2.merge(tuple(tab * c for c in self._tint)), dtype=np.float32)
         np.clip(blended, 0.0, 255.0, out=blended)
         roi[...] = blended
         if self.config.occlusion > 0:
