@@ -73,7 +73,7 @@ def plot_cup_demo(result: CupDemoResult, path: str | Path) -> Path:
     ax_f.set_title(
         f"(f) force over the sequence: chose the {result.chosen_side or 'no'} cup "
         f"(IR {', '.join(f'{k} {v:.1f} °C' for k, v in result.ir_cup_temps_c.items())}; "
-        f"background {result.ir_background_c:.1f} °C)", fontsize=9)
+        f"background {result.ir_background_c:.1f} °C)", fontsize=9, pad=14)
     tg_c = 48.0
     for j, ax in ((0, ax_0), (1, ax_1)):
         _stages(ax, result, label=False)
