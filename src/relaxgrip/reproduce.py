@@ -22,9 +22,10 @@ from pathlib import Path
 from typing import Any
 
 from relaxgrip.errors import InputError
+from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION
 
-__all__ = ["SECTIONS", "Row", "Section", "reproduce", "write_report"]
+__all__ = ["SECTIONS", "TITLES", "Row", "Section", "reproduce", "write_report"]
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,18 @@ def _range(values: Sequence[float], fmt: str = "{:.0f}") -> str:
     return lo if lo == hi else f"{lo}–{hi}"
 
 
+#: Each section's heading, naming the paper's figure.
+TITLES: dict[str, str] = {
+    "characterization": 'Stiffness characterization (Fig. "deform")',
+    "accuracy": 'Force perception and relaxation accuracy (Fig. "acc")',
+    "holding": 'Holding with relaxation-aware control (Fig. "sphere")',
+    "modulation": 'Real-time force perception under stiffness modulation (Fig. "grasp")',
+    "multimode": 'Multi-mode grasping (Fig. "modes")',
+    "cup": 'Integrated demo (Fig. "cup")',
+    "timing": 'Timing (Fig. "network" b)',
+}
+
+
 # --- sections ---------------------------------------------------------------------------
 
 
@@ -105,7 +118,7 @@ def characterization_section(out_dir: Path, quick: bool, seed: int) -> Section:
                f"with temperature at every load; k80 falls {_range(drops)} % from {t0} to "
                f"{t1} °C.")
     d["z80_monotone_in_temp"] = monotone
-    return Section("characterization", 'Stiffness characterization (Fig. "deform")', rows,
+    return Section("characterization", TITLES["characterization"], rows,
                    finding, figure, d)
 
 
@@ -154,7 +167,7 @@ def accuracy_section(out_dir: Path, quick: bool, seed: int) -> Section:
                f"relaxation with median NRMSE {rcfn['nrmse_median']:.3f}.")
     d["dataset"] = {"icfn_samples": spec.icfn_samples, "rcfn_sequences": spec.rcfn_sequences,
                     "seed": spec.seed, "hold_s": spec.hold_s}
-    return Section("accuracy", 'Force perception and relaxation accuracy (Fig. "acc")', rows,
+    return Section("accuracy", TITLES["accuracy"], rows,
                    finding, figure, d)
 
 
@@ -182,7 +195,7 @@ def holding_section(out_dir: Path, quick: bool, seed: int) -> Section:
     finding = (f"A {duration:g} s hold at 5 N, 40 °C: the fixed aperture's force decays, the "
                "ICFN-only loop holds the finger's deflection while the true force drifts from "
                f"the target, and Eq. 10 in the loop keeps it within {mae['relax']:.3f} N.")
-    return Section("holding", 'Holding with relaxation-aware control (Fig. "sphere")', rows,
+    return Section("holding", TITLES["holding"], rows,
                    finding, figure, d)
 
 
@@ -209,7 +222,7 @@ def timing_section(out_dir: Path, quick: bool, seed: int) -> Section:
     finding = (f"Medians on one core of {platform.machine()}: the compensated estimate costs "
                f"{m['compensated']:.2f} ms per frame, "
                f"{PAPER_LATENCY_MS['compensated'] / m['compensated']:.0f}× under the paper's.")
-    return Section("timing", 'Timing (Fig. "network" b)', rows, finding, figure,
+    return Section("timing", TITLES["timing"], rows, finding, figure,
                    result.to_dict())
 
 
@@ -266,8 +279,7 @@ def modulation_section(out_dir: Path, quick: bool, seed: int) -> Section:
     finding = ("The same contact stroke gives a larger and steeper force transient the stiffer "
                "the finger; weak contacts still bend the marker measurably, and each stiffness "
                "state grasps its object under force control.")
-    return Section("modulation", 'Real-time force perception under stiffness modulation '
-                   '(Fig. "grasp")', rows, finding, figure, d)
+    return Section("modulation", TITLES["modulation"], rows, finding, figure, d)
 
 
 def multimode_section(out_dir: Path, quick: bool, seed: int) -> Section:
@@ -303,7 +315,7 @@ def multimode_section(out_dir: Path, quick: bool, seed: int) -> Section:
     ok = all(t.success for t in result.tasks().values())
     finding = ("Stiffness switching trades load-bearing against gentleness, for the physics' "
                "reasons: " + ("all three contrasts hold." if ok else "NOT every contrast holds."))
-    return Section("multimode", 'Multi-mode grasping (Fig. "modes")', rows, finding, figure, d)
+    return Section("multimode", TITLES["multimode"], rows, finding, figure, d)
 
 
 def cup_section(out_dir: Path, quick: bool, seed: int) -> Section:
@@ -344,7 +356,7 @@ def cup_section(out_dir: Path, quick: bool, seed: int) -> Section:
     finding = ("One continuous run through the five stages "
                + ("meets every criterion." if task.success else "FAILS: " + ", ".join(
                    k for k, v in c.items() if not v) + "."))
-    return Section("cup", 'Integrated demo (Fig. "cup")', rows, finding, figure, d)
+    return Section("cup", TITLES["cup"], rows, finding, figure, d)
 
 
 #: Section key -> runner, in the report's (the paper's) order.
@@ -367,7 +379,12 @@ def _run_section(key: str, out_dir: Path, quick: bool, seed: int) -> Section:
 
     cv2.setNumThreads(1)
     start = time.perf_counter()
-    section = SECTIONS[key](out_dir, quick, seed)
+    try:
+        section = SECTIONS[key](out_dir, quick, seed)
+    except Exception as exc:  # one broken experiment must not cost the others' results
+        message = f"{type(exc).__name__}: {exc}".splitlines()[0]
+        return Section(key, TITLES[key], [], f"FAILED: {message}", None, {"error": message},
+                       time.perf_counter() - start)
     return Section(section.key, section.title, section.rows, section.finding, section.figure,
                    section.results, time.perf_counter() - start)
 
@@ -486,17 +503,4 @@ def write_report(out_dir: Path, sections: Sequence[Section], quick: bool, seed: 
                              "paper_vs_ours": [vars(r) for r in s.rows],
                              "results": s.results} for s in sections},
     }
-    _atomic_write(out_dir / "results.json", json.dumps(_json_safe(payload), indent=1))
-
-
-def _json_safe(obj: Any) -> Any:
-    if isinstance(obj, float):
-        return obj if math.isfinite(obj) else None
-    if isinstance(obj, dict):
-        return {str(k): _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_json_safe(v) for v in obj]
-    if hasattr(obj, "item") and callable(obj.item):  # numpy scalars
-        return _json_safe(obj.item())
-    return obj
-
+    _atomic_write(out_dir / "results.json", json.dumps(json_safe(payload), indent=1))

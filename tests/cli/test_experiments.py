@@ -63,3 +63,25 @@ def test_report_escapes_table_cells(tmp_path: Path):
     assert json.loads((tmp_path / "results.json").read_text())["sections"]["s"]["results"] == {
         "x": None}
     assert not list(tmp_path.glob(".*tmp"))
+
+
+def test_a_failing_section_is_reported_and_the_others_kept(monkeypatch, capsys, tmp_path: Path):
+    from relaxgrip import reproduce
+
+    def boom(out_dir: Path, quick: bool, seed: int) -> Section:
+        raise RuntimeError("the twin caught fire\nsecond line")
+
+    monkeypatch.setitem(reproduce.SECTIONS, "boom", boom)
+    monkeypatch.setitem(reproduce.TITLES, "boom", "A broken experiment")
+    out = tmp_path / "report"
+    code, _, err = run_main(["reproduce", "--quick", "--out", out, "--jobs", "1", "--section",
+                             "boom", "--section", "characterization"], monkeypatch, capsys)
+    assert code == 1
+    assert "section(s) failed: boom" in err
+    report = (out / "report.md").read_text()
+    assert "## A broken experiment" in report
+    assert "FAILED: RuntimeError: the twin caught fire" in report
+    assert "second line" not in report
+    assert "## Stiffness characterization" in report
+    results = json.loads((out / "results.json").read_text())
+    assert results["sections"]["boom"]["results"] == {"error": "RuntimeError: the twin caught fire"}

@@ -28,11 +28,9 @@ from relaxgrip.perception.marker import (
     MarkerState,
     MarkerTracker,
     PoseSolver,
-    detect_markers,
+    locate_marker,
     make_detector,
-    refine_corners_by_edges,
     rotation_angle,
-    to_gray,
 )
 from relaxgrip.perception.pipeline import Perception
 from relaxgrip.perception.thermal import ThermalFeatures, ThermalPerception
@@ -121,12 +119,7 @@ def bench_perception(repeat: int, n_frames: int = 600) -> BenchResult:
     solver = PoseSolver(rig.marker.size_m, rig.rgb.intrinsics)
 
     def full_frame(i: int) -> object:
-        gray = to_gray(np.asarray(grasp.rgb[i].image, dtype=np.uint8))
-        found = detect_markers(gray, detector)
-        if not found:
-            return None
-        corners = refine_corners_by_edges(gray, found[0].corners_px, rig.rgb.intrinsics)
-        return solver.solve(found[0].corners_px if corners is None else corners)
+        return locate_marker(np.asarray(grasp.rgb[i].image, dtype=np.uint8), detector, solver)
 
     t_full: list[float] = []
     for _ in range(passes):

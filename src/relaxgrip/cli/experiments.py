@@ -69,7 +69,14 @@ def reproduce(
                            progress=progress)
     for s in sections:
         console.print(f"[bold]{s.title}[/bold] ({s.seconds:.0f} s)")
+        if not s.rows:
+            console.print(f"  {s.finding}", markup=False, highlight=False)
         for row in s.rows:
             console.print(f"  {row.quantity}: paper {row.paper}, ours {row.ours}",
                           highlight=False, markup=False)
     console.print(f"{out / 'report.md'}, {out / 'results.json'}")
+    failed = [s.key for s in sections if "error" in s.results]
+    if failed:
+        err_console.print(f"error: section(s) failed: {', '.join(failed)} (see the report)",
+                          markup=False, highlight=False)
+        raise typer.Exit(1)

@@ -56,13 +56,13 @@ from relaxgrip.experiments.stiffness_modulation import (
     ROOM_C,
     GraspRun,
     finite_figures,
-    json_safe,
     run_grasp,
 )
 from relaxgrip.experiments.tasks import TaskResult
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.perception.pipeline import Perception
+from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig, get_object
 
 FloatArray = NDArray[np.float64]

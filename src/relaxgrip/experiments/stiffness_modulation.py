@@ -77,6 +77,7 @@ from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.perception.features import marker_pose
 from relaxgrip.perception.pipeline import Perception
+from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig, get_object
 from relaxgrip.validate import check_positive
 
@@ -102,7 +103,6 @@ __all__ = [
     "finite_figures",
     "force_band_n",
     "hammer_task",
-    "json_safe",
     "orange_task",
     "run_contact",
     "run_grasp",
@@ -213,21 +213,6 @@ def rate_n_per_s(t_s: FloatArray, force_n: FloatArray, window_s: float = RATE_WI
     # np.convolve flips the kernel: pass it reversed to correlate.
     out[half:-half] = np.convolve(force_n, kernel[::-1], mode="valid")
     return out
-
-
-def _json_value(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _json_value(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_value(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def json_safe(obj: dict[str, Any]) -> dict[str, Any]:
-    """``obj`` with every non-finite float (nan, inf) replaced by ``None``, recursively."""
-    return {k: _json_value(v) for k, v in obj.items()}
 
 
 def finite_figures(figures: dict[str, float]) -> dict[str, float]:

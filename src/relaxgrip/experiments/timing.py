@@ -166,10 +166,8 @@ def run_timing(seed: int = 0, quick: bool = False) -> TimingResult:
     from relaxgrip.perception.marker import (
         MarkerTracker,
         PoseSolver,
-        detect_markers,
+        locate_marker,
         make_detector,
-        refine_corners_by_edges,
-        to_gray,
     )
     from relaxgrip.perception.pipeline import Perception
     from relaxgrip.perception.thermal import ThermalPerception
@@ -188,12 +186,7 @@ def run_timing(seed: int = 0, quick: bool = False) -> TimingResult:
         solver = PoseSolver(rig.marker.size_m, rig.rgb.intrinsics)
 
         def full_frame(i: int) -> object:
-            gray = to_gray(np.asarray(grasp.rgb[i].image, dtype=np.uint8))
-            found = detect_markers(gray, detector)
-            if not found:
-                return None
-            corners = refine_corners_by_edges(gray, found[0].corners_px, rig.rgb.intrinsics)
-            return solver.solve(found[0].corners_px if corners is None else corners)
+            return locate_marker(np.asarray(grasp.rgb[i].image, dtype=np.uint8), detector, solver)
 
         for _ in range(passes):
             tracker = MarkerTracker(rig.rgb.intrinsics, rig.marker)

@@ -47,6 +47,7 @@ __all__ = [
     "TrackStatus",
     "detect_markers",
     "estimate_pose",
+    "locate_marker",
     "make_detector",
     "mean_rotation",
     "refine_corners_by_edges",
@@ -350,6 +351,7 @@ class PoseSolver:
     def __init__(self, marker_size_m: float, intrinsics: CameraIntrinsics) -> None:
         h = marker_size_m / 2.0
         self._object = np.array([[-h, h, 0.0], [h, h, 0.0], [h, -h, 0.0], [-h, -h, 0.0]])
+        self.intrinsics = intrinsics
         self._matrix = intrinsics.matrix
         self._dist = intrinsics.dist_coeffs
 
@@ -405,6 +407,24 @@ def estimate_pose(
     MarkerPose
     """
     return PoseSolver(marker_size_m, intrinsics).solve(corners_px, previous)
+
+
+def locate_marker(
+    image: NDArray[np.uint8],
+    detector: cv2.aruco.ArucoDetector,
+    solver: PoseSolver,
+) -> MarkerPose | None:
+    """The first marker detected on the whole frame, edge-fitted corners, and its pose.
+
+    No tracking and no region of interest: what a detector-only pipeline
+    (the paper's) does on every frame.  ``None`` if no marker is found.
+    """
+    gray = to_gray(np.asarray(image, dtype=np.uint8))
+    found = detect_markers(gray, detector)
+    if not found:
+        return None
+    corners = refine_corners_by_edges(gray, found[0].corners_px, solver.intrinsics)
+    return solver.solve(found[0].corners_px if corners is None else corners)
 
 
 def rotation_angle(rotation: FloatArray) -> float:
