@@ -85,3 +85,22 @@ def test_a_failing_section_is_reported_and_the_others_kept(monkeypatch, capsys, 
     assert "## Stiffness characterization" in report
     results = json.loads((out / "results.json").read_text())
     assert results["sections"]["boom"]["results"] == {"error": "RuntimeError: the twin caught fire"}
+
+
+def test_task_json_gives_success_criteria_and_figures(monkeypatch, capsys):
+    code, out, err = run_main(["task", "can", "--seed", "1", "--json"], monkeypatch, capsys)
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["task"] == "can"
+    assert d["seed"] == 1
+    assert d["success"] is True
+    assert d["criteria"] == {"compliant_not_crushed": True, "compliant_holds": True,
+                             "stiff_crushes": True}
+    assert d["figures"]["stiff_plastic_mm"] > 0.0 == d["figures"]["compliant_plastic_mm"]
+
+
+def test_task_prints_its_verdict_and_criteria(monkeypatch, capsys):
+    code, out, err = run_main(["task", "can"], monkeypatch, capsys)
+    assert code == 0, err
+    assert "success" in out
+    assert "stiff_crushes" in out
