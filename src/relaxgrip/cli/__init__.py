@@ -15,9 +15,11 @@ from relaxgrip.cli import (  # noqa: F401  (registers commands)
     characterize,
     experiments,
     fit,
+    hardware,
     hold,
     learning,
     perceive,
+    recording,
 )
 from relaxgrip.cli._app import app, err_console
 from relaxgrip.errors import InputError

@@ -47,6 +47,12 @@ def hold(
         show_default=False)] = None,
     jobs: Annotated[int, typer.Option("--jobs", help="Parallel holds with --compare.")] = 2,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    backend: Annotated[str, typer.Option(
+        "--backend", help="twin, or emulator: the twin behind the MCU emulator over a pty "
+                          "serial link (virtual time).")] = "twin",
+    record: Annotated[Path | None, typer.Option(
+        "--record", help="Record the run to this MCAP file (not with --compare).",
+        show_default=False)] = None,
 ) -> None:
     """Close on the force ball to the target and hold it, scoring the steady state (100-280 s)."""
     from relaxgrip.control import EstimatorKind, check_target_n
@@ -71,6 +77,13 @@ def hold(
         raise InputError(f"--seed must be >= 0, got {seed}")
     if jobs < 1:
         raise InputError(f"--jobs must be >= 1, got {jobs}")
+    if backend not in ("twin", "emulator"):
+        raise InputError(f"--backend must be twin or emulator, got {backend!r}")
+    if compare and backend != "twin":
+        raise InputError("--compare runs on the twin backend only")
+    if record is not None and compare:
+        raise InputError("--record records one run: record each estimator with "
+                         "--estimator NAME --record FILE instead of --compare")
     if plot is None and compare:
         plot = DEFAULT_COMPARE_PLOT
     if plot is not None:
@@ -100,7 +113,15 @@ def hold(
             console.print(f"figure: {figure}")
         return
     with console.status(f"holding with {estimator} …") if not json_out else nullcontext():
-        result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle)
+        if record is None:
+            result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
+                              backend=backend)
+        else:
+            from relaxgrip.recording import McapRecorder
+
+            with McapRecorder(record) as recorder:
+                result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
+                                  backend=backend, recorder=recorder)
     figure = None
     if plot is not None:
         from relaxgrip.plots.holding import plot_hold

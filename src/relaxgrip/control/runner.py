@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -29,7 +29,7 @@ from relaxgrip.perception.marker import TrackStatus
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["LoopResult", "run_loop"]
+__all__ = ["LoopRecorder", "LoopResult", "run_loop"]
 
 _STATUS = tuple(TrackStatus)
 _COLUMNS = (
@@ -92,6 +92,21 @@ class LoopResult:
                 "log": self.log.to_dict()}
 
 
+class LoopRecorder(Protocol):
+    """Something that records a run as it goes (e.g. :class:`relaxgrip.recording.McapRecorder`).
+
+    It only records: it must not change the controller, the backend or the command.
+    """
+
+    def start(self, info: BackendInfo, controller: GraspController, t_s: float) -> None:
+        """The run starts at ``t_s`` (the controller has just been started)."""
+        ...
+
+    def step(self, obs: Observation, controller: GraspController, command: Command) -> None:
+        """One control period has been decided (``command`` applied)."""
+        ...
+
+
 def _truth_row(obs: Observation) -> tuple[float, float, float, float, float]:
     truth = obs.truth
     if truth is None:
@@ -109,6 +124,7 @@ def run_loop(
     max_duration_s: float,
     rate_hz: float = 30.0,
     on_step: Callable[[Observation, GraspController], bool | None] | None = None,
+    recorder: LoopRecorder | None = None,
 ) -> LoopResult:
     """Run one grasp until it is done or ``max_duration_s`` has passed.
 
@@ -129,6 +145,8 @@ def run_loop(
     on_step : callable, optional
         Called after every step with the observation and the controller;
         returning ``True`` ends the run (an experiment's own stop condition).
+    recorder : LoopRecorder, optional
+        Told of the start and of every period, the last one included.
 
     Returns
     -------
@@ -137,6 +155,8 @@ def run_loop(
     dt = 1.0 / rate_hz
     t0 = clock.now()
     controller.start(plan, t0)
+    if recorder is not None:
+        recorder.start(backend.info, controller, t0)
     rows: list[tuple[float, ...]] = []
     n_steps = math.ceil(max_duration_s * rate_hz)
     try:
@@ -145,6 +165,8 @@ def run_loop(
             command = controller.step(obs)
             backend.act(command)
             rows.append(_row(obs, controller, command))
+            if recorder is not None:
+                recorder.step(obs, controller, command)
             if controller.phase in (GraspPhase.DONE, GraspPhase.STOPPED):
                 break
             if on_step is not None and on_step(obs, controller):

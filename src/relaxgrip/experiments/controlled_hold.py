@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from relaxgrip.backend import Gripper
 from relaxgrip.clock import VirtualClock
 from relaxgrip.control import (
     EstimatorKind,
@@ -29,6 +30,7 @@ from relaxgrip.control import (
     make_estimator,
     run_loop,
 )
+from relaxgrip.control.runner import LoopRecorder
 from relaxgrip.errors import InputError
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
@@ -158,6 +160,25 @@ def _check(estimator: EstimatorKind | str, target_n: float, temp_c: float,
     return kind
 
 
+#: Backends a hold runs on: the twin itself, or the twin behind the MCU emulator.
+HOLD_BACKENDS = ("twin", "emulator")
+
+
+def _make_backend(backend: str, cfg: TwinConfig, seed: int, clock: VirtualClock) -> Gripper:
+    """The twin, or the twin behind an in-process MCU emulator on a pty (reset, ready)."""
+    if backend == "twin":
+        return GripperTwin(cfg, seed=seed, clock=clock)
+    from relaxgrip.hardware.emulator import open_emulated_gripper
+
+    gripper, _ = open_emulated_gripper(cfg, seed, clock)
+    try:
+        gripper.reset()
+    except BaseException:
+        gripper.close()
+        raise
+    return gripper
+
+
 def run_hold(
     estimator: EstimatorKind | str = EstimatorKind.RELAX,
     target_n: float = 5.0,
@@ -166,6 +187,8 @@ def run_hold(
     seed: int = 0,
     models: ModelBundle | None = None,
     config: TwinConfig | None = None,
+    backend: str = "twin",
+    recorder: LoopRecorder | None = None,
 ) -> HoldResult:
     """Close on the force ball to ``target_n`` at ``temp_c`` and hold it for ``duration_s``.
 
@@ -186,6 +209,13 @@ def run_hold(
         ICFN and RCFN (default: the shipped models).
     config : TwinConfig, optional
         Twin (default: the force ball at 80 mm, cameras on).
+    backend : {"twin", "emulator"}
+        ``twin`` drives the twin directly; ``emulator`` puts the same twin
+        behind the MCU emulator, so that every command and frame crosses a
+        real pseudo-terminal serial link (in virtual-time lockstep).
+    recorder : LoopRecorder, optional
+        Records every period (e.g. :class:`relaxgrip.recording.McapRecorder`);
+        the caller closes it.
 
     Returns
     -------
@@ -198,16 +228,19 @@ def run_hold(
         started (no contact, target out of reach).
     """
     kind = _check(estimator, target_n, temp_c, duration_s)
+    if backend not in HOLD_BACKENDS:
+        raise InputError(f"unknown backend {backend!r}; known: {', '.join(HOLD_BACKENDS)}")
     bundle = models if models is not None else load_default_models()
     base = config if config is not None else TwinConfig()
     cfg = replace(base, initial_temp_c=temp_c)
     clock = VirtualClock()
-    twin = GripperTwin(cfg, seed=seed, clock=clock)
+    twin = _make_backend(backend, cfg, seed, clock)
     controller = GraspController(cfg.rig, make_estimator(kind, bundle.icfn, bundle.rcfn),
                                  heat=cfg.heat)
     plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False)
     try:
-        loop = run_loop(twin, controller, clock, plan, duration_s + SETUP_ALLOWANCE_S)
+        loop = run_loop(twin, controller, clock, plan, duration_s + SETUP_ALLOWANCE_S,
+                        recorder=recorder)
     finally:
         twin.close()
     onset = loop.hold_onset_s()

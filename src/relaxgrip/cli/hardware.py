@@ -1,0 +1,115 @@
+"""``relaxgrip emulator`` and ``relaxgrip check-rig``: the MCU emulator and a rig's self-check."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from relaxgrip.cli._app import app, console, emit_json
+from relaxgrip.errors import InputError
+
+DEFAULT_SOCKET = "/tmp/relaxgrip-emulator/frames.sock"
+
+
+@app.command("emulator")
+def emulator(
+    rig: Annotated[Path | None, typer.Option(
+        "--rig", help="Rig file whose geometry the twin takes; its [serial] port becomes a "
+                      "link to the pty and its [emulator] socket the frame channel.",
+        show_default=False)] = None,
+    seed: Annotated[int | None, typer.Option(
+        "--seed", help="Twin seed (default: the rig file's, else 0).", show_default=False)
+    ] = None,
+    duration_s: Annotated[float | None, typer.Option(
+        "--duration-s", help="Stop after this long (default: until Ctrl-C).",
+        show_default=False)] = None,
+) -> None:
+    """Run the twin behind a pseudo-terminal as an emulated MCU, in wall-clock time."""
+    from relaxgrip.clock import WallClock
+    from relaxgrip.hardware.emulator import McuEmulator, twin_config_for_rig
+    from relaxgrip.hardware.rig_file import load_rig
+    from relaxgrip.twin import TwinConfig
+
+    if seed is not None and seed < 0:
+        raise InputError(f"--seed must be >= 0, got {seed}")
+    if duration_s is not None and not duration_s > 0:
+        raise InputError(f"--duration-s must be > 0, got {duration_s}")
+    spec = load_rig(rig) if rig is not None else None
+    config = twin_config_for_rig(spec) if spec is not None else TwinConfig()
+    socket_path = (spec.emulator.socket if spec is not None and spec.emulator is not None
+                   else DEFAULT_SOCKET)
+    run_seed = seed if seed is not None else (
+        spec.emulator.seed if spec is not None and spec.emulator is not None else 0)
+    emu = McuEmulator(config, run_seed, WallClock())
+    link: Path | None = None
+    try:
+        emu.listen(socket_path)
+        if spec is not None:
+            link = Path(spec.serial.port)
+            if link.exists() and not link.is_symlink():
+                raise InputError(f"[serial] port {link} exists and is not a link: "
+                                 "the emulator will not replace it")
+            link.parent.mkdir(parents=True, exist_ok=True)
+            with contextlib.suppress(FileNotFoundError):
+                link.unlink()
+            os.symlink(emu.port, link)
+        emu.start()
+        console.print(f"port: {emu.port}" + (f" (linked from {link})" if link else ""),
+                      highlight=False)
+        console.print(f"frames: {socket_path}", highlight=False)
+        console.print(f"seed {run_seed}; watchdog {emu.mcu_config.watchdog_default_ms} ms; "
+                      "Ctrl-C stops", highlight=False)
+        deadline = None if duration_s is None else time.monotonic() + duration_s
+        with contextlib.suppress(KeyboardInterrupt):
+            while deadline is None or time.monotonic() < deadline:
+                time.sleep(0.1)
+                if emu.error is not None:
+                    raise InputError(f"emulator stopped: {emu.error}")
+    finally:
+        emu.stop()
+        if link is not None and link.is_symlink():
+            link.unlink()
+
+
+@app.command("check-rig")
+def check_rig_command(
+    rig: Annotated[Path, typer.Argument(help="Rig file (TOML).")],
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Load a rig file, handshake with its MCU, grab a frame per camera, find the marker."""
+    from relaxgrip.hardware.rig_check import check_rig
+    from relaxgrip.hardware.rig_file import load_rig
+
+    spec = load_rig(rig)
+    result = check_rig(spec)
+    if json_out:
+        emit_json(result.to_dict())
+        return
+    table = Table(title=f"rig {result.rig}")
+    table.add_column("item")
+    table.add_column("found")
+    ir_min, ir_mean, ir_max = result.ir_temp_c
+    rows = [
+        ("serial port", result.port),
+        ("firmware", result.firmware_id),
+        ("MCU watchdog", f"{result.watchdog_ms} ms"),
+        ("MCU velocity limit", f"{result.max_velocity_mm_s:g} mm/s"),
+        ("MCU faults", ", ".join(result.fault_flags) or "none"),
+        ("RGB frame", "x".join(str(n) for n in result.rgb_shape)),
+        ("thermal frame", "x".join(str(n) for n in result.ir_shape)),
+        ("thermal min / mean / max", f"{ir_min:.1f} / {ir_mean:.1f} / {ir_max:.1f} °C"),
+        ("marker", "found" if result.marker_found else "NOT FOUND"),
+    ]
+    if result.marker_found:
+        rows += [("marker distance", f"{result.marker_distance_mm:.1f} mm"),
+                 ("marker vs rig file", f"{result.marker_offset_mm:.1f} mm off"),
+                 ("reprojection", f"{result.reprojection_px:.2f} px")]
+    for item, found in rows:
+        table.add_row(item, found)
+    console.print(table)

@@ -1,0 +1,376 @@
+"""The MCU emulator: the digital twin behind a pseudo-terminal, speaking the MCU protocol.
+
+:class:`McuEmulator` runs :class:`~relaxgrip.hardware.protocol.McuEndpoint`
+(the firmware's state machine, watchdog included) on the master side of a
+pseudo-terminal, with a :class:`TwinPlant` (a
+:class:`~relaxgrip.twin.GripperTwin`) as its motor, encoder and heaters.  The
+host opens the slave side like any serial port.  The twin's RGB and infrared
+frames (and its truth) go out on the frame channel
+(:mod:`relaxgrip.hardware.frame_channel`), a Unix socket.
+
+Timing (``docs/emulator.md``): in **wall-clock** mode (``relaxgrip
+emulator``) the emulator runs on its own clock like the real MCU.  In
+**lockstep** (in process, :func:`open_emulated_gripper`) the emulator and the
+host share one :class:`~relaxgrip.clock.VirtualClock`: the emulator handles
+each host frame at the host's current virtual time and the host's loop alone
+moves time, so a 280 s hold runs as fast as the CPU allows and sees exactly
+what the twin backend would.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import threading
+import tty
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from relaxgrip.backend import Command, Frame
+from relaxgrip.clock import Clock, VirtualClock
+from relaxgrip.hardware.cameras import EmulatorChannel, EmulatorFrameSource
+from relaxgrip.hardware.frame_channel import (
+    KIND_IR,
+    KIND_RGB,
+    encode_frame_message,
+    encode_tick,
+)
+from relaxgrip.hardware.gripper import GuardedTransport, SerialGripper
+from relaxgrip.hardware.protocol.client import McuClient
+from relaxgrip.hardware.protocol.mcu import AppliedOutputs, McuConfig, McuCore, McuEndpoint
+from relaxgrip.hardware.protocol.transport import FdTransport, SerialTransport
+from relaxgrip.hardware.rig_file import LimitsSpec, RigFile
+from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
+
+__all__ = [
+    "FramePublisher",
+    "McuEmulator",
+    "TwinPlant",
+    "open_emulated_gripper",
+    "twin_config_for_rig",
+]
+
+
+class FramePublisher:
+    """Server end of the frame channel: sends messages to the connected host, if any.
+
+    A send that fails drops the host (it may reconnect); the MCU side never
+    waits for a host that is not there.  ``muted`` streams are not sent (a
+    stalled camera, for tests).
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._client: socket.socket | None = None
+        self.muted: set[int] = set()
+        self.messages_sent = 0
+
+    def attach(self, client: socket.socket, send_timeout_s: float = 5.0) -> None:
+        """Send to ``client`` from now on (replacing any previous host).
+
+        A host that reads nothing for ``send_timeout_s`` is dropped, so that
+        the MCU loop never hangs on the frame channel.
+        """
+        client.settimeout(send_timeout_s)
+        with self._lock:
+            old, self._client = self._client, client
+        if old is not None:
+            old.close()
+
+    @property
+    def connected(self) -> bool:
+        """Whether a host is attached."""
+        return self._client is not None
+
+    def send(self, kind: int, data: bytes) -> None:
+        """Send one message of ``kind`` (skipped if muted or nobody listens)."""
+        if kind in self.muted:
+            return
+        with self._lock:
+            client = self._client
+            if client is None:
+                return
+            try:
+                client.sendall(data)
+                self.messages_sent += 1
+            except OSError:
+                client.close()
+                self._client = None
+
+    def close(self) -> None:
+        """Drop the host."""
+        with self._lock:
+            client, self._client = self._client, None
+        if client is not None:
+            with contextlib.suppress(OSError):
+                client.shutdown(socket.SHUT_RDWR)
+            client.close()
+
+
+class TwinPlant:
+    """The twin as the MCU's :class:`~relaxgrip.hardware.protocol.Plant`.
+
+    Reading the encoder integrates the twin to that time and publishes the
+    frames captured on the way and a tick (truth, force readings) on the
+    frame channel, before the MCU's answer goes out.
+
+    Parameters
+    ----------
+    twin : GripperTwin
+        The twin, on the emulator's clock.
+    publisher : FramePublisher
+        Frame channel.
+    """
+
+    def __init__(self, twin: GripperTwin, publisher: FramePublisher) -> None:
+        self.twin = twin
+        self.publisher = publisher
+        self._t_s = -float("inf")
+        self._sent: dict[int, int] = {}
+        self._ticks = 0
+        self._position_um = 0
+
+    def _publish(self, kind: int, frame: Frame | None) -> None:
+        if frame is not None and self._sent.get(kind) != frame.seq:
+            self.publisher.send(kind, encode_frame_message(kind, frame))
+            self._sent[kind] = frame.seq
+
+    def encoder_position_um(self, now_s: float) -> int:
+        """Integrate the twin to ``now_s``, publish frames and a tick, read the encoder."""
+        if now_s > self._t_s:
+            obs = self.twin.observe()
+            self._publish(KIND_RGB, obs.rgb)
+            self._publish(KIND_IR, obs.ir)
+            self.publisher.send(0, encode_tick(self._ticks, obs.t_s, obs.truth, obs.force_ref))
+            self._ticks += 1
+            self._t_s = now_s
+            self._position_um = round(obs.motor_position_mm * 1000.0)
+        return self._position_um
+
+    def apply(self, outputs: AppliedOutputs, now_s: float) -> None:
+        """Drive the twin's motor and heaters with ``outputs`` from ``now_s`` on."""
+        self.twin.act(Command(motor_velocity_mm_s=outputs.velocity_mm_s,
+                              heater_duty=outputs.heater_duty))
+
+
+class _TamperableFd(FdTransport):
+    """The MCU's end of the pty; ``tamper`` rewrites what it sends (fault injection)."""
+
+    tamper: Callable[[bytes], bytes] | None = None
+    fd_closed = False
+
+    def write(self, data: bytes) -> None:
+        """Send ``data`` (after ``tamper``, if set)."""
+        if self.tamper is not None:
+            data = self.tamper(data)
+        super().write(data)
+
+    def close_fd(self) -> None:
+        """Close the descriptor once (the peer then sees a dead line)."""
+        if not self.fd_closed:
+            os.close(self.fd)
+            self.fd_closed = True
+
+
+@dataclass
+class _Pty:
+    master: int
+    slave: int
+    path: str
+
+
+def _open_pty() -> _Pty:
+    master, slave = os.openpty()
+    tty.setraw(master)
+    return _Pty(master, slave, os.ttyname(slave))
+
+
+class McuEmulator:
+    """The twin behind a pseudo-terminal, served by a thread.
+
+    Parameters
+    ----------
+    config : TwinConfig
+        The twin.
+    seed : int
+        Twin seed.
+    clock : Clock
+        Emulator clock: the host's :class:`~relaxgrip.clock.VirtualClock` in
+        lockstep, a wall clock otherwise.
+    mcu : McuConfig, optional
+        Firmware constants (default: velocity limit of the twin's motor).
+    poll_s : float
+        Wall-clock poll period of the serving thread (s).
+    """
+
+    def __init__(self, config: TwinConfig | None = None, seed: int = 0,
+                 clock: Clock | None = None, mcu: McuConfig | None = None,
+                 poll_s: float = 0.002) -> None:
+        self.config = config if config is not None else TwinConfig()
+        self.clock: Clock = clock if clock is not None else VirtualClock()
+        self.twin = GripperTwin(self.config, seed=seed, clock=self.clock)
+        max_um_s = round(self.config.motor.max_velocity_mm_s * 1000.0)
+        self.mcu_config = mcu if mcu is not None else McuConfig(max_velocity_um_s=max_um_s)
+        self.publisher = FramePublisher()
+        self.plant = TwinPlant(self.twin, self.publisher)
+        self._pty = _open_pty()
+        self.transport = _TamperableFd(self._pty.master)
+        self.endpoint = McuEndpoint(self.transport, self.clock,
+                                    McuCore(self.mcu_config, start_s=self.clock.now()),
+                                    self.plant)
+        self.poll_s = poll_s
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._server: socket.socket | None = None
+        self._accept_thread: threading.Thread | None = None
+        self.error: BaseException | None = None
+
+    @property
+    def port(self) -> str:
+        """Path of the pseudo-terminal's slave side: the host's serial port."""
+        return self._pty.path
+
+    @property
+    def tamper_tx(self) -> Callable[[bytes], bytes] | None:
+        """Applied to every frame the MCU sends (fault injection in tests)."""
+        return self.transport.tamper
+
+    @tamper_tx.setter
+    def tamper_tx(self, tamper: Callable[[bytes], bytes] | None) -> None:
+        self.transport.tamper = tamper
+
+    def start(self) -> McuEmulator:
+        """Start serving on a thread."""
+        if self._thread is not None:
+            return self
+        self._thread = threading.Thread(target=self._serve, name="mcu-emulator", daemon=True)
+        self._thread.start()
+        return self
+
+    def _serve(self) -> None:
+        try:
+            self.endpoint.serve(self._stop, self.poll_s)
+        except BaseException as exc:  # reported by stop(); the host sees a dead link
+            if not self._stop.is_set():
+                self.error = exc
+
+    def connect_host(self) -> socket.socket:
+        """An in-process frame channel: a connected socket pair; return the host's end."""
+        mine, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+        self.publisher.attach(mine)
+        return theirs
+
+    def listen(self, path: str) -> None:
+        """Serve the frame channel on a Unix socket at ``path`` (one host at a time)."""
+        p = Path(path)
+        p.parent.mkdir(parents=True, exist_ok=True)
+        with contextlib.suppress(FileNotFoundError):
+            p.unlink()
+        server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        server.bind(str(p))
+        server.listen(1)
+        server.settimeout(0.2)
+        self._server = server
+
+        def accept() -> None:
+            while not self._stop.is_set():
+                try:
+                    client, _ = server.accept()
+                except TimeoutError:
+                    continue
+                except OSError:
+                    return
+                self.publisher.attach(client)
+
+        self._accept_thread = threading.Thread(target=accept, name="frame-channel-accept",
+                                               daemon=True)
+        self._accept_thread.start()
+
+    def disconnect(self) -> None:
+        """Unplug the cable: stop serving and close the pseudo-terminal's master side."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        self.transport.close_fd()
+
+    def stop(self) -> None:
+        """Stop serving and release the pseudo-terminal and the frame channel."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        self.publisher.close()
+        if self._server is not None:
+            self._server.close()
+            if self._accept_thread is not None:
+                self._accept_thread.join(timeout=2.0)
+        self.transport.close_fd()
+        with contextlib.suppress(OSError):
+            os.close(self._pty.slave)
+
+
+def twin_config_for_rig(rig: RigFile, base: TwinConfig | None = None) -> TwinConfig:
+    """The twin an emulator runs for a rig file: its geometry and motor speed limit.
+
+    Raises
+    ------
+    InputError
+        If the rig's finger does not match the twin's beam model (length).
+    """
+    cfg = base if base is not None else TwinConfig()
+    motor = replace(cfg.motor, max_velocity_mm_s=rig.limits.max_motor_speed_mm_s)
+    return replace(cfg, rig=rig.geometry, motor=motor)
+
+
+def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
+                          clock: VirtualClock | None = None, *,
+                          mcu: McuConfig | None = None,
+                          grace_s: float = 2.0,
+                          reply_timeout_s: float = 0.1) -> tuple[SerialGripper, McuEmulator]:
+    """An in-process emulator thread and a :class:`SerialGripper` on its pty, in lockstep.
+
+    Parameters
+    ----------
+    config : TwinConfig, optional
+        The emulated twin.
+    seed : int
+        Twin seed.
+    clock : VirtualClock, optional
+        Shared virtual clock (a new one by default).
+    mcu : McuConfig, optional
+        Firmware constants of the emulated MCU.
+    grace_s : float
+        Wall-clock wait after which silence counts as a timeout (s).
+    reply_timeout_s : float
+        Host reply timeout in virtual time (s).
+
+    Returns
+    -------
+    (SerialGripper, McuEmulator)
+        The gripper (closing it stops the emulator) and the emulator.
+    """
+    clk = clock if clock is not None else VirtualClock()
+    emu = McuEmulator(config, seed, clk, mcu)
+    try:
+        host_sock = emu.connect_host()
+        emu.start()
+        serial = SerialTransport(emu.port)
+    except BaseException:
+        emu.stop()
+        raise
+    transport = GuardedTransport(serial, clk, grace_s)
+    client = McuClient(transport, clk, reply_timeout_s=reply_timeout_s)
+    channel = EmulatorChannel(host_sock, clk, lockstep=True, wait_timeout_s=grace_s)
+    cfg = emu.config
+    rgb = EmulatorFrameSource(channel, "rgb", max(0.2, 3.0 / cfg.rig.rgb.rate_hz))
+    ir = EmulatorFrameSource(channel, "ir", max(2.5, 2.5 / cfg.rig.ir.rate_hz))
+    limits = LimitsSpec(max_motor_speed_mm_s=cfg.motor.max_velocity_mm_s)
+    gripper = SerialGripper(client, rgb if cfg.rgb is not None else None,
+                            ir if cfg.ir is not None else None, limits=limits,
+                            name="emulator", truth_feed=channel.take_truth,
+                            twin_version=TWIN_VERSION, on_close=emu.stop)
+    return gripper, emu
+
+

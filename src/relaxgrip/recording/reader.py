@@ -1,0 +1,364 @@
+"""Read a relaxgrip MCAP recording back: messages, periods, frames; recover a killed one.
+
+A complete recording ends with MCAP's footer and magic.  A recording whose
+writer was killed has neither: its complete chunks are readable one after the
+other with mcap's :class:`mcap.stream_reader.StreamReader` (a linear scan that
+needs no summary), until the record cut short by the kill, where the scan
+raises.  :func:`iter_messages` with ``tolerant=True`` stops there quietly, so a
+killed recording gives everything up to its last flushed chunk; without it, an
+incomplete file is an :class:`~relaxgrip.errors.InputError` naming
+``relaxgrip recover``.  :func:`recover` rewrites the readable part as a
+complete file (summary, footer), which every MCAP tool then opens.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import struct
+import typing
+from collections.abc import Iterator
+from dataclasses import dataclass, field, fields, is_dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from relaxgrip.backend import Frame
+from relaxgrip.errors import InputError
+from relaxgrip.recording.recorder import require_mcap
+from relaxgrip.recording.schemas import RECORDING_FORMAT, RECORDING_VERSION
+from relaxgrip.rig import RigGeometry
+
+__all__ = ["Period", "RecoverReport", "iter_messages", "iter_periods", "read_session",
+           "recover", "rig_from_dict"]
+
+_MAGIC = b"\x89MCAP0\r\n"
+_FOOTER_OPCODE = 0x02
+_FOOTER_RECORD = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, offset start, crc
+
+
+def _check_file(path: Path, tolerant: bool) -> bool:
+    """Whether ``path`` is a complete MCAP file; raise on a missing or foreign one."""
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as f:
+            head = f.read(len(_MAGIC))
+            complete = False
+            if size >= 2 * len(_MAGIC) + _FOOTER_RECORD:
+                f.seek(size - len(_MAGIC) - _FOOTER_RECORD)
+                tail = f.read()
+                complete = tail[0] == _FOOTER_OPCODE and tail.endswith(_MAGIC)
+    except FileNotFoundError:
+        raise InputError(f"{path}: no such recording") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a directory, not a recording") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
+    if head != _MAGIC:
+        raise InputError(f"{path}: not an MCAP file")
+    if not complete and not tolerant:
+        raise InputError(f"{path}: the recording is truncated (no MCAP footer: the recorder "
+                         f"was killed?); run `relaxgrip recover {path} OUT.mcap`")
+    return complete
+
+
+def iter_records(path: Path, tolerant: bool = False) -> Iterator[Any]:
+    """MCAP records of ``path`` in file order, chunks opened (schemas, channels, messages, ...).
+
+    Parameters
+    ----------
+    path : Path
+        The recording.
+    tolerant : bool
+        Read an incomplete file up to its last complete chunk instead of raising.
+
+    Raises
+    ------
+    InputError
+        Missing, foreign or (unless ``tolerant``) truncated or damaged file.
+    """
+    require_mcap()
+    from mcap.exceptions import McapError
+    from mcap.stream_reader import StreamReader
+
+    path = Path(path)
+    _check_file(path, tolerant)
+    with open(path, "rb") as f:
+        records = StreamReader(f, validate_crcs=True).records
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                return
+            except (McapError, struct.error, ValueError, EOFError) as exc:
+                # The record the writer was killed in (or a damaged one): what came
+                # before is complete; nothing after it can be trusted.
+                if tolerant:
+                    return
+                raise InputError(f"{path}: damaged MCAP data ({type(exc).__name__})") from None
+            except Exception as exc:  # decompression libraries raise their own types
+                if tolerant:
+                    return
+                raise InputError(f"{path}: damaged MCAP data ({type(exc).__name__})") from None
+            yield record
+
+
+def iter_messages(path: Path, tolerant: bool = False) -> Iterator[tuple[str, int, dict[str, Any]]]:
+    """``(topic, log_time_ns, message)`` of every JSON message, in file order.
+
+    Raises
+    ------
+    InputError
+        As :func:`iter_records`, or a message that is not JSON.
+    """
+    from mcap.records import Channel, Message
+
+    topics: dict[int, str] = {}
+    for record in iter_records(path, tolerant):
+        if isinstance(record, Channel):
+            topics[record.id] = record.topic
+        elif isinstance(record, Message):
+            topic = topics.get(record.channel_id)
+            if topic is None:
+                raise InputError(f"{path}: a message on unknown channel {record.channel_id}")
+            try:
+                yield topic, record.log_time, json.loads(record.data)
+            except (UnicodeDecodeError, json.JSONDecodeError):
+                raise InputError(f"{path}: a message on {topic} is not JSON") from None
+
+
+def read_session(path: Path, tolerant: bool = False) -> dict[str, Any]:
+    """The recording's session message (backend, estimator, plan, rig).
+
+    Raises
+    ------
+    InputError
+        The file is not a relaxgrip recording, or one newer than this code reads.
+    """
+    for topic, _, message in iter_messages(path, tolerant):
+        if topic == "/relaxgrip/session":
+            return _check_session(path, message)
+        break
+    raise InputError(f"{path}: not a relaxgrip recording (no session message first)")
+
+
+def _check_session(path: Path, session: dict[str, Any]) -> dict[str, Any]:
+    if session.get("format") != RECORDING_FORMAT:
+        raise InputError(f"{path}: not a relaxgrip recording")
+    if int(session.get("format_version", 0)) > RECORDING_VERSION:
+        raise InputError(f"{path}: recording format {session.get('format_version')} is newer "
+                         f"than this relaxgrip reads ({RECORDING_VERSION})")
+    return session
+
+
+def rig_from_dict(data: dict[str, Any]) -> RigGeometry:
+    """Rebuild the :class:`RigGeometry` a recording's session stores.
+
+    Raises
+    ------
+    InputError
+        If the stored rig does not describe one.
+    """
+    try:
+        rig = _build(RigGeometry, data)
+    except (TypeError, ValueError, KeyError) as exc:
+        raise InputError(f"the recording's rig is not readable ({exc})") from None
+    assert isinstance(rig, RigGeometry)
+    return rig
+
+
+def _build(cls: type, data: Any) -> Any:
+    hints = typing.get_type_hints(cls)
+    kwargs = {}
+    for f in fields(cls):
+        if not f.init or f.name not in data:
+            continue
+        kind = hints[f.name]
+        value = data[f.name]
+        if isinstance(kind, type) and is_dataclass(kind):
+            value = _build(kind, value)
+        elif isinstance(value, list):
+            value = tuple(value)
+        kwargs[f.name] = value
+    return cls(**kwargs)
+
+
+@dataclass
+class Period:
+    """One control period of a recording.
+
+    Attributes
+    ----------
+    t_s : float
+        Loop time (s).
+    rgb, ir : Frame or None
+        The latest frame of each stream at this period (decoded; repeated
+        between new frames, with the same ``seq``).
+    messages : dict of str to dict
+        This period's message per topic (``/relaxgrip/observation``, ...).
+    events : list of dict
+        This period's events (phase transitions, controller events, rezero).
+    """
+
+    t_s: float
+    rgb: Frame | None
+    ir: Frame | None
+    messages: dict[str, dict[str, Any]] = field(default_factory=dict)
+    events: list[dict[str, Any]] = field(default_factory=list)
+
+    def get(self, topic: str) -> dict[str, Any] | None:
+        """This period's message on ``topic``, if any."""
+        return self.messages.get(topic)
+
+
+def decode_rgb(message: dict[str, Any]) -> np.ndarray[Any, Any]:
+    """A ``foxglove.CompressedImage`` message as an RGB ``(H, W, 3)`` uint8 image."""
+    buf = np.frombuffer(base64.b64decode(message["data"]), dtype=np.uint8)
+    bgr = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise InputError(f"an RGB frame ({message.get('format')}) does not decode")
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def decode_ir(message: dict[str, Any]) -> np.ndarray[Any, Any]:
+    """A ``foxglove.RawImage`` ``32FC1`` message as a ``(H, W)`` float32 image (°C)."""
+    if message.get("encoding") != "32FC1":
+        raise InputError(f"infrared encoding {message.get('encoding')!r} is not 32FC1")
+    h, w = int(message["height"]), int(message["width"])
+    data = np.frombuffer(base64.b64decode(message["data"]), dtype="<f4")
+    if data.size != h * w:
+        raise InputError(f"an infrared frame has {data.size} values for {h}x{w}")
+    return data.reshape(h, w).astype(np.float32)
+
+
+def iter_periods(path: Path, tolerant: bool = False) -> Iterator[Period]:
+    """Every complete control period of a recording, with its frames decoded.
+
+    A period whose observation or estimate was lost (the end of a killed
+    recording) is not returned.
+
+    Raises
+    ------
+    InputError
+        As :func:`iter_messages`; a file that is not a relaxgrip recording.
+    """
+    rgb: Frame | None = None
+    ir: Frame | None = None
+    pending_rgb: dict[str, Any] | None = None
+    pending_ir: dict[str, Any] | None = None
+    current: Period | None = None
+    seen_session = False
+    for topic, _, message in iter_messages(path, tolerant):
+        if not seen_session:
+            if topic != "/relaxgrip/session":
+                raise InputError(f"{path}: not a relaxgrip recording (no session message first)")
+            _check_session(path, message)
+            seen_session = True
+            continue
+        if topic == "/rgb":
+            pending_rgb = message
+        elif topic == "/ir":
+            pending_ir = message
+        elif topic == "/relaxgrip/observation":
+            if current is not None and _complete(current):
+                yield current
+            t = float(message["t_s"])
+            if pending_rgb is not None:
+                rgb = Frame(_num(message.get("rgb_t_s"), t), int(message["rgb_seq"]),
+                            decode_rgb(pending_rgb))
+                pending_rgb = None
+            if pending_ir is not None:
+                ir = Frame(_num(message.get("ir_t_s"), t), int(message["ir_seq"]),
+                           decode_ir(pending_ir))
+                pending_ir = None
+            current = Period(t, rgb if message.get("rgb_seq") is not None else None,
+                             ir if message.get("ir_seq") is not None else None,
+                             {topic: message})
+        elif current is not None:
+            if topic == "/relaxgrip/events":
+                current.events.append(message)
+            else:
+                current.messages[topic] = message
+    if not seen_session:
+        raise InputError(f"{path}: not a relaxgrip recording (no messages)")
+    if current is not None and _complete(current):
+        yield current
+
+
+def _complete(period: Period) -> bool:
+    return "/relaxgrip/estimate" in period.messages and "/relaxgrip/phase" in period.messages
+
+
+def _num(value: Any, default: float) -> float:
+    return default if value is None else float(value)
+
+
+@dataclass(frozen=True)
+class RecoverReport:
+    """What :func:`recover` found.
+
+    Attributes
+    ----------
+    complete : bool
+        The source already had its footer.
+    messages : int
+        Messages written to the output.
+    channels : int
+        Channels written.
+    end_s : float
+        Log time of the last message (s); nan if none.
+    """
+
+    complete: bool
+    messages: int
+    channels: int
+    end_s: float
+
+
+def recover(src: Path, dst: Path) -> RecoverReport:
+    """Rewrite the readable part of a (killed) recording as a complete MCAP file.
+
+    Raises
+    ------
+    InputError
+        Missing or foreign source, nothing readable, or ``dst`` the same file.
+    """
+    require_mcap()
+    from mcap.records import Channel, Message, Schema
+    from mcap.writer import Writer
+
+    src, dst = Path(src), Path(dst)
+    complete = _check_file(src, tolerant=True)
+    if dst.exists() and os.path.samefile(src, dst):
+        raise InputError(f"{dst}: the output must be another file than the input")
+    schemas: dict[int, int] = {}
+    channels: dict[int, int] = {}
+    count = 0
+    end_ns = -1
+    tmp = dst.with_name(f".{dst.name}.partial")
+    with open(tmp, "wb") as out:
+        writer = Writer(out)
+        writer.start(profile="", library="relaxgrip recover")
+        for record in iter_records(src, tolerant=True):
+            if isinstance(record, Schema):
+                schemas[record.id] = writer.register_schema(record.name, record.encoding,
+                                                            record.data)
+            elif isinstance(record, Channel):
+                channels[record.id] = writer.register_channel(
+                    record.topic, record.message_encoding, schemas.get(record.schema_id, 0),
+                    dict(record.metadata))
+            elif isinstance(record, Message) and record.channel_id in channels:
+                writer.add_message(channels[record.channel_id], record.log_time, record.data,
+                                   record.publish_time, record.sequence)
+                count += 1
+                end_ns = max(end_ns, record.log_time)
+        writer.finish()  # type: ignore[no-untyped-call]
+    if count == 0:
+        tmp.unlink(missing_ok=True)
+        raise InputError(f"{src}: no complete message to recover")
+    os.replace(tmp, dst)
+    return RecoverReport(complete, count, len(channels), end_ns * 1e-9 if end_ns >= 0
+                         else float("nan"))

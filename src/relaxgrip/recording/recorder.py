@@ -1,0 +1,318 @@
+"""Record a run of the loop to MCAP as it goes.
+
+:class:`McapRecorder` implements :class:`relaxgrip.control.runner.LoopRecorder`:
+``run_loop(..., recorder=rec)`` hands it the observation, the controller and
+the command of every period; it writes them (see
+:mod:`relaxgrip.recording.schemas` for the channels) and never changes them.
+
+**Surviving an abrupt end.**  Messages go into MCAP chunks of at most
+``chunk_size_bytes`` (uncompressed); a chunk is written to the file when it is
+full and, whatever its size, every ``flush_every_s`` of loop time
+(:meth:`mcap.writer.Writer.flush`), and the file object is flushed to the
+operating system after every period.  A process killed with SIGKILL therefore
+leaves a file whose complete chunks are all readable: at most the last
+``flush_every_s`` of loop time (or one chunk) is lost.  Such a file has no
+summary or footer; :func:`relaxgrip.recording.reader.read_recording` reads it
+with ``tolerant=True`` and :func:`relaxgrip.recording.reader.recover` (``relaxgrip
+recover``) rewrites it as a complete file.  Losing power needs an ``fsync`` as
+well, which the recorder does not do (it would stall the loop).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+from dataclasses import asdict
+from pathlib import Path
+from types import TracebackType
+from typing import IO, TYPE_CHECKING, Any
+
+import cv2
+import numpy as np
+
+from relaxgrip import __version__
+from relaxgrip.backend import BackendInfo, Command, Frame, Observation
+from relaxgrip.errors import InputError
+from relaxgrip.perception.features import marker_pose
+from relaxgrip.perception.marker import TrackStatus
+from relaxgrip.recording.schemas import CHANNELS, RECORDING_FORMAT, RECORDING_VERSION, schema_bytes
+from relaxgrip.serialize import json_safe
+
+if TYPE_CHECKING:
+    from mcap.writer import Writer
+
+    from relaxgrip.control.controller import GraspController
+
+__all__ = ["RGB_FORMATS", "McapRecorder", "require_mcap"]
+
+#: Encodings of the RGB channel: ``jpeg`` (small) or ``png`` (lossless).
+RGB_FORMATS = ("jpeg", "png")
+IR_ENCODING = "32FC1"
+
+
+def require_mcap() -> None:
+    """Raise a helpful :class:`InputError` if the ``mcap`` package is missing."""
+    try:
+        import mcap  # noqa: F401
+    except ImportError:
+        raise InputError("recording needs the mcap package: pip install 'relaxgrip[record]'"
+                         ) from None
+
+
+def _ns(t_s: float) -> int:
+    """Seconds on the loop's clock as MCAP nanoseconds (never negative)."""
+    return max(0, round(t_s * 1e9))
+
+
+def _stamp(t_s: float) -> dict[str, int]:
+    ns = _ns(t_s)
+    return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+
+
+def encode_rgb(image: np.ndarray[Any, Any], fmt: str, jpeg_quality: int) -> bytes:
+    """An RGB ``(H, W, 3)`` uint8 image as JPEG or PNG bytes (colours as a viewer shows them)."""
+    bgr = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2BGR)
+    if fmt == "png":
+        ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    else:
+        ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality])
+    if not ok:
+        raise InputError(f"could not encode an RGB frame of shape {image.shape} as {fmt}")
+    return bytes(buf.tobytes())
+
+
+class McapRecorder:
+    """Write every period of a loop run to an MCAP file.
+
+    Parameters
+    ----------
+    path : Path
+        File to write (replaced if it exists).
+    rgb_format : {"jpeg", "png"}
+        Encoding of the RGB frames: JPEG (about 55 kB a frame) or lossless PNG
+        (about 0.5 MB a frame; offline replay then matches exactly).
+    jpeg_quality : int
+        JPEG quality, 1-100.
+    chunk_size_bytes : int
+        Largest uncompressed chunk before it is written out.
+    flush_every_s : float
+        Loop time between forced chunk writes: the most a kill can lose.
+    compression : {"zstd", "lz4", "none"}
+        Chunk compression.
+    """
+
+    def __init__(self, path: Path, rgb_format: str = "jpeg", jpeg_quality: int = 95,
+                 chunk_size_bytes: int = 512 * 1024, flush_every_s: float = 1.0,
+                 compression: str = "zstd") -> None:
+        require_mcap()
+        from mcap.writer import CompressionType, Writer
+
+        if rgb_format not in RGB_FORMATS:
+            raise InputError(f"RGB format must be jpeg or png, got {rgb_format!r}")
+        if not 1 <= jpeg_quality <= 100:
+            raise InputError(f"JPEG quality must be 1-100, got {jpeg_quality}")
+        if chunk_size_bytes < 1024:
+            raise InputError(f"chunk size must be >= 1024 bytes, got {chunk_size_bytes}")
+        if not (math.isfinite(flush_every_s) and flush_every_s > 0):
+            raise InputError(f"flush interval must be > 0 s, got {flush_every_s}")
+        kinds = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4,
+                 "none": CompressionType.NONE}
+        if compression not in kinds:
+            raise InputError(f"compression must be zstd, lz4 or none, got {compression!r}")
+        self.path = Path(path)
+        self.rgb_format = rgb_format
+        self.jpeg_quality = jpeg_quality
+        self.flush_every_s = flush_every_s
+        try:
+            self._file: IO[bytes] = open(self.path, "wb")  # noqa: SIM115  (closed in close())
+        except OSError as exc:
+            raise InputError(f"{self.path}: cannot write ({exc.strerror})") from None
+        self._writer: Writer = Writer(self._file, chunk_size=chunk_size_bytes,
+                                      compression=kinds[compression])
+        self._writer.start(profile="", library=f"relaxgrip {__version__}")
+        self._channels: dict[str, int] = {}
+        for topic, schema in CHANNELS.items():
+            schema_id = self._writer.register_schema(schema["title"], "jsonschema",
+                                                     schema_bytes(schema))
+            self._channels[topic] = self._writer.register_channel(topic, "json", schema_id)
+        self._writer.flush()  # type: ignore[no-untyped-call]
+        self._file.flush()
+        self._closed = False
+        self._last_flush_s = -math.inf
+        self._rgb_seq: int | None = None
+        self._ir_seq: int | None = None
+        self._n_transitions = 0
+        self._n_events = 0
+        self._zeroed = False
+        self.messages = 0
+
+    # -- LoopRecorder ----------------------------------------------------------------------
+
+    def start(self, info: BackendInfo, controller: GraspController, t_s: float) -> None:
+        """Write the session message (backend, estimator, plan, rig)."""
+        self._write("/relaxgrip/session", t_s, {
+            "format": RECORDING_FORMAT, "format_version": RECORDING_VERSION,
+            "relaxgrip_version": __version__,
+            "backend": {"name": info.name, "version": info.version, "has_truth": info.has_truth},
+            "estimator": controller.estimator.name,
+            "plan": {k: (v.value if hasattr(v, "value") else v)
+                     for k, v in asdict(controller.plan).items()},
+            "rig": asdict(controller.rig), "t0_s": t_s, "rgb_format": self.rgb_format,
+            "ir_encoding": IR_ENCODING,
+        })
+        self._last_flush_s = t_s
+        self._n_transitions = self._n_events = 0
+        self._zeroed = False
+
+    def step(self, obs: Observation, controller: GraspController, command: Command) -> None:
+        """Write one period: frames that are new, then the controller's view, then the truth."""
+        t = obs.t_s
+        if obs.rgb is not None and obs.rgb.seq != self._rgb_seq:
+            self._rgb_seq = obs.rgb.seq
+            self._write_rgb(t, obs.rgb)
+        if obs.ir is not None and obs.ir.seq != self._ir_seq:
+            self._ir_seq = obs.ir.seq
+            self._write_ir(t, obs.ir)
+        self._write("/relaxgrip/observation", t, {
+            "t_s": t, "motor_position_mm": obs.motor_position_mm,
+            "arm_height_mm": obs.arm_height_mm, "arm_forward_mm": obs.arm_forward_mm,
+            "heater_duty": list(obs.heater_duty),
+            "rgb_seq": None if obs.rgb is None else obs.rgb.seq,
+            "rgb_t_s": None if obs.rgb is None else obs.rgb.t_s,
+            "ir_seq": None if obs.ir is None else obs.ir.seq,
+            "ir_t_s": None if obs.ir is None else obs.ir.t_s,
+            "faults": sorted(obs.faults),
+        })
+        self._write_controller(t, controller, command)
+        self._write_truth(t, obs)
+        self._write_events(t, controller)
+        if t - self._last_flush_s >= self.flush_every_s:
+            self._writer.flush()  # type: ignore[no-untyped-call]
+            self._last_flush_s = t
+        self._file.flush()
+
+    # -- parts -----------------------------------------------------------------------------
+
+    def _write_rgb(self, t: float, frame: Frame) -> None:
+        data = encode_rgb(frame.image, self.rgb_format, self.jpeg_quality)
+        self._write("/rgb", t, {"timestamp": _stamp(frame.t_s), "frame_id": "rgb_camera",
+                                "data": base64.b64encode(data).decode("ascii"),
+                                "format": self.rgb_format})
+
+    def _write_ir(self, t: float, frame: Frame) -> None:
+        image = np.ascontiguousarray(frame.image, dtype="<f4")
+        if image.ndim != 2:
+            raise InputError(f"an infrared frame must be 2-D, got shape {image.shape}")
+        height, width = image.shape
+        self._write("/ir", t, {"timestamp": _stamp(frame.t_s), "frame_id": "ir_camera",
+                               "width": width, "height": height, "encoding": IR_ENCODING,
+                               "step": 4 * width,
+                               "data": base64.b64encode(image.tobytes()).decode("ascii")})
+
+    def _write_controller(self, t: float, c: GraspController, command: Command) -> None:
+        percept = c.percept
+        temps = [math.nan, math.nan]
+        if percept is not None:
+            pose = marker_pose(percept.marker)
+            self._write("/relaxgrip/perception", t, {
+                "t_s": percept.t_s, "marker_status": percept.marker.status.value,
+                "marker_pose": None if pose is None else [float(v) for v in pose],
+                "ir_age_s": percept.ir_age_s, "ir_error": percept.ir_error,
+                "has_features": percept.features is not None,
+            })
+            if percept.thermal is not None:
+                temps = [c.temperature.reading_c(f) for f in percept.thermal.fingers]
+        est = c.estimate
+        self._write("/relaxgrip/estimate", t, {
+            "t_s": t, "force_n": est.force_n, "f_icfn_n": est.f_icfn_n,
+            "f_onset_n": est.f_onset_n, "k_n": est.k_n, "tau_s": est.tau_s,
+            "hold_s": est.hold_s, "valid": est.valid,
+        })
+        if math.isfinite(est.hold_s):
+            stiffness = getattr(c.estimator, "closure_stiffness_n_per_mm", math.nan)
+            self._write("/relaxgrip/relaxation", t, {
+                "t_s": t, "f_onset_n": est.f_onset_n, "k_n": est.k_n, "tau_s": est.tau_s,
+                "kappa": est.k_n / est.f_onset_n if est.f_onset_n else math.nan,
+                "hold_s": est.hold_s, "closure_stiffness_n_per_mm": float(stiffness),
+            })
+        self._write("/relaxgrip/command", t, {
+            "t_s": t, "motor_velocity_mm_s": command.motor_velocity_mm_s,
+            "arm_velocity_mm_s": command.arm_velocity_mm_s,
+            "approach_velocity_mm_s": command.approach_velocity_mm_s,
+            "heater_duty": list(command.heater_duty),
+        })
+        setpoint = c.temperature.setpoint_c
+        self._write("/relaxgrip/temperature", t, {
+            "t_s": t, "ir_temp_c": temps, "setpoint_c": math.nan if setpoint is None else setpoint,
+            "truth_temp_c": None,
+        })
+        self._write("/relaxgrip/phase", t, {"t_s": t, "phase": c.phase.value})
+
+    def _write_truth(self, t: float, obs: Observation) -> None:
+        truth = obs.truth
+        if truth is not None:
+            self._write("/relaxgrip/truth", t, {
+                "t_s": t, "contact_force_n": truth.contact_force_n,
+                "finger_temp_c": [float(np.mean(f)) for f in truth.finger_temps_c],
+                "finger_deflection_m": list(truth.finger_deflection_m),
+                "marker_deflection_m": list(truth.marker_deflection_m),
+                "contact_position_m": truth.contact_position_m, "aperture_m": truth.aperture_m,
+                "object_name": truth.object_name, "object_lifted": truth.object_lifted,
+                "object_slipping": truth.object_slipping,
+                "object_crushed": truth.object_crushed,
+            })
+        if obs.force_ref is not None:
+            self._write("/relaxgrip/force_ref", t, {
+                "t_s": [float(v) for v in obs.force_ref.t_s],
+                "force_n": [float(v) for v in obs.force_ref.force_n],
+            })
+
+    def _write_events(self, t: float, c: GraspController) -> None:
+        log = c.log
+        for t_s, phase in log.transitions[self._n_transitions:]:
+            self._write("/relaxgrip/events", t, {"t_s": t_s, "kind": "phase",
+                                                 "detail": phase.value})
+        self._n_transitions = len(log.transitions)
+        for event in log.events[self._n_events:]:
+            self._write("/relaxgrip/events", t, {"t_s": event.t_s, "kind": event.kind.value,
+                                                 "detail": event.detail})
+        self._n_events = len(log.events)
+        # The controller may zero the marker again after this period's frame (it does so
+        # once the fingers are at temperature); the zero pose only ever comes back by
+        # averaging, so a zero that is gone now was dropped during this period.
+        percept = c.percept
+        tracked = percept is not None and percept.marker.status is TrackStatus.TRACKING
+        zeroed = c.perception.tracker.zero_pose is not None
+        if not zeroed and (tracked or self._zeroed):
+            self._write("/relaxgrip/events", t, {"t_s": t, "kind": "marker_rezero",
+                                                 "detail": "zero pose dropped by the controller"})
+        self._zeroed = zeroed
+
+    def _write(self, topic: str, t_s: float, message: dict[str, Any]) -> None:
+        if self._closed:
+            raise InputError(f"{self.path}: the recording is closed")
+        data = json.dumps(json_safe(message), allow_nan=False, separators=(",", ":")).encode()
+        ns = _ns(t_s)
+        self._writer.add_message(self._channels[topic], log_time=ns, data=data, publish_time=ns,
+                                 sequence=self.messages)
+        self.messages += 1
+
+    # -- life ------------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Write the summary and footer and close the file (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._writer.finish()  # type: ignore[no-untyped-call]
+        finally:
+            self._file.close()
+
+    def __enter__(self) -> McapRecorder:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()

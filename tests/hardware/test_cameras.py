@@ -1,0 +1,200 @@
+"""Camera sources with a fake VideoCapture: settings, conversion, timestamps, stall detection."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+
+from relaxgrip.backend import Frame, Truth
+from relaxgrip.clock import VirtualClock
+from relaxgrip.errors import InputError
+from relaxgrip.hardware.cameras import (
+    CameraError,
+    CameraStalledError,
+    OpenCvRgbSource,
+    UvcThermalSource,
+    open_frame_sources,
+)
+from relaxgrip.hardware.frame_channel import (
+    KIND_RGB,
+    encode_frame_message,
+    encode_tick,
+    truth_from_dict,
+)
+from relaxgrip.hardware.rig_file import load_rig
+
+DOCS = Path(__file__).resolve().parents[2] / "docs"
+
+
+class FakeCapture:
+    """A VideoCapture that serves ``frames`` once each, then nothing (a stalled camera)."""
+
+    def __init__(self, frames: list[np.ndarray[Any, Any]], opened: bool = True) -> None:
+        self.frames = list(frames)
+        self.opened = opened
+        self.props: dict[int, float] = {}
+        self.released = False
+
+    def isOpened(self) -> bool:
+        return self.opened
+
+    def set(self, prop: int, value: float) -> bool:
+        self.props[prop] = value
+        return True
+
+    def read(self) -> tuple[bool, np.ndarray[Any, Any] | None]:
+        time.sleep(0.001)
+        if not self.frames:
+            return False, None
+        return True, self.frames.pop(0)
+
+    def release(self) -> None:
+        self.released = True
+
+
+def _wait_frame(source: Any, clock: VirtualClock) -> Frame:
+    for _ in range(2000):
+        frame = source.read(clock.now())
+        if frame is not None:
+            return frame  # type: ignore[no-any-return]
+        time.sleep(0.001)
+    raise AssertionError("no frame")
+
+
+def test_rgb_source_sets_the_camera_converts_to_rgb_and_detects_a_stall() -> None:
+    rig = load_rig(DOCS / "rig-example.toml")
+    clock = VirtualClock(5.0)
+    bgr = np.zeros((480, 640, 3), np.uint8)
+    bgr[..., 0] = 200  # blue in OpenCV's order
+    cap = FakeCapture([bgr])
+    source = OpenCvRgbSource(rig.rgb, clock, capture_factory=lambda dev: cap)
+    source.start()
+    try:
+        frame = _wait_frame(source, clock)
+        assert frame.t_s == 5.0  # stamped on arrival with the injected clock
+        assert frame.image.shape == (480, 640, 3)
+        assert int(frame.image[0, 0, 2]) == 200
+        assert int(frame.image[0, 0, 0]) == 0
+        assert cap.props[cv2.CAP_PROP_FRAME_WIDTH] == 640
+        assert cap.props[cv2.CAP_PROP_FPS] == 30.0
+        assert cap.props[cv2.CAP_PROP_EXPOSURE] == -6
+        assert source.read(5.2) is frame  # 200 ms: at the limit, not yet stalled
+        with pytest.raises(CameraStalledError, match=r"RGB camera stalled: no new frame for "
+                                                     r"201 ms \(limit 200 ms\)"):
+            source.read(5.201)
+    finally:
+        source.close()
+    assert cap.released
+
+
+def test_thermal_source_asks_for_y16_and_converts_centikelvin() -> None:
+    rig = load_rig(DOCS / "rig-example.toml")
+    clock = VirtualClock()
+    raw = np.full((192, 256), 31315, np.uint16)  # 40.00 °C in centi-kelvin
+    as_bytes = np.frombuffer(raw.tobytes(), np.uint8).reshape(1, -1)  # how some backends hand Y16
+    cap = FakeCapture([raw, as_bytes])
+    source = UvcThermalSource(rig.ir, clock, capture_factory=lambda dev: cap)
+    source.start()
+    try:
+        first = _wait_frame(source, clock)
+        assert first.image.dtype == np.float32
+        assert float(first.image[10, 10]) == pytest.approx(40.0, abs=1e-3)
+        for _ in range(2000):
+            frame = source.read(0.0)
+            if frame is not None and frame.seq == 1:
+                break
+            time.sleep(0.001)
+        assert frame is not None
+        assert frame.seq == 1
+        assert np.array_equal(frame.image, first.image)
+        assert cap.props[cv2.CAP_PROP_CONVERT_RGB] == 0
+        assert cap.props[cv2.CAP_PROP_FOURCC] == cv2.VideoWriter.fourcc("Y", "1", "6", " ")
+    finally:
+        source.close()
+
+
+def test_thermal_source_rejects_8_bit_frames() -> None:
+    rig = load_rig(DOCS / "rig-example.toml")
+    cap = FakeCapture([np.zeros((192, 256, 3), np.uint8)])
+    source = UvcThermalSource(rig.ir, VirtualClock(), capture_factory=lambda dev: cap)
+    source.start()
+    try:
+        for _ in range(2000):
+            if source._error is not None:
+                break
+            time.sleep(0.001)
+        with pytest.raises(CameraError, match="is the camera in Y16 mode"):
+            source.read(0.0)
+    finally:
+        source.close()
+
+
+def test_camera_that_does_not_open_and_a_stall_before_any_frame() -> None:
+    rig = load_rig(DOCS / "rig-example.toml")
+    closed = OpenCvRgbSource(rig.rgb, VirtualClock(),
+                             capture_factory=lambda dev: FakeCapture([], opened=False))
+    with pytest.raises(CameraError, match="cannot open RGB camera 0"):
+        closed.start()
+    silent = UvcThermalSource(rig.ir, VirtualClock(), capture_factory=lambda dev: FakeCapture([]))
+    silent.start()
+    try:
+        assert silent.read(2.5) is None
+        with pytest.raises(CameraStalledError, match="thermal camera stalled: no frame at all"):
+            silent.read(2.6)
+    finally:
+        silent.close()
+
+
+def test_rig_file_names_the_sources() -> None:
+    rig = load_rig(DOCS / "rig-example.toml")
+    rgb, ir = open_frame_sources(rig, VirtualClock())
+    assert isinstance(rgb, OpenCvRgbSource)
+    assert isinstance(ir, UvcThermalSource)
+    emu = load_rig(DOCS / "rig-emulator.toml")
+    rgb2, ir2 = open_frame_sources(emu, VirtualClock())
+    assert (rgb2.name, ir2.name) == ("RGB", "thermal")
+    assert emu.emulator is not None
+    moved = replace(emu, emulator=replace(emu.emulator, socket="/nonexistent/s"))
+    source = open_frame_sources(moved, VirtualClock())[0]
+    with pytest.raises(CameraError, match="cannot reach the emulator's frame channel"):
+        source.start()
+
+
+def test_frame_channel_messages_round_trip() -> None:
+    import socket
+
+    from relaxgrip.hardware.frame_channel import MessageReader
+
+    image = np.arange(4 * 5 * 3, dtype=np.uint8).reshape(4, 5, 3)
+    temps = np.linspace(20.0, 60.0, 12, dtype=np.float32).reshape(3, 4)
+    truth = Truth(1.5, (0.1, 0.2), (0.0, 0.0), (0.01, 0.02), 0.08, ((30.0, 31.0), (32.0,)),
+                  (30.5, 32.0), 0.1, "force_ball", 0.0, False, False, False, 0.0)
+    a, b = socket.socketpair()
+    a.sendall(encode_frame_message(KIND_RGB, Frame(0.5, 7, image))
+              + encode_frame_message(2, Frame(1.0, 1, temps))
+              + encode_tick(3, 1.0, truth, None))
+    a.close()
+    reader = MessageReader(b)
+    m1, m2, m3 = reader.read(), reader.read(), reader.read()
+    assert reader.read() is None
+    b.close()
+    assert m1 is not None
+    assert m1.frame is not None
+    assert m1.frame.seq == 7
+    assert np.array_equal(m1.frame.image, image)
+    assert m1.t_s == 0.5
+    assert m2 is not None
+    assert m2.frame is not None
+    assert np.array_equal(m2.frame.image, temps)
+    assert m2.frame.image.dtype == np.float32
+    assert m3 is not None
+    assert m3.tick is not None
+    assert truth_from_dict(m3.tick["truth"]) == truth
+    with pytest.raises(InputError, match="cannot send"):
+        encode_frame_message(KIND_RGB, Frame(0.0, 0, np.zeros((2, 2), np.int64)))

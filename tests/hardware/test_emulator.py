@@ -1,0 +1,126 @@
+"""The MCU emulator: the twin behind a real pty, in lockstep virtual time and in wall-clock time."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from relaxgrip.backend import Command, check_backend
+from relaxgrip.clock import VirtualClock, WallClock
+from relaxgrip.experiments.controlled_hold import run_hold
+from relaxgrip.hardware.emulator import McuEmulator, open_emulated_gripper
+from relaxgrip.hardware.gripper import SerialGripper
+from relaxgrip.hardware.protocol.codec import FaultFlag
+from relaxgrip.hardware.rig_check import check_rig
+from relaxgrip.hardware.rig_file import load_rig
+from relaxgrip.twin import GripperTwin, TwinConfig
+
+DOCS = Path(__file__).resolve().parents[2] / "docs"
+
+
+@pytest.fixture
+def emulated() -> Iterator[tuple[SerialGripper, McuEmulator, VirtualClock]]:
+    clock = VirtualClock()
+    gripper, emu = open_emulated_gripper(seed=3, clock=clock, grace_s=1.0)
+    yield gripper, emu, clock
+    gripper.close()
+    emu.stop()
+
+
+def test_serial_gripper_on_the_emulator_passes_check_backend(
+        emulated: tuple[SerialGripper, McuEmulator, VirtualClock]) -> None:
+    gripper, emu, clock = emulated
+    check_backend(gripper, clock.advance, seconds=1.0)
+    assert gripper.info.name == "emulator"
+    assert gripper.info.has_truth
+    assert emu.error is None
+    assert emu.endpoint.core.outputs.velocity_um_s == 0  # close() stopped and disabled it
+    assert not emu.endpoint.core.enabled
+
+
+def test_lockstep_sees_exactly_what_the_twin_sees(
+        emulated: tuple[SerialGripper, McuEmulator, VirtualClock]) -> None:
+    gripper, _, clock = emulated
+    twin_clock = VirtualClock()
+    twin = GripperTwin(TwinConfig(), seed=3, clock=twin_clock)
+    obs_e, obs_t = gripper.reset(), twin.observe()
+    for k in range(45):  # 1.5 s at 30 Hz: 45 RGB frames and two IR frames
+        cmd = Command(motor_velocity_mm_s=8.0 if k < 30 else -4.0, heater_duty=(0.25, 0.5))
+        gripper.act(cmd)
+        twin.act(cmd)
+        clock.advance(1 / 30)
+        twin_clock.advance(1 / 30)
+        obs_e, obs_t = gripper.observe(), twin.observe()
+        assert obs_e.t_s == obs_t.t_s
+        assert obs_e.motor_position_mm == pytest.approx(obs_t.motor_position_mm, abs=1e-9)
+        assert obs_e.heater_duty == obs_t.heater_duty
+        assert obs_e.rgb is not None
+        assert obs_t.rgb is not None
+        assert (obs_e.rgb.seq, obs_e.rgb.t_s) == (obs_t.rgb.seq, obs_t.rgb.t_s)
+        assert np.array_equal(obs_e.rgb.image, obs_t.rgb.image)
+        assert obs_e.ir is not None
+        assert obs_t.ir is not None
+        assert np.array_equal(obs_e.ir.image, obs_t.ir.image)
+        assert obs_e.truth == obs_t.truth
+    assert obs_e.ir is not None
+    assert obs_e.ir.seq == 1
+
+
+def test_mcu_watchdog_stops_twin_when_the_host_goes_quiet(
+        emulated: tuple[SerialGripper, McuEmulator, VirtualClock]) -> None:
+    gripper, emu, clock = emulated
+    gripper.reset()
+    gripper.act(Command(motor_velocity_mm_s=5.0, heater_duty=(1.0, 1.0)))
+    assert emu.endpoint.core.outputs.heater_duty_permyriad == (10000, 10000)
+    clock.advance(0.19)
+    gripper.observe()  # a GetStatus does not feed the watchdog
+    assert emu.endpoint.core.enabled
+    clock.advance(0.02)
+    status = gripper.client.request_status()  # the watchdog tripped first: unsolicited status
+    assert status.fault_flags & FaultFlag.WATCHDOG
+    assert emu.endpoint.core.outputs.heater_duty_permyriad == (0, 0)
+    assert emu.twin.observe().heater_duty == (0.0, 0.0)
+
+
+def test_short_hold_over_the_pty_matches_the_twin() -> None:
+    twin = run_hold("relax", 5.0, 12.0, 40.0, seed=1, backend="twin")
+    start = time.perf_counter()
+    emu = run_hold("relax", 5.0, 12.0, 40.0, seed=1, backend="emulator")
+    wall_s = time.perf_counter() - start
+    assert emu.loop.backend.name == "emulator"
+    a, b = twin.metrics(), emu.metrics()
+    assert abs(a["mae_n"] - b["mae_n"]) < 0.02
+    assert abs(a["mean_signed_error_n"] - b["mean_signed_error_n"]) < 0.02
+    assert abs(twin.loop.hold_onset_s() - emu.loop.hold_onset_s()) < 0.2  # type: ignore[operator]
+    n = min(twin.truth_n.size, emu.truth_n.size)
+    assert float(np.max(np.abs(twin.truth_n[:n] - emu.truth_n[:n]))) < 0.1
+    t_end = float(emu.loop["t_s"][-1])
+    assert wall_s < t_end  # virtual time: faster than the hold itself
+
+
+def test_wall_clock_emulator_serves_check_rig_over_its_socket(tmp_path: Path) -> None:
+    rig = load_rig(DOCS / "rig-emulator.toml")
+    emu = McuEmulator(TwinConfig(), seed=0, clock=WallClock())
+    try:
+        sock = str(tmp_path / "frames.sock")
+        emu.listen(sock)
+        emu.start()
+        assert rig.emulator is not None
+        spec = dataclasses.replace(
+            rig, serial=dataclasses.replace(rig.serial, port=emu.port),
+            emulator=dataclasses.replace(rig.emulator, socket=sock))
+        found = check_rig(spec)
+    finally:
+        emu.stop()
+    assert found.firmware_id == "relaxgrip-emu 1"
+    assert found.rgb_shape == (480, 640, 3)
+    assert found.ir_shape == (192, 256)
+    assert found.marker_found
+    assert found.marker_offset_mm < 1.0
+    assert 20.0 < found.ir_temp_c[1] < 35.0
+    assert not emu.endpoint.core.enabled  # the check never enables the outputs

@@ -1,0 +1,146 @@
+"""SerialGripper faults: each is noticed within 100 ms of virtual time, outputs are stopped,
+and a one-line error names what happened."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+
+from relaxgrip.backend import Command
+from relaxgrip.clock import VirtualClock
+from relaxgrip.hardware.emulator import open_emulated_gripper
+from relaxgrip.hardware.frame_channel import KIND_RGB
+from relaxgrip.hardware.gripper import GripperFaultError, fault_names
+from relaxgrip.hardware.protocol import McuConfig
+from relaxgrip.hardware.protocol.codec import FaultFlag
+
+DT = 1 / 30
+
+
+class Bench:
+    """An emulated gripper running a hot, moving command at 30 Hz."""
+
+    def __init__(self, mcu: McuConfig | None = None) -> None:
+        self.clock = VirtualClock()
+        self.gripper, self.emu = open_emulated_gripper(seed=0, clock=self.clock, mcu=mcu,
+                                                       grace_s=0.5)
+
+    def run(self, ticks: int) -> None:
+        for _ in range(ticks):
+            self.gripper.observe()
+            self.gripper.act(Command(motor_velocity_mm_s=3.0, heater_duty=(0.6, 0.6)))
+            self.clock.advance(DT)
+
+    def fault_after(self) -> tuple[str, float]:
+        """Keep ticking until the gripper fails; (message, detection delay since now)."""
+        t_fault = self.clock.now()
+        with pytest.raises(GripperFaultError) as info:
+            self.run(100)
+        assert self.gripper.fault_time_s is not None
+        return str(info.value), self.gripper.fault_time_s - t_fault
+
+    def outputs_off_within_watchdog(self) -> None:
+        """Whatever the host could send, the MCU has stopped the outputs 200 ms later."""
+        self.clock.advance(0.25)
+        core = self.emu.endpoint.core
+        core.tick(self.clock.now())
+        assert core.outputs.velocity_um_s == 0
+        assert core.outputs.heater_duty_permyriad == (0, 0)
+
+    def close(self) -> None:
+        self.gripper.close()
+        self.emu.stop()
+
+
+@pytest.fixture
+def bench() -> Iterator[Bench]:
+    b = Bench()
+    b.gripper.reset()
+    b.run(5)
+    yield b
+    b.close()
+
+
+def _one_line(message: str) -> None:
+    assert "\n" not in message
+    assert message.startswith("gripper stopped: ")
+
+
+def test_corrupted_bytes(bench: Bench) -> None:
+    def flip(data: bytes) -> bytes:
+        return data[:3] + bytes([data[3] ^ 0x55]) + data[4:] if len(data) > 4 else data
+
+    bench.emu.tamper_tx = flip
+    message, delay_s = bench.fault_after()
+    _one_line(message)
+    assert "corrupted frame(s) received" in message
+    assert delay_s <= 0.1 + 1e-9
+    # The MCU still reads the host: the zero command reached it.
+    assert bench.emu.endpoint.core.outputs.heater_duty_permyriad == (0, 0)
+    assert bench.emu.endpoint.core.outputs.velocity_um_s == 0
+    # The run loop's final all-stop after a fault does not raise; anything else does.
+    bench.gripper.act(Command())
+    with pytest.raises(GripperFaultError, match="stopped earlier"):
+        bench.gripper.act(Command(motor_velocity_mm_s=1.0))
+
+
+def test_truncated_frame(bench: Bench) -> None:
+    bench.emu.tamper_tx = lambda data: data[: len(data) // 2]
+    message, delay_s = bench.fault_after()
+    _one_line(message)
+    assert "bytes of a truncated frame pending" in message
+    assert delay_s <= 0.1 + 1e-9
+    bench.outputs_off_within_watchdog()
+
+
+def test_dropped_connection(bench: Bench) -> None:
+    bench.emu.disconnect()
+    message, delay_s = bench.fault_after()
+    _one_line(message)
+    assert "MCU link fault" in message
+    assert "MCU watchdog stops the motor and heaters within 200 ms" in message
+    assert delay_s <= 0.1 + 1e-9
+    bench.outputs_off_within_watchdog()
+
+
+def test_stalled_camera(bench: Bench) -> None:
+    bench.emu.publisher.muted.add(KIND_RGB)
+    last_frame_s = bench.clock.now() - DT  # the last frame published before the mute
+    message, _ = bench.fault_after()
+    _one_line(message)
+    assert "RGB camera stalled: no new frame for" in message
+    assert "zero command acknowledged" in message
+    assert bench.gripper.fault_time_s is not None
+    over_limit_s = bench.gripper.fault_time_s - last_frame_s - 0.2
+    assert 0.0 < over_limit_s <= 0.1  # noticed within 100 ms of passing the 200 ms limit
+    assert bench.emu.endpoint.core.outputs.heater_duty_permyriad == (0, 0)
+
+
+def test_wrong_protocol_version() -> None:
+    b = Bench(McuConfig(protocol_version=2))
+    try:
+        t0 = b.clock.now()
+        with pytest.raises(GripperFaultError) as info:
+            b.gripper.reset()
+        message = str(info.value)
+        _one_line(message)
+        assert "wrong protocol version: MCU speaks protocol version 2, this host speaks " \
+               "version 1" in message
+        assert b.gripper.fault_time_s is not None
+        assert b.gripper.fault_time_s - t0 <= 0.1
+        assert not b.emu.endpoint.core.enabled  # never enabled: nothing was ever on
+    finally:
+        b.close()
+
+
+def test_mcu_fault_is_reported_and_host_limits_apply(bench: Bench) -> None:
+    bench.gripper.act(Command(motor_velocity_mm_s=500.0, heater_duty=(0.6, 0.6)))
+    assert bench.emu.endpoint.core.outputs.velocity_um_s == 20_000  # clamped by the host
+    bench.emu.endpoint.core.raise_fault(FaultFlag.MOTOR_DRIVER, bench.clock.now())
+    bench.clock.advance(DT)
+    obs = bench.gripper.observe()
+    assert "MOTOR_DRIVER" in obs.faults
+    with pytest.raises(GripperFaultError, match="outputs stopped by fault MOTOR_DRIVER"):
+        bench.gripper.act(Command(motor_velocity_mm_s=1.0))
+    assert fault_names(int(FaultFlag.RESET) | (1 << 9)) == {"RESET", "BIT9"}

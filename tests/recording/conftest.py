@@ -1,0 +1,42 @@
+"""Recordings shared by the recording tests: short holds on the twin (seeded, deterministic)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
+from relaxgrip.learning.store import ModelBundle
+from relaxgrip.learning.training import load_default_models
+from relaxgrip.recording import McapRecorder
+
+HOLD_S = 6.0
+
+
+@pytest.fixture(scope="session")
+def models() -> ModelBundle:
+    return load_default_models()
+
+
+@pytest.fixture(scope="session")
+def relax_hold(tmp_path_factory: pytest.TempPathFactory,
+               models: ModelBundle) -> tuple[Path, HoldResult]:
+    """A 6 s relax hold at 5 N, 40 °C, recorded with JPEG frames."""
+    path = tmp_path_factory.mktemp("rec") / "relax.mcap"
+    with McapRecorder(path) as rec:
+        result = run_hold("relax", 5.0, HOLD_S, 40.0, 0, models, recorder=rec)
+    return path, result
+
+
+@pytest.fixture(scope="session")
+def fixed_holds(tmp_path_factory: pytest.TempPathFactory, models: ModelBundle) -> list[Path]:
+    """Three 6 s fixed-aperture holds (different seeds, targets, temperatures)."""
+    folder = tmp_path_factory.mktemp("fixed")
+    paths = []
+    for seed, target, temp in ((0, 5.0, 40.0), (1, 4.0, 45.0), (2, 6.0, 35.0)):
+        path = folder / f"fixed-{seed}.mcap"
+        with McapRecorder(path) as rec:
+            run_hold("fixed", target, 6.0, temp, seed, models, recorder=rec)
+        paths.append(path)
+    return paths

@@ -1,0 +1,113 @@
+"""Bad recordings give one error line and exit code 2."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+from relaxgrip.clock import VirtualClock
+from relaxgrip.control import GraspController, GraspPlan, make_estimator, run_loop
+from relaxgrip.experiments.controlled_hold import HoldResult
+from relaxgrip.learning.store import ModelBundle
+from relaxgrip.recording import McapRecorder
+from tests.clitools import assert_one_error_line, run_main
+
+
+def _without(src: Path, dst: Path, topics: set[str]) -> None:
+    """Copy a recording leaving out some topics."""
+    with open(src, "rb") as f, open(dst, "wb") as out:
+        reader = make_reader(f)
+        writer = Writer(out)
+        writer.start()
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            if channel.topic in topics:
+                continue
+            if channel.id not in channels:
+                assert schema is not None
+                schemas.setdefault(schema.id, writer.register_schema(
+                    schema.name, schema.encoding, schema.data))
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id])
+            writer.add_message(channels[channel.id], message.log_time, message.data,
+                               message.publish_time)
+        writer.finish()  # type: ignore[no-untyped-call]
+
+
+@pytest.mark.parametrize("command", ["replay", "from-recordings"])
+def test_missing_foreign_truncated(command: str, relax_hold: tuple[Path, HoldResult],
+                                   tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                   capsys: pytest.CaptureFixture[str]) -> None:
+    good, _ = relax_hold
+    foreign = tmp_path / "notes.mcap"
+    foreign.write_text("not a recording\n" * 10)
+    truncated = tmp_path / "cut.mcap"
+    data = good.read_bytes()
+    truncated.write_bytes(data[: len(data) // 2])
+    prefix = ["replay"] if command == "replay" else ["dataset", "from-recordings"]
+    suffix: list[str | Path] = [] if command == "replay" else ["--out", tmp_path / "data"]
+    for path, expected in ((tmp_path / "nope.mcap", "no such recording"),
+                           (foreign, "not an MCAP file"),
+                           (truncated, "truncated")):
+        code, out, err = run_main([*prefix, path, *suffix], monkeypatch, capsys)
+        assert_one_error_line(code, out, err, expected)
+    assert not (tmp_path / "data").exists()
+
+
+def test_recording_without_frames(tmp_path: Path, models: ModelBundle,
+                                  monkeypatch: pytest.MonkeyPatch,
+                                  capsys: pytest.CaptureFixture[str]) -> None:
+    from relaxgrip.twin import GripperTwin, TwinConfig
+
+    cfg = replace(TwinConfig(), rgb=None, ir=None)
+    clock = VirtualClock()
+    twin = GripperTwin(cfg, seed=0, clock=clock)
+    ctl = GraspController(cfg.rig, make_estimator("icfn", models.icfn, models.rcfn))
+    path = tmp_path / "blind.mcap"
+    with McapRecorder(path) as rec:
+        run_loop(twin, ctl, clock, GraspPlan(target_n=5.0), 1.0, recorder=rec)
+    code, out, err = run_main(["replay", path], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "no RGB frames")
+    code, out, err = run_main(["dataset", "from-recordings", path, "--out", tmp_path / "d"],
+                              monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "no RGB frames")
+
+
+def test_recording_without_ground_truth(relax_hold: tuple[Path, HoldResult], tmp_path: Path,
+                                        monkeypatch: pytest.MonkeyPatch,
+                                        capsys: pytest.CaptureFixture[str]) -> None:
+    good, _ = relax_hold
+    blind = tmp_path / "no-truth.mcap"
+    _without(good, blind, {"/relaxgrip/truth", "/relaxgrip/force_ref"})
+    code, out, err = run_main(["dataset", "from-recordings", blind, "--out", tmp_path / "d"],
+                              monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "no force ground truth")
+
+
+def test_hold_record_refuses_compare(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run_main(["hold", "--compare", "--record", tmp_path / "r.mcap"],
+                              monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "--record records one run")
+    assert not (tmp_path / "r.mcap").exists()
+
+
+def test_recover_cli(relax_hold: tuple[Path, HoldResult], tmp_path: Path,
+                     monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    good, _ = relax_hold
+    cut = tmp_path / "cut.mcap"
+    data = good.read_bytes()
+    cut.write_bytes(data[: len(data) * 2 // 3])
+    out_path = tmp_path / "fixed.mcap"
+    code, out, err = run_main(["recover", cut, out_path], monkeypatch, capsys)
+    assert code == 0, err
+    assert "was truncated" in out
+    code, out, err = run_main(["replay", out_path, "--json"], monkeypatch, capsys)
+    assert code == 0, err
+    code, out, err = run_main(["recover", tmp_path / "none.mcap", out_path], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "no such recording")

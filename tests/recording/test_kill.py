@@ -1,0 +1,88 @@
+"""A recorder killed with SIGKILL mid-run leaves every flushed chunk readable."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from relaxgrip.errors import InputError
+from relaxgrip.recording import iter_periods, recover
+from relaxgrip.recording.reader import iter_messages
+
+FLUSH_S = 0.5
+KILL_AT_S = 5.0
+
+_CHILD = textwrap.dedent("""
+    import sys
+    from dataclasses import replace
+    from pathlib import Path
+
+    from relaxgrip.clock import VirtualClock
+    from relaxgrip.control import GraspController, GraspPlan, make_estimator, run_loop
+    from relaxgrip.learning.training import load_default_models
+    from relaxgrip.recording import McapRecorder
+    from relaxgrip.twin import GripperTwin, TwinConfig
+
+    class Announcing(McapRecorder):
+        def step(self, obs, controller, command):
+            super().step(obs, controller, command)
+            print(obs.t_s, flush=True)  # this period is in the recorder's hands
+
+    models = load_default_models()
+    cfg = replace(TwinConfig(), initial_temp_c=40.0)
+    clock = VirtualClock()
+    twin = GripperTwin(cfg, seed=0, clock=clock)
+    ctl = GraspController(cfg.rig, make_estimator("fixed", models.icfn, models.rcfn),
+                          heat=cfg.heat)
+    rec = Announcing(Path(sys.argv[1]), flush_every_s=float(sys.argv[2]))
+    run_loop(twin, ctl, clock, GraspPlan(target_n=5.0, temp_c=40.0, hold_s=200.0), 400.0,
+             recorder=rec)
+    rec.close()
+    print("finished", flush=True)
+""")
+
+
+def test_sigkill_leaves_the_flushed_part_readable(tmp_path: Path) -> None:
+    path = tmp_path / "killed.mcap"
+    child = subprocess.Popen([sys.executable, "-c", _CHILD, str(path), str(FLUSH_S)],
+                             stdout=subprocess.PIPE, text=True)
+    assert child.stdout is not None
+    last_t = -1.0
+    for line in child.stdout:
+        assert line.strip() != "finished", "the run ended before it was killed"
+        last_t = float(line)
+        if last_t >= KILL_AT_S:
+            os.kill(child.pid, signal.SIGKILL)
+            break
+    child.wait(timeout=30)
+    assert child.returncode == -signal.SIGKILL
+    assert last_t >= KILL_AT_S
+    # Strict reading names the problem and the way out.
+    with pytest.raises(InputError, match=r"truncated.*relaxgrip recover"):
+        next(iter_periods(path))
+    # Tolerant reading gives every period up to the last flush before the kill.
+    periods = list(iter_periods(path, tolerant=True))
+    times = [p.t_s for p in periods]
+    assert times == sorted(times)
+    assert times[0] == 0.0
+    assert times[-1] >= last_t - FLUSH_S - 1e-9
+    assert all(p.rgb is not None for p in periods[1:])
+    # recover writes a complete file that mcap's indexed reader opens.
+    out = tmp_path / "recovered.mcap"
+    report = recover(path, out)
+    assert not report.complete
+    n_tolerant = sum(1 for _ in iter_messages(path, tolerant=True))
+    assert report.messages == n_tolerant
+    with open(out, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    assert summary.statistics is not None
+    assert summary.statistics.message_count == n_tolerant
+    assert [p.t_s for p in iter_periods(out)] == times
