@@ -37,7 +37,7 @@ def test_compare_prints_the_table_and_draws_the_figure(monkeypatch, capsys, tmp_
     code, out, err = run_main(["hold", "--compare", "--duration-s", "10", "--jobs", "1"],
                               monkeypatch, capsys)
     assert code == 0, err
-    for name in ("fixed", "icfn", "relax"):
+    for name in ("fixed", "icfn", "relax", "observer"):
         assert name in out
     assert "MAE reduction of relax vs fixed" in out
     assert "vs icfn" in out
@@ -49,7 +49,7 @@ def test_compare_json_is_one_object_with_every_hold(monkeypatch, capsys, tmp_pat
                                "--plot", tmp_path / "c.svg", "--json"], monkeypatch, capsys)
     assert code == 0, err
     d = json.loads(out)
-    assert set(d["holds"]) == {"fixed", "icfn", "relax"}
+    assert set(d["holds"]) == {"fixed", "icfn", "relax", "observer"}
     assert set(d["mae_reduction"]) == {"vs_fixed", "vs_icfn"}
     for hold in d["holds"].values():
         assert hold.keys() >= KEYS

@@ -13,6 +13,7 @@ import sys
 from relaxgrip.cli import (  # noqa: F401  (registers commands)
     bench,
     characterize,
+    dashboard,
     experiments,
     fit,
     hardware,

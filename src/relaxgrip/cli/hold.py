@@ -32,7 +32,7 @@ def _paper(name: str, key: str) -> str:
 @app.command("hold")
 def hold(
     estimator: Annotated[str, typer.Option(
-        "--estimator", help="fixed, icfn or relax.")] = "relax",
+        "--estimator", help="fixed, icfn, relax or observer.")] = "relax",
     target_n: Annotated[float, typer.Option("--target-n", help="Target force (N), 0-10.")] = 5.0,
     duration_s: Annotated[float, typer.Option("--duration-s", help="Hold length (s).")] = 280.0,
     temp_c: Annotated[float, typer.Option("--temp-c", help="Finger temperature (°C).")] = 40.0,
@@ -41,7 +41,7 @@ def hold(
         "--models", help="Model directory (default: the shipped models).", show_default=False)
     ] = None,
     compare: Annotated[bool, typer.Option(
-        "--compare", help="Run fixed, icfn and relax on the same seed.")] = False,
+        "--compare", help="Run fixed, icfn, relax and observer on the same seed.")] = False,
     plot: Annotated[Path | None, typer.Option(
         "--plot", help=f"Figure file (.png/.pdf/.svg); --compare default: {DEFAULT_COMPARE_PLOT}.",
         show_default=False)] = None,
@@ -53,6 +53,15 @@ def hold(
     record: Annotated[Path | None, typer.Option(
         "--record", help="Record the run to this MCAP file (not with --compare).",
         show_default=False)] = None,
+    temp_profile: Annotated[str | None, typer.Option(
+        "--temp-profile", help="Setpoint over hold time: ramp:FROM_C:TO_C:START_S:OVER_S or "
+                               "step:TO_C:AT_S.", show_default=False)] = None,
+    target_profile: Annotated[str | None, typer.Option(
+        "--target-profile", help="Target over hold time: step:TO_N:AT_S or "
+                                 "ramp:FROM_N:TO_N:START_S:OVER_S.", show_default=False)] = None,
+    disturbance: Annotated[str | None, typer.Option(
+        "--disturbance", help="Push on the object: push:FORCE_N:AT_S[:FOR_S].",
+        show_default=False)] = None,
 ) -> None:
     """Close on the force ball to the target and hold it, scoring the steady state (100-280 s)."""
     from relaxgrip.control import EstimatorKind, check_target_n
@@ -60,6 +69,11 @@ def hold(
         check_hold_temp_c,
         compare_holds,
         run_hold,
+    )
+    from relaxgrip.experiments.profiles import (
+        parse_disturbance,
+        parse_target_profile,
+        parse_temp_profile,
     )
     from relaxgrip.learning.store import load_models
     from relaxgrip.learning.training import load_default_models
@@ -69,7 +83,10 @@ def hold(
 
     # Everything is checked before anything starts.
     if estimator not in {k.value for k in EstimatorKind}:
-        raise InputError(f"--estimator must be fixed, icfn or relax, got {estimator!r}")
+        raise InputError(f"--estimator must be fixed, icfn, relax or observer, got {estimator!r}")
+    temps = None if temp_profile is None else parse_temp_profile(temp_profile)
+    targets = None if target_profile is None else parse_target_profile(target_profile)
+    push = None if disturbance is None else parse_disturbance(disturbance)
     check_target_n(target_n)
     check_hold_temp_c(temp_c)
     check_positive(duration_s, "--duration-s")
@@ -79,6 +96,9 @@ def hold(
         raise InputError(f"--jobs must be >= 1, got {jobs}")
     if backend not in ("twin", "emulator"):
         raise InputError(f"--backend must be twin or emulator, got {backend!r}")
+    if compare and (temps, targets, push) != (None, None, None):
+        raise InputError("--compare runs the standard hold: run each estimator with "
+                         "--estimator NAME and the profiles instead")
     if compare and backend != "twin":
         raise InputError("--compare runs on the twin backend only")
     if record is not None and compare:
@@ -92,9 +112,10 @@ def hold(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_names=RCFN_SCHEMA.names)
     start = time.perf_counter()
     if compare:
-        with console.status("holding with fixed, icfn and relax …") if not json_out \
+        with console.status("holding with fixed, icfn, relax and observer …") if not json_out \
                 else nullcontext():
-            comparison = compare_holds(target_n=target_n, duration_s=duration_s, temp_c=temp_c,
+            comparison = compare_holds(("fixed", "icfn", "relax", "observer"), target_n=target_n,
+                                       duration_s=duration_s, temp_c=temp_c,
                                        seed=seed, models=bundle, n_jobs=jobs)
         figure = None
         if plot is not None:
@@ -115,13 +136,15 @@ def hold(
     with console.status(f"holding with {estimator} …") if not json_out else nullcontext():
         if record is None:
             result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
-                              backend=backend)
+                              backend=backend, temp_profile=temps,
+                              target_profile=targets, disturbance=push)
         else:
             from relaxgrip.recording import McapRecorder
 
             with McapRecorder(record) as recorder:
                 result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
-                                  backend=backend, recorder=recorder)
+                                  backend=backend, recorder=recorder,
+                                  temp_profile=temps, target_profile=targets, disturbance=push)
     figure = None
     if plot is not None:
         from relaxgrip.plots.holding import plot_hold
@@ -158,6 +181,10 @@ def _print_table(rows: dict[str, dict[str, Any]], reductions: dict[str, float],
         paper = PAPER_REDUCTION.get(key)
         ref = f" (paper {paper:.1%})" if paper is not None else ""
         console.print(f"MAE reduction of relax {key.replace('_', ' ')}: {value:.1%}{ref}")
+    for name, d in rows.items():
+        if "band_coverage" in d:
+            console.print(f"{name}: the 95 % band covers the true force "
+                          f"{d['band_coverage']:.1%} of the hold")
     for name, d in rows.items():
         for event in d["events"]:
             if event["kind"] not in ("contact", "hold_onset"):

@@ -150,3 +150,20 @@ def evaluate(
     console.print(table)
     if figure is not None:
         console.print(f"figure: {figure}")
+
+
+@app.command("fit-observer")
+def fit_observer_command(
+    data: Annotated[Path, typer.Option("--data", help="Dataset directory with RCFN holds.",
+                                       show_default=False)],
+    out: Annotated[Path, typer.Option("--out", help="Observer directory to write.",
+                                      show_default=False)],
+) -> None:
+    """Identify the viscoelastic observer (``--estimator observer``) on a dataset's RCFN holds."""
+    from relaxgrip.learning.observer import fit_observer
+
+    start = time.perf_counter()
+    model = fit_observer(data, out)
+    console.print(f"{out}: observer of {model.n_terms} branches on {model.n_sequences_} "
+                  f"sequences, {model.temps_c_.size} temperature knots, "
+                  f"{time.perf_counter() - start:.0f} s")

@@ -72,7 +72,7 @@ class GraspPlan:
     lift_mm : float
         Arm lift after the hold (mm); 0: no Lift or Sustain.
     sustain_s : float
-        Time in Sustain (s).
+        Time in Sustain (s); ``inf`` sustains until told.
     release : bool
         Open the fingers at the end (else stay in the last phase).
     """
@@ -92,7 +92,7 @@ class GraspPlan:
             raise InputError(f"hold time must be > 0 s, got {self.hold_s}")
         if not (math.isfinite(self.lift_mm) and self.lift_mm >= 0):
             raise InputError(f"lift must be >= 0 mm, got {self.lift_mm}")
-        if not (math.isfinite(self.sustain_s) and self.sustain_s >= 0):
+        if not self.sustain_s >= 0:  # nan refused; inf sustains until told, as hold_s
             raise InputError(f"sustain time must be >= 0 s, got {self.sustain_s}")
 
 
@@ -226,6 +226,43 @@ class GraspController:
     def set_target(self, target_n: float) -> None:
         """Change the force target from now on."""
         self.plan = replace(self.plan, target_n=check_target_n(target_n))
+
+    def hold(self, t_s: float) -> None:
+        """Hold the force from now on, however far the closing or lifting has got.
+
+        A closing grasp in contact enters Hold at once (the motor settles,
+        then the estimator's hold starts); a lift or sustain returns to Hold
+        (the arm stops, the force stays held).  The hold then lasts until
+        told otherwise.
+
+        Raises
+        ------
+        InputError
+            In any other phase, or while closing before contact.
+        """
+        if self.phase is GraspPhase.CLOSE and self._in_contact:
+            self._hold_started = False
+        elif self.phase not in (GraspPhase.HOLD, GraspPhase.LIFT, GraspPhase.SUSTAIN):
+            raise InputError(f"nothing to hold in phase {self.phase.value}"
+                             + (" before contact" if self.phase is GraspPhase.CLOSE else ""))
+        self.plan = replace(self.plan, hold_s=math.inf)
+        if self.phase is not GraspPhase.HOLD:
+            self._enter(t_s, GraspPhase.HOLD)
+
+    def lift(self, t_s: float, arm_mm: float, lift_mm: float) -> None:
+        """Lift the held object by ``lift_mm`` from the arm's height ``arm_mm``, then sustain.
+
+        Raises
+        ------
+        InputError
+            Unless the grasp is in Hold, or if ``lift_mm`` is not > 0.
+        """
+        if self.phase is not GraspPhase.HOLD:
+            raise InputError(f"lift needs a grasp in hold, not in phase {self.phase.value}")
+        if not (math.isfinite(lift_mm) and lift_mm > 0):
+            raise InputError(f"lift must be > 0 mm, got {lift_mm}")
+        self.plan = replace(self.plan, lift_mm=float(lift_mm), sustain_s=math.inf)
+        self._after_hold(t_s, arm_mm)
 
     def release(self, t_s: float) -> None:
         """Open the fingers now."""

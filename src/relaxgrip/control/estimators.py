@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relaxgrip.learning.icfn import ICFN
+from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
 from relaxgrip.perception.features import RcfnFeatures, finger_temperature_c, marker_pose
 from relaxgrip.perception.pipeline import Percept
@@ -69,6 +70,7 @@ class EstimatorKind(enum.StrEnum):
     FIXED = "fixed"
     ICFN = "icfn"
     RELAX = "relax"
+    OBSERVER = "observer"
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,8 @@ class ForceEstimate:
         is holding).
     hold_s : float
         Time since the hold onset (s; nan before it).
+    band_lo_n, band_hi_n : float
+        The estimate's 95 % band (N; nan when the estimator gives none).
     """
 
     force_n: float
@@ -97,6 +101,8 @@ class ForceEstimate:
     k_n: float = NAN
     tau_s: float = NAN
     hold_s: float = NAN
+    band_lo_n: float = NAN
+    band_hi_n: float = NAN
 
     @property
     def valid(self) -> bool:
@@ -318,9 +324,16 @@ def _closure_slopes(
     return stiffness, pose_slope
 
 
-def make_estimator(kind: EstimatorKind | str, icfn: ICFN, rcfn: RCFN) -> ForceEstimator:
-    """The estimator named ``kind`` on the given models."""
+def make_estimator(kind: EstimatorKind | str, icfn: ICFN, rcfn: RCFN,
+                   observer: ObserverModel | None = None) -> ForceEstimator:
+    """The estimator named ``kind`` on the given models (``observer``: default the shipped one)."""
     kind = EstimatorKind(kind)
+    if kind is EstimatorKind.OBSERVER:
+        from relaxgrip.control.observer import ObserverEstimator
+        from relaxgrip.learning.observer import load_default_observer
+
+        return ObserverEstimator(icfn, observer if observer is not None
+                                 else load_default_observer())
     if kind is EstimatorKind.FIXED:
         return FixedEstimator(icfn)
     if kind is EstimatorKind.ICFN:

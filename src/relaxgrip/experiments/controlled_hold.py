@@ -12,14 +12,14 @@ against the true force.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from relaxgrip.backend import Gripper
+from relaxgrip.backend import Gripper, Observation
 from relaxgrip.clock import VirtualClock
 from relaxgrip.control import (
     EstimatorKind,
@@ -32,6 +32,7 @@ from relaxgrip.control import (
 )
 from relaxgrip.control.runner import LoopRecorder
 from relaxgrip.errors import InputError
+from relaxgrip.experiments.profiles import Profile, band_coverage
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
@@ -106,6 +107,14 @@ class HoldResult:
     estimate_n: FloatArray
     loop: LoopResult
     twin_version: str = TWIN_VERSION
+    target_series_n: FloatArray | None = None
+
+    @property
+    def target_t_n(self) -> FloatArray:
+        """The target at each sample (N): constant unless a target profile changed it."""
+        if self.target_series_n is None:
+            return np.full(self.t_s.shape, self.target_n)
+        return self.target_series_n
 
     @property
     def window(self) -> tuple[float, float]:
@@ -121,11 +130,17 @@ class HoldResult:
         mask = self._mask()
         if not mask.any():
             raise InputError("the hold ended before its steady-state interval")
-        err = self.truth_n[mask] - self.target_n
+        err = self.truth_n[mask] - self.target_t_n[mask]
         est = self.estimate_n[mask] - self.truth_n[mask]
         est = est[np.isfinite(est)]
         q25, q75 = np.percentile(err, [25, 75])
-        return {
+        # The loop's rows of the hold, as run_hold kept them.
+        t_loop = self.loop["t_s"] - (self.loop.hold_onset_s() or 0.0)
+        rows = (t_loop >= 0.0) & (t_loop <= self.duration_s + 1e-9)
+        coverage = band_coverage(self.loop["truth_force_n"][rows], self.loop["band_lo_n"][rows],
+                                 self.loop["band_hi_n"][rows])
+        extra = {} if math.isnan(coverage) else {"band_coverage": coverage}
+        return {**extra,
             "mae_n": float(np.mean(np.abs(err))),
             "rmse_n": float(np.sqrt(np.mean(err * err))),
             "mean_signed_error_n": float(np.mean(err)),
@@ -189,6 +204,9 @@ def run_hold(
     config: TwinConfig | None = None,
     backend: str = "twin",
     recorder: LoopRecorder | None = None,
+    temp_profile: Profile | None = None,
+    target_profile: Profile | None = None,
+    disturbance: Profile | None = None,
 ) -> HoldResult:
     """Close on the force ball to ``target_n`` at ``temp_c`` and hold it for ``duration_s``.
 
@@ -216,6 +234,9 @@ def run_hold(
     recorder : LoopRecorder, optional
         Records every period (e.g. :class:`relaxgrip.recording.McapRecorder`);
         the caller closes it.
+    temp_profile, target_profile, disturbance : Profile, optional
+        Temperature setpoint (°C), force target (N) and push on the object (N,
+        twin backend only) over the hold time (:mod:`relaxgrip.experiments.profiles`).
 
     Returns
     -------
@@ -238,9 +259,10 @@ def run_hold(
     controller = GraspController(cfg.rig, make_estimator(kind, bundle.icfn, bundle.rcfn),
                                  heat=cfg.heat)
     plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False)
+    on_step = _scenario(twin, temp_profile, target_profile, disturbance, temp_c, target_n)
     try:
         loop = run_loop(twin, controller, clock, plan, duration_s + SETUP_ALLOWANCE_S,
-                        recorder=recorder)
+                        recorder=recorder, on_step=on_step)
     finally:
         twin.close()
     onset = loop.hold_onset_s()
@@ -249,8 +271,38 @@ def run_hold(
         raise InputError(f"the hold never started ({events or 'no contact'})")
     t = loop["t_s"] - onset
     keep = (t >= 0.0) & (t <= duration_s + 1e-9)
+    targets = None if target_profile is None else target_profile.values(t[keep], target_n)
     return HoldResult(kind.value, target_n, temp_c, duration_s, seed, t[keep],
-                      loop["truth_force_n"][keep], loop["estimate_n"][keep], loop)
+                      loop["truth_force_n"][keep], loop["estimate_n"][keep], loop,
+                      target_series_n=targets)
+
+
+def _scenario(backend: Gripper, temp: Profile | None, target: Profile | None,
+              push: Profile | None, temp_c: float, target_n: float
+              ) -> Callable[[Observation, GraspController], bool | None] | None:
+    """The loop's per-step hook that applies the profiles at their hold times."""
+    if temp is None and target is None and push is None:
+        return None
+    if push is not None and not isinstance(backend, GripperTwin):
+        raise InputError("a disturbance needs the twin backend")
+
+    def step(obs: Observation, controller: GraspController) -> None:
+        hold_s = controller.estimate.hold_s
+        if not math.isfinite(hold_s):
+            return
+        if temp is not None:
+            value = temp.value_at(hold_s, temp_c)
+            if value != controller.temperature.setpoint_c:
+                controller.temperature.set_temperature(value)
+        if target is not None:
+            value = target.value_at(hold_s, target_n)
+            if value != controller.plan.target_n:
+                controller.set_target(value)
+        if push is not None:
+            assert isinstance(backend, GripperTwin)
+            backend.set_external_force(push.value_at(hold_s, 0.0))
+
+    return step
 
 
 @dataclass(frozen=True)
@@ -266,12 +318,12 @@ class HoldComparison:
     holds: dict[str, HoldResult]
 
     def reductions(self) -> dict[str, float]:
-        """MAE reduction of ``relax`` over each baseline (share, 0.8 = 80 %)."""
+        """MAE reduction of ``relax`` over the paper's baselines (share, 0.8 = 80 %)."""
         if "relax" not in self.holds:
             return {}
         ours = self.holds["relax"].metrics()["mae_n"]
         return {f"vs_{name}": 1.0 - ours / hold.metrics()["mae_n"]
-                for name, hold in self.holds.items() if name != "relax"}
+                for name, hold in self.holds.items() if name in ("fixed", "icfn")}
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-Python form: each hold's figures and the reductions."""

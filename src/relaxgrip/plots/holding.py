@@ -17,8 +17,10 @@ __all__ = ["plot_hold", "plot_hold_comparison"]
 
 _TITLES = {"fixed": "without holding control (fixed)",
            "icfn": "without relaxation compensation (icfn)",
-           "relax": "ours: ICFN + RCFN (relax)"}
-_COLORS = {"fixed": "tab:gray", "icfn": "tab:red", "relax": "tab:green"}
+           "relax": "ours: ICFN + RCFN (relax)",
+           "observer": "viscoelastic observer (observer)"}
+_COLORS = {"fixed": "tab:gray", "icfn": "tab:red", "relax": "tab:green",
+           "observer": "tab:purple"}
 
 
 def _thin(t: np.ndarray, every_s: float = 0.2) -> np.ndarray:
@@ -96,6 +98,12 @@ def _force_panel(ax: Axes, name: str, hold: HoldResult) -> None:
     ax.plot(hold.t_s[idx], hold.truth_n[idx], color="tab:blue", lw=1.2, label="true force")
     ax.plot(hold.t_s[idx], hold.estimate_n[idx], color="tab:orange", lw=1.2, ls="--",
             label="estimate")
+    t_loop = hold.loop["t_s"] - (hold.loop.hold_onset_s() or 0.0)
+    rows = (t_loop >= 0.0) & (t_loop <= hold.duration_s + 1e-9)
+    lo_n, hi_n = hold.loop["band_lo_n"][rows][idx], hold.loop["band_hi_n"][rows][idx]
+    if np.isfinite(lo_n).any():
+        ax.fill_between(hold.t_s[idx], lo_n, hi_n, color="tab:orange", alpha=0.2, lw=0,
+                        label="95 % band")
     ax.axhline(hold.target_n, color="k", lw=0.6, ls=":", label="target")
     m = hold.metrics()
     ax.set_title(f"{_TITLES.get(name, name)}\nMAE {m['mae_n']:.3f} N", fontsize=9)

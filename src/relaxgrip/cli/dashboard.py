@@ -1,0 +1,71 @@
+"""``relaxgrip dashboard``: the live web dashboard on the twin, the emulator or a rig."""
+
+from __future__ import annotations
+
+import ipaddress
+import secrets
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from relaxgrip.cli._app import app, console
+from relaxgrip.errors import InputError
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` names the loopback interface only."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+@app.command("dashboard")
+def dashboard(
+    backend: Annotated[str, typer.Option(
+        "--backend", help="twin, emulator (the twin behind the MCU emulator) or "
+                          "serial:RIG.toml (a real gripper).")] = "twin",
+    host: Annotated[str, typer.Option("--host", help="Address to bind.")] = "127.0.0.1",
+    port: Annotated[int, typer.Option("--port", help="TCP port.")] = 8000,
+    allow_remote: Annotated[bool, typer.Option(
+        "--allow-remote", help="Allow a non-loopback --host; the page then needs the printed "
+                               "access token.")] = False,
+    estimator: Annotated[str, typer.Option(
+        "--estimator", help="fixed, icfn or relax.")] = "relax",
+    seed: Annotated[int, typer.Option("--seed", help="Twin seed.")] = 0,
+    record_dir: Annotated[Path, typer.Option(
+        "--record-dir", help="Where MCAP recordings go.")] = Path("."),
+) -> None:
+    """Serve the live dashboard and run the gripper loop in real time (30 Hz) behind it."""
+    from relaxgrip.dashboard import require_web_stack
+
+    require_web_stack()
+    if not 0 < port < 65536:
+        raise InputError(f"--port must be 1-65535, got {port}")
+    remote = not is_loopback(host)
+    if remote and not allow_remote:
+        raise InputError(f"--host {host} is reachable from other machines: "
+                         "add --allow-remote (an access token is then required)")
+    import uvicorn
+
+    from relaxgrip.clock import WallClock
+    from relaxgrip.dashboard.app import create_app
+    from relaxgrip.dashboard.session import open_session
+
+    session = open_session(backend, clock=WallClock(), seed=seed, estimator=estimator,
+                           record_dir=record_dir)
+    token = secrets.token_urlsafe(24) if remote else None
+    application = create_app(session, token=token)
+    shown = f"[{host}]" if ":" in host else host
+    url = f"http://{shown}:{port}/" + (f"?token={token}" if token else "")
+    console.print(f"dashboard on {url} ({session.backend.info.name}); Ctrl-C stops it "
+                  "(motor stopped, heaters off)", markup=False, highlight=False, soft_wrap=True)
+    if token:
+        console.print(f"access token: {token}", markup=False, highlight=False)
+    try:
+        uvicorn.run(application, host=host, port=port, log_level="warning")
+    finally:
+        session.close()

@@ -1,0 +1,586 @@
+"""The viscoelastic observer's parameters: identified from RCFN holds, saved without pickle.
+
+The observer (:class:`relaxgrip.control.observer.ObserverEstimator`) treats the
+finger that carries the marker as a generalized Maxwell element (Eqs. 1–2)
+driven by the deflection the marker measures, ``d(t)`` (its ``dx``, m)::
+
+    F(t) = k(T) [ g_e(T) d(t) + sum_i F_i(t) ]
+    tau_i(T) dF_i/dt + F_i = g_i(T) tau_i(T) dd/dt,   tau_i(T) = tau_ref_i a_T(T)
+
+``k(T)`` is the instantaneous stiffness per metre of marker deflection
+relative to the reference temperature, ``g_e + sum g_i = 1`` the split of it
+between the equilibrium spring and the branches, ``a_T`` the shift factor
+(reduced time).  All three are tables over temperature knots, interpolated
+linearly (the shift factor in ``ln a_T``).  The absolute scale (N per metre)
+is not a parameter: the observer takes it from the ICFN at the hold onset.
+
+Identification (:meth:`ObserverModel.fit`) on a dataset's RCFN holds (fixed
+aperture after a loading at a known closing speed):
+
+1. The relaxation times at the reference temperature: a ``n_terms`` Prony
+   series (:func:`relaxgrip.physics.fitting.fit_prony`) fitted to the mean
+   normalised force curve of the sequences nearest the reference temperature.
+2. Per temperature group (sequences of one set temperature): for each
+   candidate shift ``ln a_T`` the branch responses ``h_i(t)`` to the
+   sequence's deflection history (a ramp from contact to the onset
+   deflection over the loading time, then the marker's measured deflection
+   during the hold) are integrated with the exact recursion
+   (:func:`relaxgrip.physics.viscoelastic.branch_update`); the force is
+   linear in ``k g_e`` and ``k g_i`` given them, solved by non-negative least
+   squares per sequence.  The shift minimising the group's normalised squared
+   error wins; the shares are the group's mean.
+3. ``k(T)``: ``ln k`` of every sequence regressed on temperature-group and
+   set-up (object, contact location) indicators.
+4. The 95 % band: the observer run on the held-out (validation and test)
+   sequences, its force scaled by the ICFN's onset estimate as in closed loop;
+   the 95th percentile of ``|estimate - truth| / F_onset`` per hold-time bin.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import math
+import os
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+import relaxgrip
+from relaxgrip.errors import InputError
+from relaxgrip.learning.datastore import Dataset
+from relaxgrip.learning.icfn import ICFN
+from relaxgrip.perception.features import ICFN_SCHEMA
+from relaxgrip.physics.fitting import fit_prony
+from relaxgrip.physics.viscoelastic import branch_update
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "LOADING_SPEED_MM_S",
+    "OBSERVER_FORMAT",
+    "OBSERVER_VERSION",
+    "ObserverModel",
+    "branch_responses",
+    "default_observer_dir",
+    "load_default_observer",
+    "load_observer",
+    "save_observer",
+]
+
+#: Closing speed of the twin datasets' RCFN loadings (``relaxgrip.learning.datasets``, mm/s).
+LOADING_SPEED_MM_S = 2.0
+OBSERVER_FORMAT = "relaxgrip-observer"
+OBSERVER_VERSION = 1
+OBSERVER_FILE = "observer.npz"
+MANIFEST_NAME = "manifest.json"
+#: Hold-time bins of the band (s).
+_BAND_BIN_S = 20.0
+#: Resampling interval of the force curves for identification (s).
+_FIT_DT_S = 1.0
+#: Steps of the loading ramp (the recursion is exact for a linear ramp; a few suffice).
+_RAMP_STEPS = 4
+#: Search window of a group's ``ln a_T`` below / above the next colder group's.
+_MAX_SHIFT_DROP = 3.0
+_SHIFT_SLACK = 0.1
+_ARRAYS = ("temps_c_", "tau_ref_s_", "log_shift_", "branch_share_", "log_stiffness_",
+           "band_t_s_", "band_rel_")
+
+
+def branch_responses(t_s: FloatArray, d_m: FloatArray, tau_s: FloatArray) -> FloatArray:
+    """Unit-stiffness Maxwell branch forces along a deflection history (Eq. 2, exact).
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (n,)
+        Non-decreasing times (s).
+    d_m : ndarray, shape (n,)
+        Deflection at ``t_s`` (m), linear in between; the history starts
+        at rest (every branch at zero before ``t_s[0]``, deflection jumps to
+        ``d_m[0]`` at once).
+    tau_s : ndarray, shape (..., N)
+        Relaxation times (s); leading axes are candidates evaluated together.
+
+    Returns
+    -------
+    ndarray, shape (n, ..., N)
+        Branch forces per unit branch stiffness (m).
+    """
+    tau = np.asarray(tau_s, dtype=np.float64)
+    out = np.empty((t_s.size, *tau.shape))
+    f, _ = branch_update(np.zeros(tau.shape), float(d_m[0]), 0.0, np.ones(tau.shape), tau)
+    out[0] = f
+    for k in range(1, t_s.size):
+        f, _ = branch_update(f, float(d_m[k] - d_m[k - 1]), float(t_s[k] - t_s[k - 1]),
+                             np.ones(tau.shape), tau)
+        out[k] = f
+    return out
+
+
+@dataclass(frozen=True)
+class _Hold:
+    """One RCFN sequence prepared for identification."""
+
+    sequence: int
+    group: float
+    temp_c: float
+    setup: str
+    split: str
+    f0_n: float
+    t_s: FloatArray  # loading ramp (negative times) then the hold
+    d_m: FloatArray
+    f_n: FloatArray  # force at the hold's times (t >= 0)
+    onset_x: FloatArray | None  # ICFN features at the onset
+
+
+class ObserverModel:
+    """Temperature-dependent Prony parameters of the observer, identified from RCFN holds.
+
+    Parameters
+    ----------
+    n_terms : int
+        Maxwell branches.
+    loading_speed_mm_s : float
+        Closing speed of the dataset's loadings before each hold (mm/s): with
+        the closure ratio it gives each loading's duration.
+    band_level : float
+        Coverage the band is computed for (0.95: the 95 % band).
+    band_scale : float
+        Factor on the band's half-width (a recalibration; 1: as identified).
+    """
+
+    def __init__(self, n_terms: int = 3, loading_speed_mm_s: float = LOADING_SPEED_MM_S,
+                 band_level: float = 0.95, band_scale: float = 1.0) -> None:
+        self.n_terms = n_terms
+        self.loading_speed_mm_s = loading_speed_mm_s
+        self.band_level = band_level
+        self.band_scale = band_scale
+
+    def get_params(self) -> dict[str, Any]:
+        """Hyperparameters (scikit-learn style)."""
+        return {"n_terms": self.n_terms, "loading_speed_mm_s": self.loading_speed_mm_s,
+                "band_level": self.band_level, "band_scale": self.band_scale}
+
+    # -- evaluation ---------------------------------------------------------------------
+
+    def _check_fitted(self) -> None:
+        if not hasattr(self, "tau_ref_s_"):
+            raise ValueError("the observer model is not fitted")
+
+    def parameters(self, temp_c: float) -> tuple[float, FloatArray, FloatArray]:
+        """Equilibrium and branch stiffnesses (relative) and relaxation times at ``temp_c``.
+
+        Parameters
+        ----------
+        temp_c : float
+            Finger temperature (°C); outside the identified range the nearest
+            knot's parameters hold.
+
+        Returns
+        -------
+        k_e : float
+            ``k(T) g_e(T)`` (per unit of the reference stiffness).
+        k_i : ndarray, shape (N,)
+            ``k(T) g_i(T)``.
+        tau_s : ndarray, shape (N,)
+            ``tau_ref_i a_T(T)`` (s).
+        """
+        self._check_fitted()
+        temps = self.temps_c_
+        k = math.exp(float(np.interp(temp_c, temps, self.log_stiffness_)))
+        shares = np.array([np.interp(temp_c, temps, self.branch_share_[:, i])
+                           for i in range(self.branch_share_.shape[1])])
+        shift = math.exp(float(np.interp(temp_c, temps, self.log_shift_)))
+        return k * (1.0 - float(shares.sum())), k * shares, self.tau_ref_s_ * shift
+
+    def band_rel(self, hold_s: float) -> float:
+        """Half-width of the band relative to the onset force, ``hold_s`` into the hold."""
+        self._check_fitted()
+        return self.band_scale * float(np.interp(hold_s, self.band_t_s_, self.band_rel_))
+
+    # -- identification -------------------------------------------------------------------
+
+    def fit(self, data: Dataset, icfn: ICFN | None = None) -> ObserverModel:
+        """Identify the parameters from a dataset's RCFN holds (module docstring).
+
+        Parameters
+        ----------
+        data : Dataset
+            A dataset with RCFN sequences (``relaxgrip dataset build`` or
+            ``relaxgrip dataset from-recordings``).
+        icfn : ICFN, optional
+            The ICFN whose onset estimate scales the observer (for the band);
+            without it the band assumes the onset force is known exactly.
+
+        Returns
+        -------
+        ObserverModel
+            ``self``.
+
+        Raises
+        ------
+        InputError
+            Too few usable sequences, or hyperparameters out of range.
+        """
+        if not (1 <= self.n_terms <= 5):
+            raise InputError(f"n_terms must be 1-5, got {self.n_terms}")
+        if not (self.loading_speed_mm_s > 0 and 0.5 <= self.band_level < 1.0
+                and self.band_scale > 0):
+            raise InputError("need loading_speed_mm_s > 0, 0.5 <= band_level < 1, band_scale > 0")
+        holds = self._prepare(data)
+        train = [h for h in holds if h.split == "train"] or holds
+        held = [h for h in holds if h.split != "train"] or holds
+        groups = sorted({h.group for h in train})
+        group_temps = np.array([np.mean([h.temp_c for h in train if h.group == g])
+                                for g in groups])
+        ref = int(np.argmin(np.abs(group_temps - float(np.median(group_temps)))))
+        self.tau_ref_s_ = self._reference_times(
+            [h for h in train if h.group == groups[ref]])
+        # The shift factor falls with temperature (WLF / Arrhenius): groups are fitted from
+        # the coldest up, each searched at or below the previous one's shift, which keeps
+        # the modes from swapping between groups where two local optima compete.
+        shifts, shares = [0.0] * len(groups), [np.zeros(self.n_terms)] * len(groups)
+        bounds = (-6.0, 6.0)
+        for i in np.argsort(group_temps).tolist():
+            s, share = self._fit_group([h for h in train if h.group == groups[i]], bounds)
+            shifts[i], shares[i] = s, share
+            bounds = (s - _MAX_SHIFT_DROP, s + _SHIFT_SLACK)
+        log_shift = np.array(shifts) - shifts[ref]
+        self.tau_ref_s_ = self.tau_ref_s_ * math.exp(shifts[ref])
+        order = np.argsort(group_temps)
+        self.temps_c_ = group_temps[order]
+        self.log_shift_ = log_shift[order]
+        self.branch_share_ = np.array(shares)[order]
+        shift_of = dict(zip(groups, log_shift.tolist(), strict=True))
+        self.log_stiffness_ = self._stiffness(train, groups, ref, shift_of)[order]
+        self._fit_band(held, icfn)
+        self.n_sequences_ = len(holds)
+        return self
+
+    def _prepare(self, data: Dataset) -> list[_Hold]:
+        seqs = data.sequences
+        if len(seqs) == 0:
+            raise InputError("the dataset has no RCFN sequences")
+        feats = {int(k): v.sort_values("t_s") for k, v in data.rcfn_features.groupby("sequence")}
+        curves = {int(k): v.sort_values("t_s") for k, v in data.curves.groupby("sequence")}
+        onset_names = [f"onset_{n}" for n in ICFN_SCHEMA.names]
+        has_onset = all(n in seqs.columns for n in onset_names)
+        ratios = data.rcfn_features["closure_ratio"].to_numpy(np.float64)
+        fallback_ratio = float(np.nanmedian(ratios)) if np.isfinite(ratios).any() else 1.0
+        holds = []
+        for _, row in seqs.iterrows():
+            seq = int(row["sequence"])
+            if seq not in feats or seq not in curves:
+                continue
+            fe, cu = feats[seq], curves[seq]
+            d0 = float(fe["onset_dx_m"].iloc[0])
+            f0 = float(row["f0_n"])
+            if not (d0 > 0 and f0 > 0) or len(fe) < 2:
+                continue
+            t_c = cu["t_s"].to_numpy(np.float64)
+            grid = np.arange(0.0, float(t_c[-1]) + 1e-9, _FIT_DT_S)
+            f = np.interp(grid, t_c, cu["force_n"].to_numpy(np.float64))
+            d_hold = np.interp(grid, fe["t_s"].to_numpy(np.float64),
+                               fe["dx_m"].to_numpy(np.float64))
+            d_hold[0] = d0
+            ratio = float(fe["closure_ratio"].iloc[0])
+            if not (math.isfinite(ratio) and ratio > 0):
+                ratio = fallback_ratio
+            load_s = max(ratio * d0 * 1e3 / self.loading_speed_mm_s, 1e-3)
+            ramp_t = np.linspace(-load_s, 0.0, _RAMP_STEPS + 1)[:-1]
+            ramp_d = np.linspace(0.0, d0, _RAMP_STEPS + 1)[:-1]
+            holds.append(_Hold(
+                sequence=seq, group=round(float(row["temp_set_c"]), 1),
+                temp_c=float(np.nanmedian(fe["temp_c"].to_numpy(np.float64))),
+                setup=f"{row['object']}@{float(row['contact_set_m']):.3f}",
+                split=str(row["split"]), f0_n=f0,
+                t_s=np.concatenate([ramp_t, grid]), d_m=np.concatenate([ramp_d, d_hold]),
+                f_n=f, onset_x=row[onset_names].to_numpy(np.float64) if has_onset else None,
+            ))
+        if len(holds) < 3:
+            raise InputError(f"only {len(holds)} usable RCFN sequences; the observer needs >= 3")
+        return holds
+
+    def _reference_times(self, group: list[_Hold]) -> FloatArray:
+        n = min(h.f_n.size for h in group)
+        t = group[0].t_s[_RAMP_STEPS:][:n]
+        y = np.mean([h.f_n[:n] / h.f0_n for h in group], axis=0)
+        fit = fit_prony(t, y, n_terms=self.n_terms)
+        return np.clip(np.asarray(fit.tau_s, dtype=np.float64), 0.05, 1e5)
+
+    def _group_error(self, group: list[_Hold], log_shift: float
+                     ) -> tuple[float, FloatArray, list[float]]:
+        """Normalised squared error of a group at one shift; mean shares; each stiffness."""
+        from scipy.optimize import nnls
+
+        tau = self.tau_ref_s_ * math.exp(log_shift)
+        err = 0.0
+        shares, stiff = [], []
+        for h in group:
+            resp = branch_responses(h.t_s, h.d_m, tau)[_RAMP_STEPS:]
+            basis = np.column_stack([h.d_m[_RAMP_STEPS:], resp])
+            theta, resid = nnls(basis, h.f_n)
+            err += float(resid / h.f0_n) ** 2
+            total = float(theta.sum())
+            stiff.append(total)
+            shares.append(theta[1:] / total if total > 0 else np.zeros(self.n_terms))
+        return err, np.mean(shares, axis=0), stiff
+
+    def _fit_group(self, group: list[_Hold], bounds: tuple[float, float]
+                   ) -> tuple[float, FloatArray]:
+        from scipy.optimize import minimize_scalar
+
+        grid = np.linspace(bounds[0], bounds[1], max(9, round(4 * (bounds[1] - bounds[0])) + 1))
+        errs = [self._group_error(group, s)[0] for s in grid]
+        best = int(np.argmin(errs))
+        lo, hi = grid[max(best - 1, 0)], grid[min(best + 1, grid.size - 1)]
+        res = minimize_scalar(lambda s: self._group_error(group, float(s))[0],
+                              bounds=(lo, hi), method="bounded", options={"xatol": 1e-3})
+        s = float(res.x) if res.fun <= errs[best] else float(grid[best])
+        return s, self._group_error(group, s)[1]
+
+    def _stiffness(self, holds: list[_Hold], groups: list[float], ref: int,
+                   shift: dict[float, float]) -> FloatArray:
+        """``ln k(T)`` per group, relative to the reference group (set-ups as nuisance)."""
+        setups = sorted({h.setup for h in holds})
+        rows, target = [], []
+        for h in holds:
+            i = groups.index(h.group)
+            _, _, stiff = self._group_error([h], shift[h.group])
+            if not stiff[0] > 0:
+                continue
+            row = np.zeros(len(groups) + len(setups))
+            row[i] = 1.0
+            row[len(groups) + setups.index(h.setup)] = 1.0
+            rows.append(row)
+            target.append(math.log(stiff[0]))
+        a = np.array(rows)
+        a = np.delete(a, ref, axis=1)  # the reference group is the level
+        coef, *_ = np.linalg.lstsq(a, np.array(target), rcond=None)
+        out = np.insert(coef[: len(groups) - 1], ref, 0.0)
+        return np.asarray(out, dtype=np.float64)
+
+    def predict_hold(self, t_s: FloatArray, d_m: FloatArray, temp_c: float) -> FloatArray:
+        """Unit-scaled force along a deflection history at one temperature (arbitrary scale).
+
+        Parameters
+        ----------
+        t_s, d_m : ndarray, shape (n,)
+            Times (s) and marker deflection (m), the history starting at rest.
+        temp_c : float
+            Temperature (°C).
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            ``k(T) [g_e d + sum g_i h_i]`` (m, per unit reference stiffness).
+        """
+        k_e, k_i, tau = self.parameters(temp_c)
+        return k_e * d_m + branch_responses(t_s, d_m, tau) @ k_i
+
+    def _fit_band(self, held: list[_Hold], icfn: ICFN | None) -> None:
+        edges = np.arange(0.0, max(h.t_s[-1] for h in held) + _BAND_BIN_S, _BAND_BIN_S)
+        errs: list[list[float]] = [[] for _ in edges]
+        onset_errs = []
+        for h in held:
+            u = self.predict_hold(h.t_s, h.d_m, h.temp_c)[_RAMP_STEPS:]
+            f_onset = h.f0_n
+            if icfn is not None and h.onset_x is not None and np.isfinite(h.onset_x).all():
+                f_onset = max(1e-3, float(icfn.predict(h.onset_x[None, :])[0]))
+            est = f_onset * u / u[0]
+            rel = np.abs(est - h.f_n) / h.f0_n
+            onset_errs.append(abs(f_onset - h.f0_n) / h.f0_n)
+            t = h.t_s[_RAMP_STEPS:]
+            idx = np.minimum((t / _BAND_BIN_S).astype(int), edges.size - 1)
+            for b, r in zip(idx.tolist(), rel.tolist(), strict=True):
+                errs[b].append(r)
+        q = 100.0 * self.band_level
+        rel_q = np.array([np.percentile(e, q) if e else np.nan for e in errs])
+        rel_q = np.maximum.accumulate(np.where(np.isfinite(rel_q), rel_q, 0.0))
+        self.band_t_s_ = edges + 0.5 * _BAND_BIN_S
+        self.band_rel_ = np.maximum(rel_q, float(np.percentile(onset_errs, q)))
+        self.onset_rel_ = float(np.percentile(onset_errs, q))
+
+    # -- persistence ----------------------------------------------------------------------
+
+    def to_arrays(self) -> dict[str, FloatArray]:
+        """The learned arrays (for :func:`save_observer`)."""
+        self._check_fitted()
+        out = {name: np.asarray(getattr(self, name), dtype=np.float64) for name in _ARRAYS}
+        out["onset_rel_"] = np.array([self.onset_rel_])
+        return out
+
+    @classmethod
+    def from_arrays(cls, arrays: Mapping[str, Any], params: Mapping[str, Any]) -> ObserverModel:
+        """Rebuild a fitted model from :meth:`to_arrays` and :meth:`get_params`.
+
+        Raises
+        ------
+        ValueError
+            Missing, non-finite or misshapen arrays, or unknown parameters.
+        """
+        try:
+            model = cls(**dict(params))
+        except TypeError as exc:
+            raise ValueError(f"bad observer parameters: {exc}") from exc
+        onset = np.asarray(arrays.get("onset_rel_", [np.nan]), dtype=np.float64).ravel()
+        if onset.size != 1 or not np.isfinite(onset).all():
+            raise ValueError("array 'onset_rel_' missing or bad")
+        model.onset_rel_ = float(onset[0])
+        for name in _ARRAYS:
+            if name not in arrays:
+                raise ValueError(f"array {name!r} missing")
+            value = np.asarray(arrays[name], dtype=np.float64)
+            if not np.isfinite(value).all():
+                raise ValueError(f"array {name!r} has non-finite values")
+            setattr(model, name, value)
+        n_k = model.temps_c_.size
+        n = model.tau_ref_s_.size
+        if not (model.temps_c_.ndim == 1 and n_k >= 1 and model.log_shift_.shape == (n_k,)
+                and model.log_stiffness_.shape == (n_k,) and model.branch_share_.shape == (n_k, n)
+                and model.tau_ref_s_.shape == (n,) and n == model.n_terms
+                and model.band_t_s_.shape == model.band_rel_.shape
+                and model.band_t_s_.ndim == 1 and model.band_t_s_.size >= 1):
+            raise ValueError("array shapes do not fit together")
+        if (model.tau_ref_s_ <= 0).any() or np.any(np.diff(model.temps_c_) < 0):
+            raise ValueError("relaxation times must be > 0 and temperatures ascending")
+        return model
+
+
+class ObserverFileError(InputError):
+    """An observer directory that cannot be loaded (one line: the file and the problem)."""
+
+
+def save_observer(directory: Path, model: ObserverModel, training: Mapping[str, Any]) -> Path:
+    """Write ``observer.npz`` and ``manifest.json`` (format, version, sha256, training record).
+
+    Returns
+    -------
+    Path
+        The manifest's path.
+    """
+    directory = Path(directory)
+    buffer = io.BytesIO()
+    arrays: dict[str, Any] = dict(model.to_arrays())
+    np.savez(buffer, **arrays)
+    data = buffer.getvalue()
+    manifest = {
+        "format": OBSERVER_FORMAT, "format_version": OBSERVER_VERSION,
+        "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
+        "relaxgrip_version": relaxgrip.__version__,
+        "observer": {"estimator": "ObserverModel", "params": model.get_params(),
+                     "file": OBSERVER_FILE, "bytes": len(data),
+                     "sha256": hashlib.sha256(data).hexdigest()},
+        "training": dict(training),
+    }
+    text = json.dumps(manifest, indent=2, allow_nan=False)
+    directory.mkdir(parents=True, exist_ok=True)
+    for name, payload in ((OBSERVER_FILE, data), (MANIFEST_NAME, (text + "\n").encode())):
+        fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{name}.", suffix=".tmp")
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(payload)
+        os.replace(tmp, directory / name)
+    return directory / MANIFEST_NAME
+
+
+def load_observer(directory: Path) -> ObserverModel:
+    """Load an observer directory written by :func:`save_observer`, checking everything.
+
+    Raises
+    ------
+    ObserverFileError
+        Missing directory or file, a foreign or too new manifest, a file whose
+        size or sha256 differs from the manifest, unreadable or bad arrays.
+    """
+    directory = Path(directory)
+    path = directory / MANIFEST_NAME
+    if not path.is_file():
+        raise ObserverFileError(f"{path}: missing (not an observer model directory?)")
+    try:
+        manifest = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise ObserverFileError(f"{path}: unreadable manifest ({type(exc).__name__})") from None
+    if not isinstance(manifest, dict) or manifest.get("format") != OBSERVER_FORMAT:
+        raise ObserverFileError(f"{path}: not an observer manifest (no {OBSERVER_FORMAT!r})")
+    version = manifest.get("format_version")
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise ObserverFileError(f"{path}: format version {version!r} is not a positive integer")
+    if version > OBSERVER_VERSION:
+        raise ObserverFileError(f"{path}: format version {version} is newer than this "
+                                f"relaxgrip reads ({OBSERVER_VERSION}); upgrade relaxgrip")
+    section = manifest.get("observer")
+    if not (isinstance(section, dict) and isinstance(section.get("params"), dict)
+            and {"file", "bytes", "sha256"} <= section.keys()):
+        raise ObserverFileError(f"{path}: manifest lacks the 'observer' section or its fields")
+    name = section["file"]
+    if not isinstance(name, str) or Path(name).name != name:
+        raise ObserverFileError(f"{path}: bad file name {name!r}")
+    npz_path = directory / name
+    try:
+        data = npz_path.read_bytes()
+    except OSError:
+        raise ObserverFileError(f"{npz_path}: missing or unreadable") from None
+    if len(data) != section["bytes"] or hashlib.sha256(data).hexdigest() != section["sha256"]:
+        raise ObserverFileError(f"{npz_path}: truncated or modified (size or sha256 differs "
+                                "from the manifest)")
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+            arrays = {key: npz[key] for key in npz.files}
+        return ObserverModel.from_arrays(arrays, section["params"])
+    except Exception as exc:  # zipfile, npy-format, pickle refusal, shape checks
+        message = " ".join(str(exc).split()) or type(exc).__name__
+        raise ObserverFileError(f"{npz_path}: {message}") from None
+
+
+def default_observer_dir() -> Path:
+    """Where the shipped observer parameters live (inside the package)."""
+    from importlib import resources
+
+    return Path(str(resources.files("relaxgrip") / "models" / "observer"))
+
+
+def load_default_observer() -> ObserverModel:
+    """The shipped observer parameters."""
+    return load_observer(default_observer_dir())
+
+
+def fit_observer(data_dir: Path, out_dir: Path, icfn: ICFN | None = None) -> ObserverModel:
+    """Identify the observer on a dataset directory and save it to ``out_dir``.
+
+    ``relaxgrip fit-observer --data DIR --out DIR`` runs this; the shipped
+    parameters came from ``relaxgrip dataset build --icfn-samples 0
+    --rcfn-sequences 80 --seed 3`` (see the manifest's training record).
+
+    Parameters
+    ----------
+    data_dir : Path
+        A relaxgrip dataset with RCFN sequences.
+    out_dir : Path
+        Observer directory to write.
+    icfn : ICFN, optional
+        The ICFN for the band's onset error (default: the shipped one).
+
+    Returns
+    -------
+    ObserverModel
+    """
+    from relaxgrip.learning.datastore import load_dataset
+    from relaxgrip.learning.training import load_default_models
+
+    data = load_dataset(Path(data_dir))
+    net = icfn if icfn is not None else load_default_models().icfn
+    model = ObserverModel().fit(data, net)
+    spec = data.manifest.get("spec", {})
+    save_observer(Path(out_dir), model, {
+        "dataset": {"path": str(data_dir), "spec": spec,
+                    "twin_version": data.manifest.get("twin_version")},
+        "n_sequences": model.n_sequences_,
+    })
+    return model

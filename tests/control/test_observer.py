@@ -1,0 +1,179 @@
+"""The viscoelastic observer: tracking, persistence, scenario grammar, closed loop, band."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from relaxgrip.control.observer import ObserverEstimator
+from relaxgrip.errors import InputError
+from relaxgrip.experiments.profiles import (
+    band_coverage,
+    parse_disturbance,
+    parse_target_profile,
+    parse_temp_profile,
+)
+from relaxgrip.learning.observer import (
+    ObserverFileError,
+    ObserverModel,
+    load_default_observer,
+    load_observer,
+    save_observer,
+)
+from tests.clitools import run_main
+
+
+def _model() -> ObserverModel:
+    arrays = {
+        "temps_c_": np.array([30.0, 40.0, 50.0, 60.0]),
+        "tau_ref_s_": np.array([2.0, 20.0, 200.0]),
+        "log_shift_": np.array([1.0, 0.0, -1.0, -1.6]),
+        "branch_share_": np.array([[0.08, 0.10, 0.15], [0.08, 0.10, 0.15],
+                                   [0.10, 0.13, 0.20], [0.12, 0.16, 0.24]]),
+        "log_stiffness_": np.array([0.1, 0.0, -0.3, -0.5]),
+        "band_t_s_": np.array([10.0, 100.0, 290.0]),
+        "band_rel_": np.array([0.05, 0.08, 0.10]),
+        "onset_rel_": np.array([0.05]),
+    }
+    return ObserverModel.from_arrays(arrays, ObserverModel().get_params())
+
+
+def _deflection(t: float) -> float:
+    """Steps of the deflection (smoothed over 0.1 s): 1 mm at 1 s, +0.2 at 60 s, -0.3 at 120 s."""
+    def ramp(t0: float, h: float) -> float:
+        return h * min(max((t - t0) / 0.1, 0.0), 1.0)
+    return ramp(1.0, 1e-3) + ramp(60.0, 2e-4) + ramp(120.0, -3e-4)
+
+
+def _temp(t: float) -> float:
+    """40 °C, ramp to 55 °C over 100-130 s."""
+    return 40.0 + 15.0 * min(max((t - 100.0) / 30.0, 0.0), 1.0)
+
+
+def test_observer_tracks_a_continuous_prony_truth() -> None:
+    """30 Hz frames (temperature held over each) vs. the ODE of Eq. 2 integrated finely."""
+    model = _model()
+
+    def rhs(t: float, f: np.ndarray) -> np.ndarray:
+        _, k_i, tau = model.parameters(_temp(t))
+        dd = (_deflection(t + 1e-6) - _deflection(t - 1e-6)) / 2e-6
+        return k_i * dd - f / tau
+
+    t_end = 200.0
+    frames = np.arange(0.0, t_end, 1.0 / 30.0)
+    sol = solve_ivp(rhs, (0.0, t_end), np.zeros(3), t_eval=frames, max_step=0.02,
+                    rtol=1e-9, atol=1e-12)
+    truth = np.array([model.parameters(_temp(t))[0] * _deflection(t) for t in frames]) \
+        + sol.y.sum(axis=0)
+    est = ObserverEstimator.__new__(ObserverEstimator)
+    est.model = model
+    est.reset = ObserverEstimator.reset.__get__(est)  # type: ignore[method-assign]
+    est.icfn = type("Stub", (), {"reset": lambda self: None})()
+    est.reset()
+    got = []
+    for t in frames:
+        temp = _temp(float(t) - 1.0 / 60.0)  # held over the frame: its midpoint
+        est.advance(float(t), _deflection(float(t)), temp)
+        got.append(est.unit_force_m())
+    got_a = np.array(got)
+    loaded = frames > 2.0
+    err = np.abs(got_a[loaded] - truth[loaded]) / np.max(truth)
+    assert err.max() < 2e-3
+    assert np.mean(err) < 2e-4
+
+
+def test_save_load_round_trip_and_bad_files(tmp_path: Path) -> None:
+    model = _model()
+    save_observer(tmp_path / "m", model, {"note": "test"})
+    back = load_observer(tmp_path / "m")
+    for temp in (25.0, 42.0, 57.0, 70.0):
+        a, b = model.parameters(temp), back.parameters(temp)
+        assert a[0] == b[0]
+        assert np.array_equal(a[1], b[1])
+        assert np.array_equal(a[2], b[2])
+    assert back.band_rel(150.0) == model.band_rel(150.0)
+    with pytest.raises(ObserverFileError, match="missing"):
+        load_observer(tmp_path / "none")
+    npz = tmp_path / "m" / "observer.npz"
+    npz.write_bytes(npz.read_bytes()[:-10])
+    with pytest.raises(ObserverFileError, match="truncated or modified"):
+        load_observer(tmp_path / "m")
+    save_observer(tmp_path / "m", model, {})
+    manifest = tmp_path / "m" / "manifest.json"
+    data = json.loads(manifest.read_text())
+    data["format_version"] = 99
+    manifest.write_text(json.dumps(data))
+    with pytest.raises(ObserverFileError, match="newer"):
+        load_observer(tmp_path / "m")
+    manifest.write_text("{not json")
+    with pytest.raises(ObserverFileError, match="unreadable manifest"):
+        load_observer(tmp_path / "m")
+
+
+def test_shipped_observer_loads_with_physical_parameters() -> None:
+    model = load_default_observer()
+    _, k_cold, tau_cold = model.parameters(35.0)
+    _, k_hot, tau_hot = model.parameters(55.0)
+    assert np.all(tau_hot < tau_cold)  # relaxation speeds up with temperature
+    assert np.all(k_cold > 0)
+    assert np.all(k_hot > 0)
+    assert 0.0 < model.band_rel(100.0) < 0.5
+
+
+def test_profile_grammar() -> None:
+    ramp = parse_temp_profile("ramp:40:55:150:30")
+    assert ramp.value_at(100.0, 40.0) == 40.0
+    assert ramp.value_at(165.0, 40.0) == pytest.approx(47.5)
+    assert ramp.value_at(200.0, 40.0) == 55.0
+    step = parse_target_profile("step:3:150")
+    assert step.value_at(149.9, 5.0) == 5.0
+    assert step.value_at(150.0, 5.0) == 3.0
+    push = parse_disturbance("push:2:200:10")
+    assert push.value_at(199.0, 0.0) == 0.0
+    assert push.value_at(205.0, 0.0) == 2.0
+    assert push.value_at(211.0, 0.0) == 0.0
+    for bad, parse in (("ramp:40:55:150", parse_temp_profile), ("ramp:40:99:1:1",
+                       parse_temp_profile), ("step:x:1", parse_target_profile),
+                       ("step:30:1", parse_target_profile), ("push:2:-1", parse_disturbance),
+                       ("pull:2:1", parse_disturbance), ("step:3:nan", parse_target_profile)):
+        with pytest.raises(InputError):
+            parse(bad)
+
+
+@pytest.mark.parametrize("args", [["--temp-profile", "ramp:40"], ["--target-profile", "jump:1:2"],
+                                  ["--disturbance", "push:9:1"],
+                                  ["--compare", "--target-profile", "step:3:150"]])
+def test_cli_rejects_bad_profiles(args: list[str], monkeypatch: pytest.MonkeyPatch,
+                                  capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run_main(["hold", "--estimator", "observer", *args], monkeypatch, capsys)
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_band_coverage() -> None:
+    truth = np.array([1.0, 2.0, 3.0, 4.0, np.nan])
+    lo = np.array([0.5, 2.5, np.nan, 3.0, 0.0])
+    hi = np.array([1.5, 3.0, 4.0, 4.0, 9.0])
+    assert band_coverage(truth, lo, hi) == pytest.approx(2 / 3)
+    assert math.isnan(band_coverage(truth, np.full(5, np.nan), hi))
+
+
+def test_short_closed_loop_hold_with_observer_and_profiles() -> None:
+    from relaxgrip.experiments.controlled_hold import run_hold
+
+    result = run_hold("observer", duration_s=6.0, seed=0,
+                      target_profile=parse_target_profile("step:4:3"),
+                      disturbance=parse_disturbance("push:1:4"))
+    m = result.metrics()
+    assert math.isfinite(m["mae_n"])
+    assert m["mae_n"] < 1.0
+    assert 0.0 <= m["band_coverage"] <= 1.0
+    assert result.target_t_n[-1] == 4.0
+    assert result.target_t_n[0] == 5.0
+    est = result.estimate_n[np.isfinite(result.estimate_n)]
+    assert est.size > 100

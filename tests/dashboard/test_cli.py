@@ -1,0 +1,30 @@
+"""``relaxgrip dashboard``: a public address needs --allow-remote; a missing extra is named."""
+
+from __future__ import annotations
+
+import sys
+
+import pytest
+from typer.testing import CliRunner
+
+from relaxgrip.cli import app
+from relaxgrip.cli.dashboard import is_loopback
+from relaxgrip.dashboard import require_web_stack
+from relaxgrip.errors import InputError
+
+
+def test_public_host_needs_allow_remote() -> None:
+    result = CliRunner().invoke(app, ["dashboard", "--host", "0.0.0.0"])
+    assert isinstance(result.exception, InputError)
+    assert "--allow-remote" in str(result.exception)
+    assert is_loopback("127.0.0.1")
+    assert is_loopback("::1")
+    assert is_loopback("localhost")
+    assert not is_loopback("0.0.0.0")
+    assert not is_loopback("example.org")
+
+
+def test_missing_web_stack_is_a_helpful_error(monkeypatch) -> None:
+    monkeypatch.setitem(sys.modules, "fastapi", None)
+    with pytest.raises(InputError, match=r"pip install 'relaxgrip\[dashboard\]'"):
+        require_web_stack()

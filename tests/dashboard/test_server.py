@@ -1,0 +1,243 @@
+"""The dashboard server with Starlette's TestClient: state stream, controls, tokens, viewers."""
+
+from __future__ import annotations
+
+import base64
+import threading
+import time
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+
+pytest.importorskip("fastapi")
+
+from fastapi.testclient import TestClient
+from starlette.websockets import WebSocketDisconnect
+
+from relaxgrip.backend import Command
+from relaxgrip.clock import WallClock
+from relaxgrip.dashboard.app import TOKEN_HEADER, create_app
+from relaxgrip.dashboard.session import LiveSession
+
+
+class Spy:
+    """A backend that records its commands and can be made to fail."""
+
+    def __init__(self, inner, fail_after: int | None = None) -> None:
+        self.inner = inner
+        self.fail_after = fail_after
+        self.observed = 0
+        self.commands: list[Command] = []
+        self.closed = False
+
+    @property
+    def info(self):
+        return self.inner.info
+
+    def reset(self, seed=None):
+        return self.inner.reset(seed)
+
+    def observe(self):
+        self.observed += 1
+        if self.fail_after is not None and self.observed > self.fail_after:
+            raise OSError("camera unplugged")
+        return self.inner.observe()
+
+    def act(self, command: Command) -> None:
+        self.commands.append(command)
+        self.inner.act(command)
+
+    def close(self) -> None:
+        self.closed = True
+        self.inner.close()
+
+
+def _state(ws: Any, pred: Any = lambda s: True, max_messages: int = 200) -> Any:
+    for _ in range(max_messages):
+        msg = ws.receive_json()
+        if msg["type"] == "state" and pred(msg):
+            return msg
+    raise AssertionError("no matching state message")
+
+
+def _control(ws: Any, op: str, value: Any = None, ident: int = 1) -> Any:
+    ws.send_json({"id": ident, "op": op, "value": value})
+    for _ in range(200):
+        msg = ws.receive_json()
+        if msg["type"] == "reply" and msg["id"] == ident:
+            return msg
+    raise AssertionError("no reply")
+
+
+def _decode(b64: str) -> Any:
+    data = np.frombuffer(base64.b64decode(b64), dtype=np.uint8)
+    return cv2.imdecode(data, cv2.IMREAD_COLOR)
+
+
+@pytest.fixture
+def served(make_session):
+    session = make_session()
+    spy = Spy(session.backend)
+    session.backend = spy
+    with TestClient(create_app(session)) as client:
+        yield client, session, spy
+    # lifespan shut down:
+    assert not session.alive
+    assert spy.closed
+    assert spy.commands[-1] == Command()  # motor stopped, heaters off
+
+
+def test_state_messages_carry_the_live_view(served) -> None:
+    client, _, _ = served
+    page = client.get("/")
+    assert page.status_code == 200
+    assert "relaxgrip" in page.text
+    assert client.get("/static/uPlot.iife.min.js").status_code == 200
+    with client.websocket_connect("/ws") as ws:
+        s = _state(ws, lambda s: s["rgb_jpeg"] is not None and s["ir_jpeg"] is not None
+                   and s["marker"] == "tracking")
+    assert s["phase"] == "done"
+    assert s["backend"] == "twin"
+    assert s["estimator"] == "relax"
+    assert s["truth_n"] == pytest.approx(0.0, abs=1e-6)  # the twin's truth, shown
+    assert s["mode"] == "stiff"
+    assert s["setpoint_c"] is None
+    assert all(20.0 < t < 35.0 for t in s["temps_c"])
+    assert "hammer" in s["objects"]
+    assert s["object"] == "force_ball"
+    rgb, ir = _decode(s["rgb_jpeg"]), _decode(s["ir_jpeg"])
+    assert rgb.shape == (480, 640, 3)
+    assert ir.shape == (384, 512, 3)
+    # The marker is drawn: the ArUco border colour (green) and the axes are on the frame.
+    green = (rgb[:, :, 1] > 200) & (rgb[:, :, 0] < 60) & (rgb[:, :, 2] < 60)
+    assert green.sum() > 20
+
+
+def test_controls_change_the_loop_and_bad_values_change_nothing(served) -> None:
+    client, session, _ = served
+    with client.websocket_connect("/ws") as ws:
+        assert _control(ws, "target", 3, 1)["ok"]
+        bad = _control(ws, "target", 12.5, 2)
+        assert not bad["ok"]
+        assert bad["error"] == "target force 12.5 N is outside (0, 10] N"
+        assert not _control(ws, "target", "abc", 3)["ok"]
+        assert _state(ws)["target_n"] == 3.0
+        assert _control(ws, "mode", "medium", 4)["ok"]
+        s = _state(ws, lambda s: s["mode"] == "medium")
+        assert s["setpoint_c"] == 40.0
+        lava = _control(ws, "mode", "lava", 5)
+        assert not lava["ok"]
+        assert "unknown stiffness mode 'lava'" in lava["error"]
+        hot = _control(ws, "temperature", 95, 6)
+        assert not hot["ok"]
+        assert "\n" not in hot["error"]
+        assert _state(ws)["setpoint_c"] == 40.0
+        assert _control(ws, "temperature", 45, 7)["ok"]
+        assert _state(ws, lambda s: s["mode"] is None)["setpoint_c"] == 45.0
+        assert not _control(ws, "object", "anvil", 8)["ok"]
+        assert _control(ws, "object", "hammer", 9)["ok"]
+        assert _state(ws)["object"] == "hammer"
+        assert "nothing to release" in _control(ws, "release", None, 10)["error"]
+        assert "nothing to hold" in _control(ws, "hold", None, 11)["error"]
+        assert "unknown control" in _control(ws, "explode", None, 12)["error"]
+        assert _control(ws, "close", None, 13)["ok"]
+        assert _state(ws, lambda s: s["phase"] == "open")["target_n"] == 3.0
+        again = _control(ws, "close", None, 14)
+        assert not again["ok"]
+        assert "release first" in again["error"]
+        assert not _control(ws, "object", "glass", 15)["ok"]  # not while grasping
+        rec = _control(ws, "record", True, 16)
+        assert rec["ok"]
+        assert rec["path"].endswith(".mcap")
+        assert _state(ws, lambda s: s["recording"] is not None)["recording"] == rec["path"]
+        time.sleep(0.5)
+        assert _control(ws, "record", False, 17)["ok"]
+        assert _control(ws, "stop", None, 18)["ok"]
+        s = _state(ws, lambda s: s["phase"] == "stopped")
+        assert s["recording"] is None
+        assert s["duty"] == [0.0, 0.0]
+    from relaxgrip.recording import read_session
+
+    assert read_session(session.record_dir / rec["path"].split("/")[-1])["backend"]["name"] \
+        == "twin"
+
+
+def test_token_is_required_when_set(make_session) -> None:
+    session = make_session()
+    token = "s3cret-token"
+    with TestClient(create_app(session, token=token)) as client:
+        assert client.get("/").status_code == 403
+        assert client.get("/?token=wrong").status_code == 403
+        assert client.get(f"/?token={token}").status_code == 200
+        assert client.get("/", headers={TOKEN_HEADER: token}).status_code == 200
+        with pytest.raises(WebSocketDisconnect), client.websocket_connect("/ws") as ws:
+            ws.receive_json()
+        with pytest.raises(WebSocketDisconnect), \
+                client.websocket_connect("/ws?token=nope") as ws:
+            ws.receive_json()
+        with client.websocket_connect(f"/ws?token={token}") as ws:
+            assert _state(ws)["backend"] == "twin"
+        with client.websocket_connect("/ws", headers={TOKEN_HEADER: token}) as ws:
+            assert _state(ws)["backend"] == "twin"
+
+
+def test_four_viewers_each_get_at_least_10_updates_per_second(served) -> None:
+    client, _, _ = served
+    window_s = 2.0
+    counts: list[int] = []
+    times: list[list[float]] = []
+    lock = threading.Lock()
+    sockets = [client.websocket_connect("/ws") for _ in range(4)]
+    conns = [s.__enter__() for s in sockets]
+    try:
+        for ws in conns:
+            _state(ws)  # connected and streaming
+
+        def watch(ws) -> None:
+            seen: list[float] = []
+            t0 = time.monotonic()
+            while time.monotonic() - t0 < window_s:
+                msg = ws.receive_json()
+                if msg["type"] == "state":
+                    seen.append(msg["t_s"])
+            with lock:
+                counts.append(len(seen))
+                times.append(seen)
+
+        threads = [threading.Thread(target=watch, args=(ws,)) for ws in conns]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(10.0)
+    finally:
+        for s in sockets:
+            s.__exit__(None, None, None)
+    assert len(counts) == 4
+    rates = [n / window_s for n in counts]
+    print(f"updates per second, 4 viewers: {[round(r, 1) for r in rates]}")
+    assert min(rates) >= 10.0
+    for seen in times:  # live: the loop time advances between messages
+        assert seen[-1] - seen[0] > 1.0
+
+
+def test_loop_death_stops_motor_and_heaters_and_shows_the_error(make_session) -> None:
+    session = make_session()
+    spy = Spy(session.backend, fail_after=20)
+    session.backend = spy
+    session.set_mode("compliant")  # heaters on while it runs
+    with TestClient(create_app(session)) as client, client.websocket_connect("/ws") as ws:
+        s = _state(ws, lambda s: s["error"] is not None)
+        assert s["error"] == "control loop stopped: OSError: camera unplugged"
+        assert not s["alive"]
+        assert spy.commands[-1] == Command()
+        assert any(c.heater_duty != (0.0, 0.0) for c in spy.commands)
+        assert "camera unplugged" in _control(ws, "close")["error"]
+
+
+def test_session_refuses_bad_construction() -> None:
+    from relaxgrip.errors import InputError
+
+    with pytest.raises(InputError, match="control rate"):
+        LiveSession(None, None, WallClock(), rate_hz=0.0)  # type: ignore[arg-type]
