@@ -1,4 +1,4 @@
-"""Force estimators behind one interface: ``fixed``, ``icfn`` and ``relax``.
+"""Force estimators behind one interface: ``fixed``, ``icfn``, ``relax`` and ``observer``.
 
 Every estimator reads percepts (features of rendered or real frames) and the
 motor encoder, never ground truth.  Each frame it reports a
@@ -29,6 +29,9 @@ motor encoder, never ground truth.  Each frame it reports a
   steps' own relaxation is left out: superposing it with Eq. 10's single mode
   measured worse on the twin (mean MAE 0.087 against 0.077 N over seeds 0–5);
   the ``observer`` estimator models every mode.
+* ``observer`` (:mod:`relaxgrip.control.observer`): Prony-series branch
+  states in reduced time, driven by the measured deflection and temperature,
+  for any displacement history and temperature path; it reports a 95 % band.
 """
 
 from __future__ import annotations
