@@ -192,6 +192,9 @@ def holding_section(out_dir: Path, quick: bool, seed: int) -> Section:
         Row("reduction vs fixed / vs ICFN only", "80 % / 95 %",
             f"{_pct(red['vs_fixed'])} / {_pct(red['vs_icfn'])}"),
     ]
+    if "observer" in mae:
+        rows.append(Row("MAE: online viscoelastic observer (beyond the paper)", "—",
+                        f"{mae['observer']:.3f} N"))
     finding = (f"A {duration:g} s hold at 5 N, 40 °C: the fixed aperture's force decays, the "
                "ICFN-only loop holds the finger's deflection while the true force drifts from "
                f"the target, and Eq. 10 in the loop keeps it within {mae['relax']:.3f} N.")
