@@ -42,8 +42,6 @@ import hashlib
 import io
 import json
 import math
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -57,6 +55,7 @@ import relaxgrip
 from relaxgrip.errors import InputError
 from relaxgrip.learning.datastore import Dataset
 from relaxgrip.learning.icfn import ICFN
+from relaxgrip.learning.store import _file_entry, _npz_bytes, _write_all_atomically
 from relaxgrip.perception.features import ICFN_SCHEMA
 from relaxgrip.physics.fitting import fit_prony
 from relaxgrip.physics.viscoelastic import branch_update
@@ -467,26 +466,19 @@ def save_observer(directory: Path, model: ObserverModel, training: Mapping[str, 
         The manifest's path.
     """
     directory = Path(directory)
-    buffer = io.BytesIO()
-    arrays: dict[str, Any] = dict(model.to_arrays())
-    np.savez(buffer, **arrays)
-    data = buffer.getvalue()
+    data = _npz_bytes(dict(model.to_arrays()))
     manifest = {
         "format": OBSERVER_FORMAT, "format_version": OBSERVER_VERSION,
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         "relaxgrip_version": relaxgrip.__version__,
         "observer": {"estimator": "ObserverModel", "params": model.get_params(),
-                     "file": OBSERVER_FILE, "bytes": len(data),
-                     "sha256": hashlib.sha256(data).hexdigest()},
+                     **_file_entry(OBSERVER_FILE, data)},
         "training": dict(training),
     }
     text = json.dumps(manifest, indent=2, allow_nan=False)
     directory.mkdir(parents=True, exist_ok=True)
-    for name, payload in ((OBSERVER_FILE, data), (MANIFEST_NAME, (text + "\n").encode())):
-        fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{name}.", suffix=".tmp")
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(payload)
-        os.replace(tmp, directory / name)
+    _write_all_atomically(directory, [(OBSERVER_FILE, data),
+                                      (MANIFEST_NAME, (text + "\n").encode())])
     return directory / MANIFEST_NAME
 
 
