@@ -46,13 +46,14 @@ from relaxgrip.control import (
 from relaxgrip.control.phases import PHASES, GraspPhase
 from relaxgrip.control.temperature import StiffnessMode
 from relaxgrip.errors import InputError
-from relaxgrip.experiments.tasks import TaskResult
+from relaxgrip.experiments.tasks import TaskResult, finite_figures
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.perception.proximity import ProximityTarget
 from relaxgrip.perception.thermal import ThermalFeatures
 from relaxgrip.physics.smp import storage_modulus_pa
 from relaxgrip.rig import transform_points
+from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig, get_object
 from relaxgrip.twin.sensors import SceneObject
 
@@ -229,18 +230,14 @@ class CupDemoResult:
             "chosen_side": self.chosen_side, "right_cup": self.right_cup,
             "ir_cup_temps_c": dict(self.ir_cup_temps_c), "ir_background_c": self.ir_background_c,
             "stages_s": {f"S{k + 1}": [a, b] for k, (a, b) in enumerate(self.stages_s)},
-            "figures": {k: _json_float(v) for k, v in self.figures.items()},
+            "figures": dict(self.figures),
             "events": list(self.events),
             "settings": {k: v for k, v in self.settings.__dict__.items()},
         }
         if series:
-            out["series"] = {k: [_json_float(x) for x in v.tolist()]
-                             for k, v in self.series.items()}
-        return out
-
-
-def _json_float(x: float) -> float | None:
-    return float(x) if math.isfinite(x) else None
+            out["series"] = {k: v.tolist() for k, v in self.series.items()}
+        safe: dict[str, Any] = json_safe(out)
+        return safe
 
 
 class _Recorder:
@@ -747,7 +744,7 @@ def score_cup_demo(r: CupDemoResult) -> TaskResult:
         "handover_detected": 0.0 <= f["handover_delay_s"] <= 1.5,
         "released": f["final_force_n"] < 0.05,
     }
-    figures = {k: v for k, v in f.items() if math.isfinite(v)}
+    figures = finite_figures(f)
     figures["approach_error_m"] = approach_err
     figures["stiff_share"] = stiff_share
     figures.update({f"ir_{k}_c": v for k, v in r.ir_cup_temps_c.items()})

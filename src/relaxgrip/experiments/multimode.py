@@ -55,10 +55,9 @@ from relaxgrip.errors import InputError
 from relaxgrip.experiments.stiffness_modulation import (
     ROOM_C,
     GraspRun,
-    finite_figures,
     run_grasp,
 )
-from relaxgrip.experiments.tasks import TaskResult
+from relaxgrip.experiments.tasks import TaskResult, finite_figures
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.perception.pipeline import Perception

@@ -72,7 +72,7 @@ from relaxgrip.control import (
 )
 from relaxgrip.control.phases import PHASES
 from relaxgrip.errors import InputError
-from relaxgrip.experiments.tasks import TaskResult
+from relaxgrip.experiments.tasks import TaskResult, finite_figures
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.perception.features import marker_pose
@@ -100,7 +100,6 @@ __all__ = [
     "balloon_task",
     "brush_task",
     "feather_task",
-    "finite_figures",
     "force_band_n",
     "hammer_task",
     "orange_task",
@@ -213,11 +212,6 @@ def rate_n_per_s(t_s: FloatArray, force_n: FloatArray, window_s: float = RATE_WI
     # np.convolve flips the kernel: pass it reversed to correlate.
     out[half:-half] = np.convolve(force_n, kernel[::-1], mode="valid")
     return out
-
-
-def finite_figures(figures: dict[str, float]) -> dict[str, float]:
-    """The finite entries of ``figures`` (a task's figures are plain numbers)."""
-    return {k: float(v) for k, v in figures.items() if math.isfinite(v)}
 
 
 def _baseline(values: FloatArray) -> tuple[float, float]:

@@ -12,13 +12,14 @@ their experiments; this module only names them, so that the command line and
 from __future__ import annotations
 
 import importlib
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from relaxgrip.errors import InputError
 
-__all__ = ["TASKS", "TaskResult", "run_task", "task_names"]
+__all__ = ["TASKS", "TaskResult", "finite_figures", "run_task", "task_names"]
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,11 @@ class TaskResult:
             "figures": {k: float(v) for k, v in self.figures.items()},
             **({"detail": dict(self.detail)} if self.detail else {}),
         }
+
+
+def finite_figures(figures: Mapping[str, float]) -> dict[str, float]:
+    """The finite entries of ``figures`` as floats (a task's figures are plain numbers)."""
+    return {k: float(v) for k, v in figures.items() if math.isfinite(v)}
 
 
 #: Task name -> (module, function); the function takes ``seed`` and returns a TaskResult.
