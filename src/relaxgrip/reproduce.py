@@ -25,7 +25,7 @@ from relaxgrip.errors import InputError
 from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION
 
-__all__ = ["SECTIONS", "TITLES", "Row", "Section", "reproduce", "write_report"]
+__all__ = ["SECTIONS", "TITLES", "Row", "Section", "check_request", "reproduce", "write_report"]
 
 
 @dataclass(frozen=True)
@@ -392,6 +392,27 @@ def _run_section(key: str, out_dir: Path, quick: bool, seed: int) -> Section:
                    section.results, time.perf_counter() - start)
 
 
+def check_request(out_dir: Path, jobs: int, only: Sequence[str] | None) -> list[str]:
+    """Check a reproduce request before anything runs; the section keys to run.
+
+    Raises
+    ------
+    InputError
+        ``jobs`` < 1, an unknown section, or an output directory whose parent is missing.
+    """
+    if jobs < 1:
+        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    keys = list(SECTIONS) if only is None else list(only)
+    unknown = [k for k in keys if k not in SECTIONS]
+    if unknown:
+        raise InputError(f"unknown section(s) {', '.join(unknown)}; sections: "
+                         f"{', '.join(SECTIONS)}")
+    out_dir = Path(out_dir)
+    if not out_dir.parent.is_dir():
+        raise InputError(f"{out_dir}: directory {out_dir.parent} does not exist")
+    return keys
+
+
 def reproduce(
     out_dir: Path,
     quick: bool = False,
@@ -424,16 +445,8 @@ def reproduce(
     """
     from joblib import Parallel, delayed
 
-    if jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {jobs}")
-    keys = list(SECTIONS) if only is None else list(only)
-    unknown = [k for k in keys if k not in SECTIONS]
-    if unknown:
-        raise InputError(f"unknown section(s) {', '.join(unknown)}; sections: "
-                         f"{', '.join(SECTIONS)}")
+    keys = check_request(out_dir, jobs, only)
     out_dir = Path(out_dir)
-    if not out_dir.parent.is_dir():
-        raise InputError(f"{out_dir}: directory {out_dir.parent} does not exist")
     out_dir.mkdir(exist_ok=True)
     start = time.perf_counter()
     ordered = sorted(keys, key=lambda k: -_COST.get(k, 3))

@@ -52,11 +52,12 @@ def reproduce(
         "--section", help="Run only this section (repeatable).", show_default=False)] = None,
 ) -> None:
     """Run every experiment of the paper, write DIR/report.md, DIR/results.json and figures."""
-    from relaxgrip.reproduce import Section
+    from relaxgrip.reproduce import Section, check_request
     from relaxgrip.reproduce import reproduce as run_all
 
     if seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
+    check_request(out, jobs, section)  # before the progress bar: a bad flag prints one line
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), console=err_console) as bar:
         job = bar.add_task("experiments", total=None)
