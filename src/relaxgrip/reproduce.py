@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import write_text_atomically
 from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION
 
@@ -464,15 +465,6 @@ def reproduce(
     return sections
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
-
-
 def _cell(text: str) -> str:
     return text.replace("|", "\\|")
 
@@ -509,7 +501,7 @@ def write_report(out_dir: Path, sections: Sequence[Section], quick: bool, seed: 
                      else "" for k in seeds]
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
         lines.append("")
-    _atomic_write(out_dir / "report.md", "\n".join(lines))
+    write_text_atomically(out_dir / "report.md", "\n".join(lines))
     payload = {
         "twin_version": TWIN_VERSION,
         "seed": seed,
@@ -519,4 +511,4 @@ def write_report(out_dir: Path, sections: Sequence[Section], quick: bool, seed: 
                              "paper_vs_ours": [vars(r) for r in s.rows],
                              "results": s.results} for s in sections},
     }
-    _atomic_write(out_dir / "results.json", json.dumps(json_safe(payload), indent=1))
+    write_text_atomically(out_dir / "results.json", json.dumps(json_safe(payload), indent=1))

@@ -53,9 +53,9 @@ from numpy.typing import NDArray
 
 import relaxgrip
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import file_entry, npz_bytes, write_files_atomically
 from relaxgrip.learning.datastore import Dataset
 from relaxgrip.learning.icfn import ICFN
-from relaxgrip.learning.store import _file_entry, _npz_bytes, _write_all_atomically
 from relaxgrip.perception.features import ICFN_SCHEMA
 from relaxgrip.physics.fitting import fit_prony
 from relaxgrip.physics.viscoelastic import branch_update
@@ -466,19 +466,19 @@ def save_observer(directory: Path, model: ObserverModel, training: Mapping[str, 
         The manifest's path.
     """
     directory = Path(directory)
-    data = _npz_bytes(dict(model.to_arrays()))
+    data = npz_bytes(dict(model.to_arrays()))
     manifest = {
         "format": OBSERVER_FORMAT, "format_version": OBSERVER_VERSION,
         "created_utc": datetime.now(UTC).isoformat(timespec="seconds"),
         "relaxgrip_version": relaxgrip.__version__,
         "observer": {"estimator": "ObserverModel", "params": model.get_params(),
-                     **_file_entry(OBSERVER_FILE, data)},
+                     **file_entry(OBSERVER_FILE, data)},
         "training": dict(training),
     }
     text = json.dumps(manifest, indent=2, allow_nan=False)
     directory.mkdir(parents=True, exist_ok=True)
-    _write_all_atomically(directory, [(OBSERVER_FILE, data),
-                                      (MANIFEST_NAME, (text + "\n").encode())])
+    write_files_atomically(directory, [(OBSERVER_FILE, data),
+                                       (MANIFEST_NAME, (text + "\n").encode())])
     return directory / MANIFEST_NAME
 
 

@@ -21,8 +21,6 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -34,6 +32,7 @@ import sklearn  # type: ignore[import-untyped]
 
 import relaxgrip
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import file_entry, npz_bytes, write_files_atomically
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.rcfn import RCFN
 from relaxgrip.perception.features import FeatureSchema
@@ -98,44 +97,6 @@ def _json_default(value: object) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
 
 
-def _npz_bytes(arrays: Mapping[str, Any]) -> bytes:
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
-    return buffer.getvalue()
-
-
-def _file_entry(name: str, data: bytes) -> dict[str, Any]:
-    return {"file": name, "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
-
-
-def _write_all_atomically(directory: Path, files: Sequence[tuple[str, bytes]]) -> None:
-    """Write each ``(name, data)`` to a temporary file, then rename all into place, in order."""
-    temporaries: list[tuple[Path, Path]] = []
-    try:
-        for name, data in files:
-            fd, tmp_name = tempfile.mkstemp(dir=directory, prefix=f".{name}.", suffix=".tmp")
-            temporaries.append((Path(tmp_name), directory / name))
-            with os.fdopen(fd, "wb") as fh:
-                fh.write(data)
-                fh.flush()
-                os.fsync(fh.fileno())
-        for tmp, final in temporaries:
-            os.replace(tmp, final)
-    finally:
-        for tmp, _ in temporaries:
-            tmp.unlink(missing_ok=True)
-    try:  # make the renames durable; not every platform can open a directory
-        dir_fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(dir_fd)
-    except OSError:
-        pass
-    finally:
-        os.close(dir_fd)
-
-
 def save_models(
     directory: Path,
     icfn: ICFN,
@@ -194,8 +155,8 @@ def save_models(
             f"{len(names)} RCFN feature names given but the RCFN was fitted on "
             f"{rcfn.n_features_in_} features"
         )
-    icfn_data = _npz_bytes(icfn_arrays)
-    rcfn_data = _npz_bytes(rcfn_arrays)
+    icfn_data = npz_bytes(icfn_arrays)
+    rcfn_data = npz_bytes(rcfn_arrays)
     manifest = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
@@ -208,13 +169,13 @@ def save_models(
             "estimator": "ICFN",
             "params": icfn.get_params(),
             "feature_schema": icfn_feature_schema.to_dict(),
-            **_file_entry(ICFN_FILE, icfn_data),
+            **file_entry(ICFN_FILE, icfn_data),
         },
         "rcfn": {
             "estimator": "RCFN",
             "params": rcfn.get_params(),
             "feature_names": names,
-            **_file_entry(RCFN_FILE, rcfn_data),
+            **file_entry(RCFN_FILE, rcfn_data),
         },
         "training": dict(training),
     }
@@ -223,7 +184,7 @@ def save_models(
     except (TypeError, ValueError) as exc:
         raise ValueError(f"training record is not JSON-serialisable: {exc}") from exc
     directory.mkdir(parents=True, exist_ok=True)
-    _write_all_atomically(
+    write_files_atomically(
         directory,
         [(ICFN_FILE, icfn_data), (RCFN_FILE, rcfn_data), (MANIFEST_NAME, (text + "\n").encode())],
     )

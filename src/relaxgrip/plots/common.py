@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import write_files_atomically
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -53,12 +55,9 @@ def new_figure(width_in: float, height_in: float) -> Figure:
 
 
 def save_figure(fig: Figure, path: str | Path, dpi: int = 150) -> Path:
-    """Write ``fig`` to ``path`` atomically (a temporary file, then a rename)."""
+    """Write ``fig`` to ``path`` atomically (rendered in memory, then one rename)."""
     path = check_plot_path(path)
-    tmp = path.with_name(f".{path.name}.tmp{path.suffix}")
-    try:
-        fig.savefig(tmp, dpi=dpi)
-        tmp.replace(path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format=path.suffix[1:].lower(), dpi=dpi)
+    write_files_atomically(path.parent, [(path.name, buffer.getvalue())])
     return path
