@@ -16,8 +16,8 @@ from relaxgrip.experiments.controlled_hold import run_hold
 from relaxgrip.hardware.emulator import McuEmulator, open_emulated_gripper
 from relaxgrip.hardware.gripper import SerialGripper
 from relaxgrip.hardware.protocol.codec import FaultFlag
-from relaxgrip.hardware.rig_check import check_rig
 from relaxgrip.hardware.rig_file import load_rig
+from relaxgrip.perception.rig_check import check_rig
 from relaxgrip.twin import GripperTwin, TwinConfig
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"

@@ -83,8 +83,8 @@ def check_rig_command(
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Load a rig file, handshake with its MCU, grab a frame per camera, find the marker."""
-    from relaxgrip.hardware.rig_check import check_rig
     from relaxgrip.hardware.rig_file import load_rig
+    from relaxgrip.perception.rig_check import check_rig
 
     spec = load_rig(rig)
     result = check_rig(spec)
