@@ -127,3 +127,21 @@ def test_bad_inputs_and_damaged_datasets(small: Path, tmp_path: Path) -> None:
         build_dataset(tmp_path / "x", SMALL, backend="spark")
     with pytest.raises(InputError, match="seed"):
         DatasetSpec(seed=-1)
+
+
+def test_rcfn_labels_touch_each_hold_where_its_frame_is(small: Path) -> None:
+    data = load_dataset(small)
+    x, y = data.rcfn_xy("all")
+    assert x.shape == (len(data.rcfn_features), len(RCFN_SCHEMA.names))
+    rows = data.rcfn_features
+    f0 = rows["sequence"].map(data.sequences.set_index("sequence")["f0_n"]).to_numpy()
+    t = rows["t_s"].to_numpy()
+    touched = f0 * (1.0 - y[:, 0] * -np.expm1(-np.maximum(t, 1.0) / np.exp(y[:, 1])))
+    truth = np.array([np.interp(max(ti, 1.0), c["t_s"], c["force_n"]) for ti, c in
+                      zip(t, (data.curves[data.curves["sequence"] == s] for s in rows["sequence"]),
+                          strict=True)])
+    # Late in a hold the force may stop falling: those frames keep the whole-hold fit.
+    assert np.quantile(np.abs(touched - truth), 0.9) < 0.002  # N
+    assert np.abs(touched - truth).max() < 0.05
+    for _, idx in rows.groupby("sequence").indices.items():  # one label per frame, not per hold
+        assert np.ptp(y[idx, 1]) > 0.5

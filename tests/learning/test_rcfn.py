@@ -248,3 +248,35 @@ def test_basis_and_log_kappa_validation() -> None:
         RCFN().fit(X, np.column_stack([-Y[:, 0], Y[:, 1]]))
     with pytest.raises(ValueError, match="temp_column"):
         RCFN(temp_column=9).fit(X, Y)
+
+
+def relaxing_data(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame labels of a three-mode hold: the touching curve's share grows as log time."""
+    rng = np.random.default_rng(seed)
+    temp = rng.uniform(25.0, 60.0, n)
+    hold = rng.uniform(0.0, 280.0, n)
+    other = rng.normal(size=n)
+    kappa = (0.05 + 0.02 * np.log1p(hold)) * np.exp(0.1 * other)
+    log_tau = 1.0 + 0.8 * np.log1p(hold) - 0.02 * (temp - 40.0)
+    return np.column_stack([temp, other, hold]), np.column_stack([kappa, log_tau])
+
+
+@pytest.mark.parametrize("knots", [0, 5])
+def test_log_time_column_fits_relaxation_in_log_time_and_round_trips(knots: int) -> None:
+    X, Y = relaxing_data(2000, 4)
+    X_test, Y_test = relaxing_data(300, 5)
+    plain = RCFN(alpha_kappa=1e-3, alpha_log_tau=1e-3, temp_knots=knots).fit(X, Y)
+    timed = RCFN(alpha_kappa=1e-3, alpha_log_tau=1e-3, temp_knots=knots, time_column=2).fit(X, Y)
+    error = [float(np.sqrt(np.mean((m.predict(X_test)[:, 1] - Y_test[:, 1]) ** 2)))
+             for m in (plain, timed)]
+    assert error[1] < 0.5 * error[0]
+    predicted = timed.predict(X_test[:20])
+    for x, (kappa, log_tau) in zip(X_test[:20], predicted, strict=True):
+        k_n, tau_s = timed.relaxation(x, 2.0)
+        assert k_n == pytest.approx(kappa * 2.0, rel=1e-10)
+        assert tau_s == pytest.approx(np.exp(log_tau), rel=1e-10)
+    rebuilt = RCFN.from_arrays(timed.to_arrays(), timed.get_params())
+    assert np.allclose(rebuilt.predict(X_test), timed.predict(X_test), rtol=1e-12)
+    assert rebuilt.n_features_in_ == 3
+    with pytest.raises(ValueError, match="time_column"):
+        RCFN(time_column=7).fit(X, Y)

@@ -337,3 +337,36 @@ def test_anchored_fit_is_the_least_squares_optimum_and_passes_through_the_anchor
             assert best <= cost(fit.k_n * (1 + dk), fit.tau_s * (1 + dtau))
     free = fit_reduced(t, f)
     assert free.objective <= fit.objective  # one parameter fewer cannot fit better
+
+
+def test_osculating_reduced_recovers_one_exponential_and_touches_three() -> None:
+    from relaxgrip.physics.fitting import osculating_reduced
+
+    t = np.arange(0.0, 280.0 + 1e-9, 0.1)
+    one = 5.0 * (1.0 - 0.2 * -np.expm1(-t / 30.0))
+    kappa, tau = osculating_reduced(t, one, 5.0, [0.0, 10.0, 100.0, 280.0])
+    np.testing.assert_allclose(kappa, 0.2, rtol=1e-2)
+    np.testing.assert_allclose(tau, 30.0, rtol=1e-2)
+    # Three modes: the touching curve has the hold's force and slope where it touches.
+    three = 5.0 - 0.4 * -np.expm1(-t / 2.0) - 0.3 * -np.expm1(-t / 25.0) \
+        - 0.3 * -np.expm1(-t / 300.0)
+    at = np.array([2.0, 20.0, 150.0])
+    kappa, tau = osculating_reduced(t, three, 5.0, at)
+    touch = 5.0 * (1.0 - kappa * -np.expm1(-at / tau))
+    np.testing.assert_allclose(touch, np.interp(at, t, three), atol=1e-4)
+    slope = -5.0 * kappa / tau * np.exp(-at / tau)
+    true_slope = -(0.4 / 2.0 * np.exp(-at / 2.0) + 0.3 / 25.0 * np.exp(-at / 25.0)
+                   + 0.3 / 300.0 * np.exp(-at / 300.0))
+    np.testing.assert_allclose(slope, true_slope, rtol=0.03)  # a local quadratic
+    assert tau[0] < tau[1] < tau[2]  # the slower modes take over
+
+
+def test_osculating_reduced_is_undefined_where_the_force_rises() -> None:
+    from relaxgrip.physics.fitting import osculating_reduced
+
+    t = np.arange(0.0, 20.0, 0.1)
+    kappa, tau = osculating_reduced(t, 5.0 + 0.01 * t, 5.0, [5.0, 10.0])
+    assert np.isnan(kappa).all()
+    assert np.isnan(tau).all()
+    with pytest.raises(ValueError, match="> 0"):
+        osculating_reduced(t, 5.0 + 0 * t, 0.0, [5.0])

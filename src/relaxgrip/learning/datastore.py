@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA, FeatureSchema
+from relaxgrip.physics.fitting import osculating_reduced
 
 FloatArray = NDArray[np.float64]
 
@@ -205,16 +206,32 @@ class Dataset:
                 rows["force_n"].to_numpy(np.float64))
 
     def rcfn_xy(self, split: str) -> tuple[FloatArray, FloatArray]:
-        """RCFN features along the holds of a split and their sequences' ``[kappa, log tau]``."""
+        """RCFN features along the holds of a split and their per-frame ``[kappa, log tau]`` labels.
+
+        Each feature row is labelled with the Eq. 10 curve that touches its
+        hold's force curve at the row's time (same force and slope,
+        :func:`relaxgrip.physics.fitting.osculating_reduced`): the curve the
+        estimator should follow from that frame on.  Where the force is not
+        relaxing at that instant (it rises), the sequence's whole-hold fit
+        (``kappa``, ``tau_s`` of the sequences table) stands in.
+        """
         labels = self.sequences.set_index("sequence")
         rows = self.rcfn_features
         if split != "all":
             rows = rows[rows["sequence"].map(labels["split"]) == split]
-        y = np.column_stack([
-            rows["sequence"].map(labels["kappa"]).to_numpy(np.float64),
-            np.log(rows["sequence"].map(labels["tau_s"]).to_numpy(np.float64)),
-        ])
-        return rows[list(RCFN_SCHEMA.names)].to_numpy(np.float64), y
+        kappa = rows["sequence"].map(labels["kappa"]).to_numpy(np.float64, copy=True)
+        tau = rows["sequence"].map(labels["tau_s"]).to_numpy(np.float64, copy=True)
+        curves = self.curves.groupby("sequence")
+        times = rows["t_s"].to_numpy(np.float64)
+        for seq_id, idx in rows.groupby("sequence").indices.items():
+            curve = curves.get_group(seq_id)
+            k, t = osculating_reduced(curve["t_s"].to_numpy(np.float64),
+                                      curve["force_n"].to_numpy(np.float64),
+                                      float(labels.at[seq_id, "f0_n"]), times[idx])
+            ok = np.isfinite(k) & (k > 0)
+            kappa[idx[ok]], tau[idx[ok]] = k[ok], t[ok]
+        return rows[list(RCFN_SCHEMA.names)].to_numpy(np.float64), np.column_stack(
+            [kappa, np.log(tau)])
 
 
 def _check_schema(manifest: dict[str, Any], key: str, schema: FeatureSchema, path: Path) -> None:

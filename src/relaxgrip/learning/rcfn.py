@@ -13,6 +13,15 @@ contact onset, current pose, pose velocity).  By Eq. 7, ``K = X0 sum k_i`` and
 material state, independent of the load: the first regressor predicts
 ``kappa`` and ``K_hat = kappa_hat * F_inst_hat``.
 
+The estimator asks the RCFN again at every frame of the hold, so it need not
+predict one curve for the whole hold.  Several modes relax at once in the
+finger, and one exponential cannot follow the fast start and the slow tail of
+a 280 s hold together (fitted to the whole hold it correlates 0.98 with it):
+the RCFN is trained on per-frame labels, the Eq. 10 curve that touches the
+hold at that frame (:meth:`relaxgrip.learning.datastore.Dataset.rcfn_xy`),
+and the time since the onset enters also as ``log(1 + t)``
+(``time_column``), the scale on which relaxation proceeds.
+
 Both regressors read the same features.  Temperature acts on relaxation
 strongly and non-polynomially (slowly in the glassy state, steeply through
 the transition), so the temperature column is first replaced by a
@@ -209,6 +218,13 @@ def _basis(X: FloatArray, knots: FloatArray, column: int) -> FloatArray:
     return np.hstack([_hat_weights(X[:, column], knots), rest])
 
 
+def _with_log_time(X: FloatArray, Z: FloatArray, column: int | None) -> FloatArray:
+    """``Z`` with ``log(1 + t)`` of ``X``'s time column appended (``column`` None: ``Z``)."""
+    if column is None:
+        return Z
+    return np.hstack([Z, np.log1p(np.maximum(X[:, column], 0.0))[:, None]])
+
+
 def _ridge(phi: FloatArray, y: FloatArray, alpha: float) -> tuple[FloatArray, float]:
     """Coefficients and intercept of one Ridge fit."""
     model = Ridge(alpha=alpha, fit_intercept=True).fit(phi, y)
@@ -252,6 +268,10 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         (0: temperature enters as it is).
     temp_column : int
         Which feature is the temperature.
+    time_column : int or None
+        Which feature is the time since the hold onset: ``log(1 + t)`` is
+        appended to the features, the scale on which relaxation proceeds
+        (None: no such column).
     log_kappa : bool
         Fit ``log kappa`` rather than ``kappa`` (predictions are ``kappa`` either way).
 
@@ -287,6 +307,7 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         temp_knots: int = 5,
         temp_column: int = 0,
         log_kappa: bool = True,
+        time_column: int | None = None,
     ) -> None:
         self.alpha_kappa = alpha_kappa
         self.alpha_log_tau = alpha_log_tau
@@ -294,6 +315,7 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         self.temp_knots = temp_knots
         self.temp_column = temp_column
         self.log_kappa = log_kappa
+        self.time_column = time_column
 
     def fit(self, X: ArrayLike, Y: ArrayLike) -> RCFN:
         """Fit both regressors.
@@ -319,7 +341,7 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         _check_degree(self.degree)
         X_arr, Y_arr = _check_targets(X, Y)
         knots = self._knots_for(X_arr)
-        design, phi = _Design.of(_basis(X_arr, knots, self.temp_column), self.degree)
+        design, phi = _Design.of(self._transform(X_arr, knots), self.degree)
         targets = self._internal_targets(Y_arr)
         fits = [
             _ridge(phi, targets[:, k], alpha)
@@ -328,6 +350,12 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         self._set_learned(design, np.column_stack([c for c, _ in fits]), [b for _, b in fits],
                           knots, X_arr.shape[1])
         return self
+
+    def _transform(self, X: FloatArray, knots: FloatArray) -> FloatArray:
+        """Features after the temperature basis and the log-time column."""
+        if self.time_column is not None and not 0 <= self.time_column < X.shape[1]:
+            raise ValueError(f"time_column {self.time_column} is not a column of X")
+        return _with_log_time(X, _basis(X, knots, self.temp_column), self.time_column)
 
     def _knots_for(self, X: FloatArray) -> FloatArray:
         """Knots spread over the training range of the temperature column."""
@@ -402,7 +430,7 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         """
         self._check_fitted()
         X_arr = _check_predict_X(X, self.n_features_in_, "RCFN", "relaxation")
-        Z = _basis(X_arr, self.temp_knots_, self.temp_column)
+        Z = self._transform(X_arr, self.temp_knots_)
         phi = _poly_expand((Z - self.x_mean_) / self.x_scale_, self.degree)
         phi -= self.phi_mean_
         phi /= self.phi_scale_
@@ -462,20 +490,23 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         return kappa * f_inst_n, math.exp(log_tau)
 
     def _expand_one(self, x: ArrayLike) -> FloatArray | ArrayLike:
-        """One vector through the temperature basis, into a reused buffer."""
+        """One vector through the temperature basis and the log-time column, into a buffer."""
         knots = self._knots_list
-        if not knots:
+        if not knots and self.time_column is None:
             return x
         out = self._expanded
         k = len(knots)
-        out[:k] = 0.0
-        temp = float(np.asarray(x)[self.temp_column])
-        t = min(max(temp, knots[0]), knots[-1])
-        i = min(bisect.bisect_right(knots, t) - 1, k - 2)
-        w = (t - knots[i]) / (knots[i + 1] - knots[i])
-        out[i] = 1.0 - w
-        out[i + 1] = w
-        np.take(x, self._others, out=out[k:])
+        if k:
+            out[:k] = 0.0
+            temp = float(np.asarray(x)[self.temp_column])
+            t = min(max(temp, knots[0]), knots[-1])
+            i = min(bisect.bisect_right(knots, t) - 1, k - 2)
+            w = (t - knots[i]) / (knots[i + 1] - knots[i])
+            out[i] = 1.0 - w
+            out[i + 1] = w
+        np.take(x, self._others, out=out[k : k + self._others.size])
+        if self.time_column is not None:
+            out[-1] = math.log1p(max(float(np.asarray(x)[self.time_column]), 0.0))
         return out
 
     def __getstate__(self) -> dict[str, Any]:
@@ -556,7 +587,7 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         if knots.size and not (np.diff(knots) > 0).all():
             raise ValueError("array 'temp_knots' must be increasing")
         design = _Design(got["x_mean"], got["x_scale"], got["phi_mean"], got["phi_scale"])
-        n_features = d - knots.size + 1 if knots.size else d
+        n_features = (d - knots.size + 1 if knots.size else d) - (est.time_column is not None)
         est._set_learned(design, got["coef"], got["intercept"].tolist(), knots, n_features)
         return est
 
@@ -571,6 +602,7 @@ def select_rcfn(
     degree: int = 2,
     temp_knots: int = 5,
     log_kappa: bool = True,
+    time_column: int | None = None,
 ) -> tuple[RCFN, list[dict[str, Any]]]:
     """Choose each target's Ridge penalty by validation RMSE.
 
@@ -586,7 +618,7 @@ def select_rcfn(
         Validation features and targets.
     alphas : sequence of float
         Penalties to try, each ``> 0``.
-    degree, temp_knots, log_kappa : int, int, bool
+    degree, temp_knots, log_kappa, time_column : int, int, bool, int or None
         The other hyperparameters, see :class:`RCFN`.
 
     Returns
@@ -604,9 +636,10 @@ def select_rcfn(
     X_va, Y_va = _check_targets(X_val, Y_val)
     if X_va.shape[1] != X_tr.shape[1]:
         raise ValueError(f"X_val has {X_va.shape[1]} features but X_train has {X_tr.shape[1]}")
-    probe = RCFN(degree=degree, temp_knots=temp_knots, log_kappa=log_kappa)
+    probe = RCFN(degree=degree, temp_knots=temp_knots, log_kappa=log_kappa,
+                 time_column=time_column)
     knots = probe._knots_for(X_tr)
-    design, phi = _Design.of(_basis(X_tr, knots, probe.temp_column), degree)
+    design, phi = _Design.of(probe._transform(X_tr, knots), degree)
     targets = probe._internal_targets(Y_tr)
     fits: list[list[tuple[FloatArray, float]]] = []
     table: list[dict[str, Any]] = []
@@ -628,7 +661,7 @@ def select_rcfn(
     best_t = int(np.argmin([row["val_rmse_log_tau"] for row in table]))
     best = RCFN(
         alpha_kappa=float(alphas[best_k]), alpha_log_tau=float(alphas[best_t]), degree=degree,
-        temp_knots=temp_knots, log_kappa=log_kappa,
+        temp_knots=temp_knots, log_kappa=log_kappa, time_column=time_column,
     )
     coef = np.column_stack([fits[best_k][0][0], fits[best_t][1][0]])
     best._set_learned(design, coef, [fits[best_k][0][1], fits[best_t][1][1]], knots,

@@ -77,7 +77,8 @@ def train_models(data: Dataset, random_state: int = 0) -> TrainedModels:
     start = time.perf_counter()
     icfn, icfn_table = select_icfn(x_train, y_train, x_val, y_val, random_state=random_state)
     icfn_s = time.perf_counter() - start
-    rcfn, rcfn_table = select_rcfn(r_train, k_train, r_val, k_val)
+    rcfn, rcfn_table = select_rcfn(r_train, k_train, r_val, k_val,
+                                   time_column=RCFN_SCHEMA.names.index("hold_time_s"))
     rcfn_s = time.perf_counter() - start - icfn_s
     val = icfn.predict(x_val) - y_val
     training = {
