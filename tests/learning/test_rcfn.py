@@ -37,7 +37,8 @@ def make_data(
     z = rng.normal(size=(n, SCALES.size))
     X = OFFSETS + SCALES * z
     # A known quadratic relation in the standardised features (z is close to it).
-    kappa = 0.25 + 0.08 * z[:, 0] - 0.02 * z[:, 0] ** 2 + 0.015 * z[:, 1] * z[:, 3]
+    # kappa stays inside [0, 1] (the RCFN clips it there) over the draws' tails.
+    kappa = 0.4 + 0.04 * z[:, 0] - 0.01 * z[:, 0] ** 2 + 0.01 * z[:, 1] * z[:, 3]
     log_tau = math.log(20.0) - 0.6 * z[:, 0] + 0.1 * z[:, 2] ** 2 + 0.05 * z[:, 4] * z[:, 5]
     Y = np.column_stack([kappa, log_tau]) + rng.normal(size=(n, 2)) * noise
     return X, Y
@@ -280,3 +281,16 @@ def test_log_time_column_fits_relaxation_in_log_time_and_round_trips(knots: int)
     assert rebuilt.n_features_in_ == 3
     with pytest.raises(ValueError, match="time_column"):
         RCFN(time_column=7).fit(X, Y)
+
+
+def test_far_outside_its_training_range_the_rcfn_stays_physical() -> None:
+    X, Y = relaxing_data(1000, 6)
+    model = RCFN(alpha_kappa=1e-3, alpha_log_tau=1e-3, time_column=2).fit(X, Y)
+    wild = np.array([[200.0, 50.0, 1e5], [-100.0, -50.0, 0.0], [40.0, 30.0, 280.0]])
+    predicted = model.predict(wild)
+    assert ((predicted[:, 0] >= 0) & (predicted[:, 0] <= 1)).all()
+    lo, hi = model.log_tau_range_
+    assert ((predicted[:, 1] >= lo) & (predicted[:, 1] <= hi)).all()
+    assert hi - lo < 1.3 * np.ptp(Y[:, 1])
+    for x, (kappa, log_tau) in zip(wild, predicted, strict=True):
+        assert model.relaxation(x, 3.0) == pytest.approx((3.0 * kappa, np.exp(log_tau)))

@@ -62,6 +62,8 @@ __all__ = ["RCFN", "RCFN_ALPHAS", "RCFN_TARGETS", "n_poly_features", "reconstruc
 RCFN_TARGETS = ("kappa", "log_tau_s")
 #: Default penalties :func:`select_rcfn` tries for each target.
 RCFN_ALPHAS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0, 1000.0)
+#: Inputs and ``log tau`` are clipped to their training range widened by this share of it.
+RANGE_MARGIN = 0.1
 #: Fewest samples :meth:`RCFN.fit` accepts.
 MIN_SAMPLES = 2
 
@@ -225,6 +227,15 @@ def _with_log_time(X: FloatArray, Z: FloatArray, column: int | None) -> FloatArr
     return np.hstack([Z, np.log1p(np.maximum(X[:, column], 0.0))[:, None]])
 
 
+def _ranges(X: FloatArray, Y: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Training ranges of the features and of the ``log tau`` labels, widened by a margin."""
+    lo, hi = X.min(axis=0), X.max(axis=0)
+    margin = RANGE_MARGIN * (hi - lo)
+    t_lo, t_hi = float(Y[:, 1].min()), float(Y[:, 1].max())
+    t_margin = RANGE_MARGIN * (t_hi - t_lo)
+    return lo - margin, hi + margin, np.array([t_lo - t_margin, t_hi + t_margin])
+
+
 def _ridge(phi: FloatArray, y: FloatArray, alpha: float) -> tuple[FloatArray, float]:
     """Coefficients and intercept of one Ridge fit."""
     model = Ridge(alpha=alpha, fit_intercept=True).fit(phi, y)
@@ -287,6 +298,10 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         Standardisation of the features after the temperature basis.
     phi_mean_, phi_scale_ : ndarray, shape (n_output_features_,)
         Standardisation of the expanded features.
+    x_min_, x_max_ : ndarray, shape (n_features_in_,)
+        Range of each feature in training (inputs are clipped to it).
+    log_tau_range_ : ndarray, shape (2,)
+        Range of the ``log tau`` labels in training (predictions are clipped to it).
     coef_ : ndarray, shape (n_output_features_, 2)
         Ridge coefficients, one column per target (``kappa``, ``log_tau_s``).
     intercept_ : ndarray, shape (2,)
@@ -294,9 +309,12 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
 
     Notes
     -----
-    Predictions are not clipped: far outside the training data ``kappa`` may
-    leave ``[0, 1)``.  :meth:`relaxation` reuses buffers owned by the
-    estimator and is not re-entrant; give each thread its own copy.
+    A polynomial extrapolates wildly: every feature is clipped to the range
+    it had in training (widened by :data:`RANGE_MARGIN` of it) before the
+    expansion, ``kappa`` to ``[0, 1]`` (a hold cannot lose more than its
+    force) and ``log tau`` to the training labels' range (widened alike).
+    :meth:`relaxation` reuses buffers owned by the estimator and is not
+    re-entrant; give each thread its own copy.
     """
 
     def __init__(
@@ -348,7 +366,7 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
             for k, alpha in enumerate((self.alpha_kappa, self.alpha_log_tau))
         ]
         self._set_learned(design, np.column_stack([c for c, _ in fits]), [b for _, b in fits],
-                          knots, X_arr.shape[1])
+                          knots, X_arr.shape[1], _ranges(X_arr, Y_arr))
         return self
 
     def _transform(self, X: FloatArray, knots: FloatArray) -> FloatArray:
@@ -385,7 +403,9 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         intercept: Sequence[float],
         knots: FloatArray,
         n_features: int,
+        ranges: tuple[FloatArray, FloatArray, FloatArray],
     ) -> None:
+        self.x_min_, self.x_max_, self.log_tau_range_ = ranges
         self.temp_knots_ = knots
         self.x_mean_ = design.x_mean
         self.x_scale_ = design.x_scale
@@ -401,6 +421,8 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         self._others = np.array([i for i in range(n_features)
                                  if knots.size == 0 or i != self.temp_column])
         self._expanded = np.zeros(design.x_mean.size)
+        self._clipped = np.zeros(n_features)
+        self._log_tau_bounds = (float(self.log_tau_range_[0]), float(self.log_tau_range_[1]))
 
     def _check_fitted(self) -> None:
         if not hasattr(self, "coef_"):
@@ -429,14 +451,17 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
             ``X`` not 2-D, of the wrong width, or not finite.
         """
         self._check_fitted()
-        X_arr = _check_predict_X(X, self.n_features_in_, "RCFN", "relaxation")
+        X_arr = np.clip(_check_predict_X(X, self.n_features_in_, "RCFN", "relaxation"),
+                        self.x_min_, self.x_max_)
         Z = self._transform(X_arr, self.temp_knots_)
         phi = _poly_expand((Z - self.x_mean_) / self.x_scale_, self.degree)
         phi -= self.phi_mean_
         phi /= self.phi_scale_
         result: FloatArray = phi @ self.coef_ + self.intercept_
         if self.log_kappa:
-            result[:, 0] = np.exp(result[:, 0])
+            result[:, 0] = np.exp(np.minimum(result[:, 0], 0.0))
+        np.clip(result[:, 0], 0.0, 1.0, out=result[:, 0])
+        np.clip(result[:, 1], *self.log_tau_range_, out=result[:, 1])
         return result
 
     def _make_plan(self) -> _RelaxationPlan | None:
@@ -484,10 +509,11 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         if plan is None:
             kappa, log_tau = self.predict(np.asarray(x, dtype=np.float64)[None, :])[0].tolist()
             return kappa * f_inst_n, math.exp(log_tau)
-        kappa, log_tau = plan(self._expand_one(x))
-        if self.log_kappa:
-            kappa = math.exp(kappa)
-        return kappa * f_inst_n, math.exp(log_tau)
+        np.clip(x, self.x_min_, self.x_max_, out=self._clipped)
+        kappa, log_tau = plan(self._expand_one(self._clipped))
+        kappa = math.exp(min(kappa, 0.0)) if self.log_kappa else min(max(kappa, 0.0), 1.0)
+        lo, hi = self._log_tau_bounds
+        return kappa * f_inst_n, math.exp(min(max(log_tau, lo), hi))
 
     def _expand_one(self, x: ArrayLike) -> FloatArray | ArrayLike:
         """One vector through the temperature basis and the log-time column, into a buffer."""
@@ -538,6 +564,9 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
             "coef": self.coef_.copy(),
             "intercept": self.intercept_.copy(),
             "temp_knots": self.temp_knots_.copy(),
+            "x_min": self.x_min_.copy(),
+            "x_max": self.x_max_.copy(),
+            "log_tau_range": self.log_tau_range_.copy(),
         }
 
     @classmethod
@@ -567,7 +596,7 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         est = cls(**params)
         _check_degree(est.degree)
         expected = {"x_mean", "x_scale", "phi_mean", "phi_scale", "coef", "intercept",
-                    "temp_knots"}
+                    "temp_knots", "x_min", "x_max", "log_tau_range"}
         got = _float_arrays(arrays, expected)
         if got["x_mean"].ndim != 1 or got["x_mean"].size == 0:
             shape = got["x_mean"].shape
@@ -588,7 +617,14 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
             raise ValueError("array 'temp_knots' must be increasing")
         design = _Design(got["x_mean"], got["x_scale"], got["phi_mean"], got["phi_scale"])
         n_features = (d - knots.size + 1 if knots.size else d) - (est.time_column is not None)
-        est._set_learned(design, got["coef"], got["intercept"].tolist(), knots, n_features)
+        for name, shape in (("x_min", (n_features,)), ("x_max", (n_features,)),
+                            ("log_tau_range", (2,))):
+            if got[name].shape != shape:
+                raise ValueError(f"array '{name}' has shape {got[name].shape}, expected {shape}")
+        if (got["x_max"] < got["x_min"]).any() or got["log_tau_range"][1] < got["log_tau_range"][0]:
+            raise ValueError("ranges must have min <= max")
+        est._set_learned(design, got["coef"], got["intercept"].tolist(), knots, n_features,
+                         (got["x_min"], got["x_max"], got["log_tau_range"]))
         return est
 
 
@@ -641,6 +677,7 @@ def select_rcfn(
     knots = probe._knots_for(X_tr)
     design, phi = _Design.of(probe._transform(X_tr, knots), degree)
     targets = probe._internal_targets(Y_tr)
+    ranges = _ranges(X_tr, Y_tr)
     fits: list[list[tuple[FloatArray, float]]] = []
     table: list[dict[str, Any]] = []
     for alpha in alphas:
@@ -648,7 +685,7 @@ def select_rcfn(
         pair = [_ridge(phi, targets[:, k], float(alpha)) for k in range(2)]
         fit_s = time.perf_counter() - start
         probe._set_learned(design, np.column_stack([c for c, _ in pair]), [b for _, b in pair],
-                           knots, X_tr.shape[1])
+                           knots, X_tr.shape[1], ranges)
         rmse = np.sqrt(np.mean((probe.predict(X_va) - Y_va) ** 2, axis=0))
         fits.append(pair)
         table.append({
@@ -665,7 +702,7 @@ def select_rcfn(
     )
     coef = np.column_stack([fits[best_k][0][0], fits[best_t][1][0]])
     best._set_learned(design, coef, [fits[best_k][0][1], fits[best_t][1][1]], knots,
-                      X_tr.shape[1])
+                      X_tr.shape[1], ranges)
     return best, table
 
 
