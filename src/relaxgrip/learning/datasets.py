@@ -287,15 +287,21 @@ class _Harness:
         assert obj is not None
         self.width_m = obj.width_m
         self.dt = 1.0 / _RATE_HZ
-        self._speed = 0.0
+        self._command = Command(0.0, (self.duty, self.duty))
         self.motor_mm = 0.0  # encoder at the last perceived frame
         self.closed_aperture_m = cfg.rig.open_aperture_m - cfg.motor.stroke_mm * 1e-3
 
     def tick(self) -> Truth:
         """Advance one control period without rendering; return the truth."""
         self.clock.advance(self.dt)
-        self.twin.act(Command(self._speed, (self.duty, self.duty)))
+        self.twin.act(self._command)
         return self.twin.truth()
+
+    def wait(self, periods: int) -> float:
+        """Advance ``periods`` control periods under the same command; the true force after."""
+        self.clock.advance(periods * self.dt)
+        self.twin.act(self._command)
+        return self.twin.contact_force_n
 
     def perceive(self) -> tuple[Percept, Truth]:
         """Render the current frames and run perception on them."""
@@ -306,8 +312,8 @@ class _Harness:
 
     def run(self, speed_mm_s: float) -> None:
         """Close at ``speed_mm_s`` from now on (heaters at the holding duty)."""
-        self._speed = speed_mm_s
-        self.twin.act(Command(speed_mm_s, (self.duty, self.duty)))
+        self._command = Command(speed_mm_s, (self.duty, self.duty))
+        self.twin.act(self._command)
 
     def zero(self) -> None:
         """Zero the marker on the open finger (rendered frames at the camera rate)."""
@@ -447,12 +453,15 @@ def run_rcfn_sequence(seq: RcfnSequence) -> UnitResult:
     curve_every = max(1, round(_RATE_HZ / seq.curve_rate_hz))
     frame_every = max(1, round(_RATE_HZ / seq.feature_rate_hz))
     n_ticks = round(seq.hold_s * _RATE_HZ)
-    for k in range(1, n_ticks + 1):
-        truth = h.tick()
+    # The command stays the same through the hold: the twin advances from one kept
+    # sample to the next in one call (its physics still steps at the camera rate).
+    stride = math.gcd(curve_every, frame_every)
+    for k in range(stride, n_ticks + 1, stride):
+        force = h.wait(stride)
         t = k / _RATE_HZ
         if k % curve_every == 0:
             curve_t.append(t)
-            curve_f.append(truth.contact_force_n)
+            curve_f.append(force)
         if k % frame_every == 0:
             keep_features(t, h.perceive()[0])
     fit = fit_reduced(np.asarray(curve_t), np.asarray(curve_f), f_inst_n=f0)

@@ -15,6 +15,7 @@ the force moves smoothly).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -120,11 +121,29 @@ class SensorSuite:
         """Time of the next camera capture (s), ``inf`` without cameras."""
         return self._next_capture_s
 
-    def capture(self, t_s: float, scene: SceneState) -> None:
-        """Record ``scene`` for every camera whose capture is due at ``t_s``."""
+    def capture(self, t_s: float, scene: Callable[[], SceneState],
+                until_s: float = -math.inf) -> None:
+        """Record the scene for every camera whose capture is due at ``t_s``.
+
+        Parameters
+        ----------
+        t_s : float
+            Capture time (s).
+        scene : callable
+            Returns the scene now; called at most once, and only if a camera
+            keeps this capture.
+        until_s : float
+            The twin advances to this time before anyone can look: a capture
+            whose camera captures again by then is replaced unseen, and only
+            its frame number is kept.
+        """
+        seen: SceneState | None = None
         for stream in self.streams:
             while stream.next_t_s <= t_s + _TIME_SLACK_S:
-                stream.latest = (stream.next_seq, stream.next_t_s, scene)
+                if stream.next_t_s + stream.period_s > until_s + _TIME_SLACK_S:  # kept
+                    if seen is None:
+                        seen = scene()
+                    stream.latest = (stream.next_seq, stream.next_t_s, seen)
                 stream.next_seq += 1
         self._next_capture_s = self._earliest_capture()
 

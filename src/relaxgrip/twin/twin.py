@@ -51,6 +51,8 @@ _REFRESH_K = 0.02
 _CRUSHED_M = 0.001
 #: Times closer than this are the same instant (s): clock arithmetic round-off.
 _TIME_SLACK_S = 1e-9
+#: Steps whose lengths differ by less than this share their discretisation (relative).
+_SAME_STEP_REL = 1e-9
 
 
 #: Stream of the unit's random draws (apart from every run's).
@@ -147,8 +149,9 @@ class _FingerStiffness:
 
     def step_coefficients(self, dt_s: float) -> tuple[tuple[float, ...], tuple[float, ...], float]:
         """Branch decays ``e^{-dt/tau_i}``, gains ``k_i phi1(dt/tau_i)`` and the gains' sum."""
-        # Steps of the same length up to round-off share their coefficients.
-        if self._coeffs is None or abs(self._coeffs[0] - dt_s) > 1e-12 * dt_s:
+        # Steps of the same length up to round-off share their coefficients (times
+        # hundreds of seconds into a run carry ~1e-11 of a 33 ms step in round-off).
+        if self._coeffs is None or abs(self._coeffs[0] - dt_s) > _SAME_STEP_REL * dt_s:
             h = dt_s / self.tau
             gain = self.k_i * phi1(h)
             decay = tuple(np.exp(-h).tolist())
@@ -360,7 +363,9 @@ class GripperTwin:
             # A capture that falls on the requested time up to round-off is taken there:
             # no sliver of a step between them.
             self._integrate_to(t_s if t_capture > t_s - _TIME_SLACK_S else t_capture)
-            self._sensors.capture(t_capture, self._scene())
+            # A capture that a later one of this advance replaces is never seen: its
+            # scene is not assembled.
+            self._sensors.capture(t_capture, self._scene, until_s=t_s)
         self._integrate_to(t_s)
 
     def _integrate_to(self, t_s: float) -> None:
@@ -490,7 +495,7 @@ class GripperTwin:
         if dt <= 0.0:
             return
         # Heat steps of the same length up to round-off share their discretisation.
-        if self._step_cache is None or abs(self._step_cache[0] - dt) > 1e-12 * dt:
+        if self._step_cache is None or abs(self._step_cache[0] - dt) > _SAME_STEP_REL * dt:
             ad, bd = discrete_heat_system(self.config.heat, dt)
             self._step_cache = (dt, ad.T.copy(), bd.T.copy())
         _, ad_t, bd_t = self._step_cache
