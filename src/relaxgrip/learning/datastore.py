@@ -124,7 +124,10 @@ def _readme(tables: dict[str, pd.DataFrame], manifest: dict[str, Any]) -> str:
                           "features at the onset (`onset_*`).",
         "rcfn_features": "RCFN features along each hold (RCFN schema order), "
                          f"{manifest['spec']['feature_rate_hz']:g} Hz.",
-        "rcfn_curves": f"True force along each hold, {manifest['spec']['curve_rate_hz']:g} Hz.",
+        "rcfn_curves": f"True force along each hold, {manifest['spec']['curve_rate_hz']:g} Hz. "
+                       "`relaxgrip train` labels each RCFN feature row with the Eq. 10 curve "
+                       "that touches its hold's curve at the row's time (same force and slope); "
+                       "the sequences' `k_n`, `tau_s` fit the whole hold.",
     }
     parts = [
         "# relaxgrip dataset",
