@@ -27,3 +27,14 @@ def test_a_failure_keeps_the_previous_file(tmp_path) -> None:
         write_files_atomically(tmp_path, [("report.md", b"new"), ("second", None)])  # type: ignore[list-item]
     assert target.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["report.md"]
+
+
+def test_written_files_get_the_umasks_mode_not_a_private_one(tmp_path) -> None:
+    import os
+
+    old = os.umask(0o022)
+    try:
+        write_text_atomically(tmp_path / "report.md", "x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "report.md").stat().st_mode & 0o777 == 0o644

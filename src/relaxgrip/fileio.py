@@ -11,7 +11,7 @@ from __future__ import annotations
 import hashlib
 import io
 import os
-import tempfile
+import secrets
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -47,8 +47,10 @@ def write_files_atomically(directory: Path, files: Sequence[tuple[str, bytes]]) 
     temporaries: list[tuple[Path, Path]] = []
     try:
         for name, data in files:
-            fd, tmp_name = tempfile.mkstemp(dir=directory, prefix=f".{name}.", suffix=".tmp")
-            temporaries.append((Path(tmp_name), directory / name))
+            # Not mkstemp: its files are private (0600); these get the umask's mode.
+            tmp = directory / f".{name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            temporaries.append((tmp, directory / name))
             with os.fdopen(fd, "wb") as fh:
                 fh.write(data)
                 fh.flush()
