@@ -418,8 +418,6 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         self._plan: _RelaxationPlan | None = None
         # The fast path's temperature basis: plain floats and a reusable vector.
         self._knots_list = knots.tolist()
-        self._others = np.array([i for i in range(n_features)
-                                 if knots.size == 0 or i != self.temp_column])
         self._expanded = np.zeros(design.x_mean.size)
         self._clipped = np.zeros(n_features)
         self._log_tau_bounds = (float(self.log_tau_range_[0]), float(self.log_tau_range_[1]))
@@ -509,14 +507,15 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         if plan is None:
             kappa, log_tau = self.predict(np.asarray(x, dtype=np.float64)[None, :])[0].tolist()
             return kappa * f_inst_n, math.exp(log_tau)
-        np.clip(x, self.x_min_, self.x_max_, out=self._clipped)
-        kappa, log_tau = plan(self._expand_one(self._clipped))
+        clipped = np.minimum(x, self.x_max_, out=self._clipped)
+        np.maximum(clipped, self.x_min_, out=clipped)
+        kappa, log_tau = plan(self._expand_one(clipped))
         kappa = math.exp(min(kappa, 0.0)) if self.log_kappa else min(max(kappa, 0.0), 1.0)
         lo, hi = self._log_tau_bounds
         return kappa * f_inst_n, math.exp(min(max(log_tau, lo), hi))
 
-    def _expand_one(self, x: ArrayLike) -> FloatArray | ArrayLike:
-        """One vector through the temperature basis and the log-time column, into a buffer."""
+    def _expand_one(self, x: FloatArray) -> FloatArray:
+        """One (clipped) vector through the temperature basis and the log-time column."""
         knots = self._knots_list
         if not knots and self.time_column is None:
             return x
@@ -524,15 +523,19 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         k = len(knots)
         if k:
             out[:k] = 0.0
-            temp = float(np.asarray(x)[self.temp_column])
-            t = min(max(temp, knots[0]), knots[-1])
+            t = min(max(x.item(self.temp_column), knots[0]), knots[-1])
             i = min(bisect.bisect_right(knots, t) - 1, k - 2)
             w = (t - knots[i]) / (knots[i + 1] - knots[i])
             out[i] = 1.0 - w
             out[i + 1] = w
-        np.take(x, self._others, out=out[k : k + self._others.size])
+        if k:  # every feature but the temperature, in order: two slices
+            c = self.temp_column
+            out[k : k + c] = x[:c]
+            out[k + c : k + x.size - 1] = x[c + 1 :]
+        else:
+            out[: x.size] = x
         if self.time_column is not None:
-            out[-1] = math.log1p(max(float(np.asarray(x)[self.time_column]), 0.0))
+            out[-1] = math.log1p(max(x.item(self.time_column), 0.0))
         return out
 
     def __getstate__(self) -> dict[str, Any]:
