@@ -142,3 +142,34 @@ def test_setpoints_outside_the_safe_range_are_refused(bad):
 def test_unknown_mode_is_refused():
     with pytest.raises(InputError, match="unknown stiffness mode"):
         TemperatureLoop(HEAT).set_mode("squishy")
+
+
+def test_covered_beams_are_those_nearer_the_background_than_the_warmest():
+    from relaxgrip.control.temperature import covered_beams
+
+    assert covered_beams([54.5, 56.5, 56.9, 30.2, 26.6], 25.0) == (False, False, False, True,
+                                                                   True)
+    assert covered_beams([54.5, 56.5, 56.9, 52.6, 54.2], 25.0) == (False,) * 5
+    assert covered_beams([26.0, 27.0, 25.5], 25.0) == (False,) * 3  # a cold finger: no contrast
+    assert covered_beams([55.0, float("nan"), 26.0], float("nan")) == (False,) * 3
+
+
+def test_an_object_covering_the_tip_does_not_make_the_loop_overheat():
+    """A cold object over two beams: the loop regulates the finger, not the object."""
+    loop = TemperatureLoop(HEAT)
+    loop.set_temperature(55.0)
+    temps = np.full((2, HEAT.n_nodes), 55.0)
+    covered_from = 300.0
+    for k in range(6000):
+        t = k / 10
+        if k % 10 == 0:
+            seen = temps.copy()
+            if t >= covered_from:
+                seen[:, -2:] = 26.0  # a room-temperature ball in front of the distal beams
+            latest = features(t, seen)
+        duty = loop.update(latest, t)
+        temps = np.vstack([heat_step(temps[j], duty[j], 0.1, HEAT, AMBIENT_C) for j in range(2)])
+    assert temps.mean(axis=1) == pytest.approx([55.0, 55.0], abs=0.3)
+    assert loop.readings_c(latest)[0] == pytest.approx(55.0, abs=0.3)
+    # The face's mean reads the ball: regulating it would overheat the finger.
+    assert latest.fingers[0].mean_c < 50.0

@@ -327,7 +327,7 @@ class GraspController:
         thermal = percept.thermal
         if thermal is None:
             return False
-        readings = [self.temperature.reading_c(f) for f in thermal.fingers]
+        readings = self.temperature.readings_c(thermal)
         ok = all(math.isfinite(r) and abs(r - setpoint) <= self.config.temp_band_k
                  for r in readings)
         if not ok:

@@ -187,7 +187,7 @@ def _row(obs: Observation, c: GraspController, command: Command) -> tuple[float,
     if percept is not None:
         status = float(_STATUS.index(percept.marker.status))
         if percept.thermal is not None:
-            temps = tuple(c.temperature.reading_c(f) for f in percept.thermal.fingers)  # type: ignore[assignment]
+            temps = c.temperature.readings_c(percept.thermal)  # type: ignore[assignment]
     setpoint = c.temperature.setpoint_c
     return (
         obs.t_s, float(PHASES.index(c.phase)), obs.motor_position_mm, obs.arm_height_mm,

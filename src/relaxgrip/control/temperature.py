@@ -14,12 +14,21 @@ named setpoints.  Two guards come before any control:
 
 The PID runs when a new infrared frame arrives (1 Hz) and its duty is held
 between frames.
+
+**Occlusion.** A grasped object stands between the camera and the finger's
+distal beams: a room-temperature ball makes them read 26-30 °C while the rest
+of a 55 °C finger reads 55-57 °C, and a loop regulating the face's mean would
+heat the finger 4 K above its setpoint to make up for it.  A beam that reads
+closer to the background than to the finger's warmest beam is taken as
+covered (:func:`covered_beams`); while any is, the reading is the last
+uncovered mean moved by as much as the uncovered beams have moved since.
 """
 
 from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from relaxgrip.control.pid import PID, PIDGains
@@ -33,7 +42,28 @@ __all__ = [
     "TemperatureLoop",
     "TemperatureStatus",
     "ThermalLimits",
+    "covered_beams",
 ]
+
+#: Below this spread between the warmest beam and the background nothing is told covered (K).
+_MIN_CONTRAST_K = 5.0
+
+
+def covered_beams(beams_c: Sequence[float], background_c: float) -> tuple[bool, ...]:
+    """Which beams an object hides: those closer to the background than to the warmest beam.
+
+    Nothing is covered when the finger is within :data:`_MIN_CONTRAST_K` of the
+    background (a cold finger cannot be told from a cold object) or when the
+    background is unknown; a beam out of view (nan) is not covered either.
+    """
+    finite = [b for b in beams_c if math.isfinite(b)]
+    if not finite or not math.isfinite(background_c):
+        return (False,) * len(beams_c)
+    warmest = max(finite)
+    if warmest - background_c < _MIN_CONTRAST_K:
+        return (False,) * len(beams_c)
+    middle = 0.5 * (warmest + background_c)
+    return tuple(math.isfinite(b) and b < middle for b in beams_c)
 
 
 class StiffnessMode(enum.StrEnum):
@@ -139,6 +169,9 @@ class TemperatureLoop:
         self._cut = [False, False]
         self._duty = (0.0, 0.0)
         self._last_ir_t: float | None = None
+        self._seen_t: float | None = None
+        # Per finger, the latest frame with no beam covered: its mean and its beams.
+        self._clear: list[tuple[float, tuple[float, ...]] | None] = [None, None]
 
     def set_mode(self, mode: StiffnessMode | str) -> None:
         """Switch to a stiffness mode's setpoint."""
@@ -162,12 +195,48 @@ class TemperatureLoop:
             self._last_ir_t = None  # re-seed the integrators on the next frame
 
     def reading_c(self, finger: FingerThermal) -> float:
-        """What the loop regulates: the pads (tip beams) in adhesive mode, else the mean (°C)."""
+        """A finger seen whole: the pads (tip beams) if adhesive, else the mean (°C)."""
         if self.mode is StiffnessMode.ADHESIVE:
             tip = [b for b in finger.beam_temps_c[-2:] if math.isfinite(b)]
             if tip:
                 return sum(tip) / len(tip)
         return finger.mean_c
+
+    def readings_c(self, thermal: ThermalFeatures) -> tuple[float, ...]:
+        """What the loop regulates of each finger, covered beams made up for (°C).
+
+        Where an object covers beams of a finger (module notes), its reading is
+        the mean of the latest frame with nothing covered, moved by the mean
+        change of the beams visible in both; before any such frame, the mean
+        of the visible beams.  The adhesive pads are read as they are.
+        """
+        out = []
+        for j, finger in enumerate(thermal.fingers):
+            covered = covered_beams(finger.beam_temps_c, thermal.background_c)
+            if self.mode is StiffnessMode.ADHESIVE or not any(covered):
+                out.append(self.reading_c(finger))
+                continue
+            clear = self._clear[j] if j < len(self._clear) else None
+            now = finger.beam_temps_c
+            if clear is None:
+                seen = [b for b, c in zip(now, covered, strict=True) if not c and math.isfinite(b)]
+                out.append(sum(seen) / len(seen))
+                continue
+            mean_c, then = clear
+            moved = [b - a for b, a, c in zip(now, then, covered, strict=True)
+                     if not c and math.isfinite(b) and math.isfinite(a)]
+            out.append(mean_c + sum(moved) / len(moved) if moved else mean_c)
+        return tuple(out)
+
+    def _remember_clear(self, thermal: ThermalFeatures) -> None:
+        """Keep each finger's latest uncovered frame (once per infrared frame)."""
+        if thermal.t_s == self._seen_t:
+            return
+        self._seen_t = thermal.t_s
+        for j, finger in enumerate(thermal.fingers[: len(self._clear)]):
+            if math.isfinite(finger.mean_c) and not any(
+                    covered_beams(finger.beam_temps_c, thermal.background_c)):
+                self._clear[j] = (finger.mean_c, tuple(finger.beam_temps_c))
 
     def update(self, thermal: ThermalFeatures | None, t_s: float) -> tuple[float, float]:
         """Heater duties at ``t_s`` given the latest infrared features.
@@ -190,6 +259,7 @@ class TemperatureLoop:
             self._duty = (0.0, 0.0)
             self._last_ir_t = None
             return self._duty
+        self._remember_clear(thermal)
         for j, finger in enumerate(thermal.fingers):
             hottest = finger.max_c
             if math.isfinite(hottest):
@@ -215,8 +285,7 @@ class TemperatureLoop:
         dt = 1.0 if first else max(thermal.t_s - (self._last_ir_t or 0.0), 1e-3)
         self._last_ir_t = thermal.t_s
         out = []
-        for pid, finger in zip(self._pids, thermal.fingers, strict=True):
-            reading = self.reading_c(finger)
+        for pid, reading in zip(self._pids, self.readings_c(thermal), strict=True):
             if not math.isfinite(reading):
                 out.append(0.0)  # a finger out of view is not heated blind
                 continue

@@ -256,7 +256,7 @@ class LiveSession:
         temps = [math.nan, math.nan]
         percept = c.percept
         if percept is not None and percept.thermal is not None:
-            temps = [c.temperature.reading_c(f) for f in percept.thermal.fingers]
+            temps = list(c.temperature.readings_c(percept.thermal))
         t = obs.t_s if obs is not None else math.nan
         contact = c.log.first(EventKind.CONTACT)
         since_contact = (t - contact.t_s if contact is not None and c.phase not in _IDLE

@@ -420,7 +420,7 @@ def run_contact(
             twin.act(Command(velocity, duty))
             pose = marker_pose(percept.marker)
             j = cfg.rig.marker_finger
-            reading = (temperature.reading_c(percept.thermal.fingers[j])
+            reading = (temperature.readings_c(percept.thermal)[j]
                        if percept.thermal is not None else math.nan)
             rows.append((obs.t_s - t_press, obs.truth.contact_force_n if obs.truth else math.nan,
                          est.force_n, raw_n, math.nan if pose is None else float(pose[0]), reading,

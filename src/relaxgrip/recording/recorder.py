@@ -222,7 +222,7 @@ class McapRecorder:
                 "has_features": percept.features is not None,
             })
             if percept.thermal is not None:
-                temps = [c.temperature.reading_c(f) for f in percept.thermal.fingers]
+                temps = list(c.temperature.readings_c(percept.thermal))
         est = c.estimate
         self._write("/relaxgrip/estimate", t, {
             "t_s": t, "force_n": est.force_n, "f_icfn_n": est.f_icfn_n,
