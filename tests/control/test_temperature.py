@@ -155,7 +155,7 @@ def test_covered_beams_are_those_nearer_the_background_than_the_warmest():
 
 
 def test_an_object_covering_the_tip_does_not_make_the_loop_overheat():
-    """A cold object over two beams: the loop regulates the finger, not the object."""
+    """A cold object over a beam and a half: the loop regulates the finger, not the object."""
     loop = TemperatureLoop(HEAT)
     loop.set_temperature(55.0)
     temps = np.full((2, HEAT.n_nodes), 55.0)
@@ -164,8 +164,9 @@ def test_an_object_covering_the_tip_does_not_make_the_loop_overheat():
         t = k / 10
         if k % 10 == 0:
             seen = temps.copy()
-            if t >= covered_from:
-                seen[:, -2:] = 26.0  # a room-temperature ball in front of the distal beams
+            if t >= covered_from:  # a room-temperature ball: over the tip, half over the next
+                seen[:, -1] = 26.0
+                seen[:, -2] = 0.6 * seen[:, -2] + 0.4 * 26.0
             latest = features(t, seen)
         duty = loop.update(latest, t)
         temps = np.vstack([heat_step(temps[j], duty[j], 0.1, HEAT, AMBIENT_C) for j in range(2)])

@@ -21,13 +21,15 @@ of a 55 °C finger reads 55-57 °C, and a loop regulating the face's mean would
 heat the finger 4 K above its setpoint to make up for it.  A beam that reads
 closer to the background than to the finger's warmest beam is taken as
 covered (:func:`covered_beams`); while any is, the reading is the last
-uncovered mean moved by as much as the uncovered beams have moved since.
+uncovered mean moved by the median change of the other beams since (a beam
+the object only half covers drops too, and the median passes over it).
 """
 
 from __future__ import annotations
 
 import enum
 import math
+import statistics
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -206,7 +208,7 @@ class TemperatureLoop:
         """What the loop regulates of each finger, covered beams made up for (°C).
 
         Where an object covers beams of a finger (module notes), its reading is
-        the mean of the latest frame with nothing covered, moved by the mean
+        the mean of the latest frame with nothing covered, moved by the median
         change of the beams visible in both; before any such frame, the mean
         of the visible beams.  The adhesive pads are read as they are.
         """
@@ -223,9 +225,10 @@ class TemperatureLoop:
                 out.append(sum(seen) / len(seen))
                 continue
             mean_c, then = clear
+            # The median change: a beam the object half covers drops with it, not the finger.
             moved = [b - a for b, a, c in zip(now, then, covered, strict=True)
                      if not c and math.isfinite(b) and math.isfinite(a)]
-            out.append(mean_c + sum(moved) / len(moved) if moved else mean_c)
+            out.append(mean_c + statistics.median(moved) if moved else mean_c)
         return tuple(out)
 
     def _remember_clear(self, thermal: ThermalFeatures) -> None:
