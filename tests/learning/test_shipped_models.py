@@ -29,12 +29,11 @@ def test_shipped_models_meet_their_accuracy_on_a_fresh_dataset(tmp_path: Path) -
     result = evaluate(load_dataset(out), load_default_models(), split="all")
     summary = result.to_dict()
     icfn, rcfn = summary["icfn"], summary["rcfn"]
-    # The issue's goals: ICFN MAE <= 0.30 N, R^2 >= 0.95; RCFN AUC_rel median <= 0.03.
+    # The issue's goals: ICFN MAE <= 0.30 N, R^2 >= 0.95; RCFN NRMSE median <= 0.08, AUC_rel
+    # median <= 0.03, mean correlation >= 0.99 (this set: 0.072, 0.011, 0.996).
     assert icfn["mae_n"] <= 0.30
     assert icfn["r2"] >= 0.95
+    assert rcfn["nrmse_median"] <= 0.08
     assert rcfn["auc_rel_median"] <= 0.03
-    # NRMSE median: goal 0.08, measured 0.080 on the paper-size test split (280 s holds);
-    # correlation: goal 0.99, out of Eq. 10's reach on a three-mode material (0.981 measured).
-    assert rcfn["nrmse_median"] <= 0.11
-    assert rcfn["corr_mean"] >= 0.98
+    assert rcfn["corr_mean"] >= 0.99
     assert summary["repeatability"]["40"]["sequences"] == 6
