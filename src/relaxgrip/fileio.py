@@ -1,15 +1,21 @@
-"""Writing files so that a crash never leaves a half-written one.
+"""Writing files so that a crash never leaves a half-written one, and reading them back checked.
 
 Every file relaxgrip writes for a user (models, reports, figures) goes
 through :func:`write_files_atomically`: each file is written to a temporary
 name beside its destination, flushed to disk, and renamed into place; a
 failure removes the temporaries and leaves whatever was there before.
+
+Model directories (a ``manifest.json`` naming its format and version, and
+``.npz`` arrays recorded by :func:`file_entry`) are read back through
+:func:`read_manifest` and :func:`read_npz_entry`, which raise the caller's
+one-line error on anything missing, foreign, too new, truncated or modified.
 """
 
 from __future__ import annotations
 
 import hashlib
 import io
+import json
 import os
 import secrets
 from collections.abc import Mapping, Sequence
@@ -18,7 +24,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["file_entry", "npz_bytes", "write_files_atomically", "write_text_atomically"]
+__all__ = [
+    "file_entry",
+    "npz_bytes",
+    "one_line",
+    "read_manifest",
+    "read_npz_entry",
+    "write_files_atomically",
+    "write_text_atomically",
+]
 
 
 def npz_bytes(arrays: Mapping[str, Any]) -> bytes:
@@ -76,3 +90,72 @@ def write_text_atomically(path: Path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` through a temporary file and a rename."""
     path = Path(path)
     write_files_atomically(path.parent, [(path.name, text.encode("utf-8"))])
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception's message on one line (its type's name if it has none)."""
+    return " ".join(str(exc).split()) or type(exc).__name__
+
+
+def read_manifest(path: Path, format_name: str, format_version: int,
+                  error: type[Exception], what: str) -> dict[str, Any]:
+    """A manifest's JSON object, checked to be of ``format_name`` and at most ``format_version``.
+
+    Parameters
+    ----------
+    path : Path
+        The ``manifest.json``.
+    format_name, format_version : str, int
+        The format it must name, and the newest version this code reads.
+    error : exception class
+        Raised, with one line naming ``path`` and the problem.
+    what : str
+        What the directory should be, for the messages ("a relaxgrip model directory").
+    """
+    if not path.is_file():
+        raise error(f"{path}: missing (not {what}?)")
+    try:
+        manifest = json.loads(path.read_bytes().decode("utf-8"))
+    except OSError as exc:
+        raise error(f"{path}: cannot read: {one_line(exc)}") from exc
+    except ValueError as exc:  # JSONDecodeError and UnicodeDecodeError
+        raise error(f"{path}: unreadable manifest, not {what} ({one_line(exc)})") from exc
+    if not isinstance(manifest, dict) or manifest.get("format") != format_name:
+        raise error(f"{path}: not {what} (no {format_name!r} format)")
+    version = manifest.get("format_version")
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
+        raise error(f"{path}: format version {version!r} is not a positive integer")
+    if version > format_version:
+        raise error(f"{path}: format version {version} is newer than this relaxgrip reads "
+                    f"({format_version}); upgrade relaxgrip")
+    return manifest
+
+
+def read_npz_entry(directory: Path, entry: Mapping[str, Any],
+                   error: type[Exception]) -> tuple[Path, dict[str, Any]]:
+    """The arrays of the file a manifest entry (:func:`file_entry`) names, size and sha256 checked.
+
+    Returns the file's path and its arrays (loaded without pickle); raises
+    ``error`` with one line naming the file and the problem.
+    """
+    name = entry["file"]
+    if not isinstance(name, str) or Path(name).name != name:
+        raise error(f"{directory / 'manifest.json'}: bad file name {name!r}")
+    path = directory / name
+    if not path.is_file():
+        raise error(f"{path}: missing")
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise error(f"{path}: cannot read: {one_line(exc)}") from exc
+    if len(data) != entry["bytes"]:
+        raise error(f"{path}: truncated or modified ({len(data)} bytes, the manifest says "
+                    f"{entry['bytes']})")
+    if hashlib.sha256(data).hexdigest() != entry["sha256"]:
+        raise error(f"{path}: truncated or modified (sha256 differs from the manifest)")
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+            arrays = {key: npz[key] for key in npz.files}
+    except Exception as exc:  # zipfile, npy-format and pickle refusals all land here
+        raise error(f"{path}: unreadable npz: {one_line(exc)}") from exc
+    return path, arrays

@@ -38,8 +38,6 @@ aperture after a loading at a known closing speed):
 
 from __future__ import annotations
 
-import hashlib
-import io
 import json
 import math
 from collections.abc import Mapping
@@ -53,7 +51,14 @@ from numpy.typing import NDArray
 
 import relaxgrip
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import file_entry, npz_bytes, write_files_atomically
+from relaxgrip.fileio import (
+    file_entry,
+    npz_bytes,
+    one_line,
+    read_manifest,
+    read_npz_entry,
+    write_files_atomically,
+)
 from relaxgrip.learning.datastore import Dataset
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.perception.features import ICFN_SCHEMA
@@ -493,42 +498,17 @@ def load_observer(directory: Path) -> ObserverModel:
     """
     directory = Path(directory)
     path = directory / MANIFEST_NAME
-    if not path.is_file():
-        raise ObserverFileError(f"{path}: missing (not an observer model directory?)")
-    try:
-        manifest = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise ObserverFileError(f"{path}: unreadable manifest ({type(exc).__name__})") from None
-    if not isinstance(manifest, dict) or manifest.get("format") != OBSERVER_FORMAT:
-        raise ObserverFileError(f"{path}: not an observer manifest (no {OBSERVER_FORMAT!r})")
-    version = manifest.get("format_version")
-    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
-        raise ObserverFileError(f"{path}: format version {version!r} is not a positive integer")
-    if version > OBSERVER_VERSION:
-        raise ObserverFileError(f"{path}: format version {version} is newer than this "
-                                f"relaxgrip reads ({OBSERVER_VERSION}); upgrade relaxgrip")
+    manifest = read_manifest(path, OBSERVER_FORMAT, OBSERVER_VERSION, ObserverFileError,
+                             "an observer model directory")
     section = manifest.get("observer")
     if not (isinstance(section, dict) and isinstance(section.get("params"), dict)
             and {"file", "bytes", "sha256"} <= section.keys()):
         raise ObserverFileError(f"{path}: manifest lacks the 'observer' section or its fields")
-    name = section["file"]
-    if not isinstance(name, str) or Path(name).name != name:
-        raise ObserverFileError(f"{path}: bad file name {name!r}")
-    npz_path = directory / name
+    npz_path, arrays = read_npz_entry(directory, section, ObserverFileError)
     try:
-        data = npz_path.read_bytes()
-    except OSError:
-        raise ObserverFileError(f"{npz_path}: missing or unreadable") from None
-    if len(data) != section["bytes"] or hashlib.sha256(data).hexdigest() != section["sha256"]:
-        raise ObserverFileError(f"{npz_path}: truncated or modified (size or sha256 differs "
-                                "from the manifest)")
-    try:
-        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
-            arrays = {key: npz[key] for key in npz.files}
         return ObserverModel.from_arrays(arrays, section["params"])
-    except Exception as exc:  # zipfile, npy-format, pickle refusal, shape checks
-        message = " ".join(str(exc).split()) or type(exc).__name__
-        raise ObserverFileError(f"{npz_path}: {message}") from None
+    except Exception as exc:  # shape and value checks of the arrays and parameters
+        raise ObserverFileError(f"{npz_path}: {one_line(exc)}") from None
 
 
 def default_observer_dir() -> Path:

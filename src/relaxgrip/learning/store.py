@@ -18,8 +18,6 @@ the renames leaves files whose checksums disagree with the manifest, which
 
 from __future__ import annotations
 
-import hashlib
-import io
 import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -32,7 +30,14 @@ import sklearn  # type: ignore[import-untyped]
 
 import relaxgrip
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import file_entry, npz_bytes, write_files_atomically
+from relaxgrip.fileio import (
+    file_entry,
+    npz_bytes,
+    one_line,
+    read_manifest,
+    read_npz_entry,
+    write_files_atomically,
+)
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.rcfn import RCFN
 from relaxgrip.perception.features import FeatureSchema
@@ -191,29 +196,9 @@ def save_models(
     return directory / MANIFEST_NAME
 
 
-def _one_line(exc: BaseException) -> str:
-    return " ".join(str(exc).split()) or type(exc).__name__
-
-
 def _read_manifest(path: Path) -> dict[str, Any]:
-    if not path.is_file():
-        raise ModelFileError(f"{path}: missing (not a relaxgrip model directory?)")
-    try:
-        manifest = json.loads(path.read_bytes().decode("utf-8"))
-    except OSError as exc:
-        raise ModelFileError(f"{path}: cannot read: {_one_line(exc)}") from exc
-    except ValueError as exc:  # JSONDecodeError and UnicodeDecodeError
-        raise ModelFileError(f"{path}: not JSON, not a relaxgrip model directory") from exc
-    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT_NAME:
-        raise ModelFileError(f"{path}: not a relaxgrip model directory (no {FORMAT_NAME!r} format)")
-    version = manifest.get("format_version")
-    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
-        raise ModelFileError(f"{path}: format version {version!r} is not a positive integer")
-    if version > FORMAT_VERSION:
-        raise ModelFileError(
-            f"{path}: format version {version} is newer than this relaxgrip reads "
-            f"({FORMAT_VERSION}); upgrade relaxgrip"
-        )
+    manifest = read_manifest(path, FORMAT_NAME, FORMAT_VERSION, ModelFileError,
+                             "a relaxgrip model directory")
     for key, fields in (
         ("icfn", ("params", "feature_schema", "file", "bytes", "sha256")),
         ("rcfn", ("params", "feature_names", "file", "bytes", "sha256")),
@@ -277,32 +262,6 @@ def _check_features(
             )
 
 
-def _load_arrays(directory: Path, section: Mapping[str, Any]) -> tuple[Path, dict[str, Any]]:
-    name = section["file"]
-    if not isinstance(name, str) or Path(name).name != name:
-        raise ModelFileError(f"{directory / MANIFEST_NAME}: bad file name {name!r}")
-    path = directory / name
-    if not path.is_file():
-        raise ModelFileError(f"{path}: missing")
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise ModelFileError(f"{path}: cannot read: {_one_line(exc)}") from exc
-    if len(data) != section["bytes"]:
-        raise ModelFileError(
-            f"{path}: truncated or modified ({len(data)} bytes, the manifest says "
-            f"{section['bytes']})"
-        )
-    if hashlib.sha256(data).hexdigest() != section["sha256"]:
-        raise ModelFileError(f"{path}: truncated or modified (sha256 differs from the manifest)")
-    try:
-        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
-            arrays = {key: npz[key] for key in npz.files}
-    except Exception as exc:  # zipfile, npy-format and pickle refusals all land here
-        raise ModelFileError(f"{path}: unreadable npz: {_one_line(exc)}") from exc
-    return path, arrays
-
-
 def load_models(
     directory: Path,
     *,
@@ -342,16 +301,16 @@ def load_models(
     manifest = _read_manifest(manifest_path)
     _check_features(manifest_path, manifest, icfn_feature_schema, rcfn_feature_names)
 
-    icfn_path, icfn_arrays = _load_arrays(directory, manifest["icfn"])
+    icfn_path, icfn_arrays = read_npz_entry(directory, manifest["icfn"], ModelFileError)
     try:
         icfn = ICFN.from_arrays(icfn_arrays, manifest["icfn"]["params"])
     except (TypeError, ValueError) as exc:
-        raise ModelFileError(f"{icfn_path}: {_one_line(exc)}") from exc
-    rcfn_path, rcfn_arrays = _load_arrays(directory, manifest["rcfn"])
+        raise ModelFileError(f"{icfn_path}: {one_line(exc)}") from exc
+    rcfn_path, rcfn_arrays = read_npz_entry(directory, manifest["rcfn"], ModelFileError)
     try:
         rcfn = RCFN.from_arrays(rcfn_arrays, manifest["rcfn"]["params"])
     except (TypeError, ValueError) as exc:
-        raise ModelFileError(f"{rcfn_path}: {_one_line(exc)}") from exc
+        raise ModelFileError(f"{rcfn_path}: {one_line(exc)}") from exc
 
     n_icfn = len(manifest["icfn"]["feature_schema"]["names"])
     if icfn.n_features_in_ != n_icfn:
