@@ -486,14 +486,9 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
     controller = GraspController(cfg.rig, make_estimator(kind, bundle.icfn, bundle.rcfn),
                                  heat=cfg.heat)
     if backend == "emulator":
-        from relaxgrip.hardware.emulator import open_emulated_gripper
+        from relaxgrip.hardware.emulator import ready_emulated_gripper
 
-        emulated, _ = open_emulated_gripper(cfg, seed, virtual)
-        try:
-            emulated.reset()
-        except BaseException:
-            emulated.close()
-            raise
+        emulated = ready_emulated_gripper(cfg, seed, virtual)
         return LiveSession(emulated, controller, clock, backend_clock=virtual,
                            object_name=object_name, record_dir=record_dir)
     twin = GripperTwin(cfg, seed=seed, clock=virtual)

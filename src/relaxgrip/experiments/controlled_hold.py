@@ -183,15 +183,9 @@ def _make_backend(backend: str, cfg: TwinConfig, seed: int, clock: VirtualClock)
     """The twin, or the twin behind an in-process MCU emulator on a pty (reset, ready)."""
     if backend == "twin":
         return GripperTwin(cfg, seed=seed, clock=clock)
-    from relaxgrip.hardware.emulator import open_emulated_gripper
+    from relaxgrip.hardware.emulator import ready_emulated_gripper
 
-    gripper, _ = open_emulated_gripper(cfg, seed, clock)
-    try:
-        gripper.reset()
-    except BaseException:
-        gripper.close()
-        raise
-    return gripper
+    return ready_emulated_gripper(cfg, seed, clock)
 
 
 def run_hold(

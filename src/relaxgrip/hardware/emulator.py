@@ -49,6 +49,7 @@ __all__ = [
     "McuEmulator",
     "TwinPlant",
     "open_emulated_gripper",
+    "ready_emulated_gripper",
     "twin_config_for_rig",
 ]
 
@@ -374,3 +375,13 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
     return gripper, emu
 
 
+def ready_emulated_gripper(config: TwinConfig | None, seed: int,
+                           clock: VirtualClock) -> SerialGripper:
+    """:func:`open_emulated_gripper`, then reset (handshake, first frames); closed if that fails."""
+    gripper, _ = open_emulated_gripper(config, seed, clock)
+    try:
+        gripper.reset()
+    except BaseException:
+        gripper.close()
+        raise
+    return gripper
