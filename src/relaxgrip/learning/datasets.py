@@ -293,8 +293,7 @@ class _Harness:
 
     def tick(self) -> Truth:
         """Advance one control period without rendering; return the truth."""
-        self.clock.advance(self.dt)
-        self.twin.act(self._command)
+        self.wait(1)
         return self.twin.truth()
 
     def wait(self, periods: int) -> float:
