@@ -13,8 +13,9 @@ motor encoder, never ground truth.  Each frame it reports a
   onset and never regulates again (:attr:`ForceEstimator.regulates_hold` is
   false): the aperture is held and the force decays ("without holding
   control").
-* ``relax``: the paper's Eq. 10 in closed loop.  At the hold onset the ICFN
-  gives ``F_inst``; the RCFN predicts ``(K, tau)`` every frame from the
+* ``relax``: the paper's Eq. 10 in closed loop.  Around the hold onset the ICFN
+  gives ``F_inst`` (averaged over the last second of loading and the hold's first
+  0.6 s); the RCFN predicts ``(K, tau)`` every frame from the
   current temperature, the onset pose, the current pose and its velocity.  The
   RCFN was trained on holds at a fixed aperture, so Eq. 10 predicts the force
   *if the motor stayed where it was at the onset*; the closure the controller
@@ -215,9 +216,15 @@ class RelaxEstimator:
         :data:`relaxgrip.perception.features.RCFN_SCHEMA`).
     stiffness_window_s : float
         Loading window over which the closure stiffness is measured (s).
-    onset_window_s : float
+    onset_window_s, onset_before_s : float
         ``F_inst`` is the mean ICFN estimate over this much of the hold's start
-        (s): it is the one number every later estimate builds on.
+        and of the loading before it (s), each loading reading carried to the
+        onset's motor position along the closure stiffness: it is the one number
+        every later estimate builds on, and one frame's ICFN is 0.1-0.2 N off.
+        The loading frames halve the onset's noise and the estimate does not
+        jump when the hold starts (on the twin, 5 N, 40 °C, seeds 0-11: mean
+        MAE 0.053 N without them, 0.043 N with one second; with 2 s, or with
+        1.5 s after the onset, the mean is higher again).
     smoothing_s : float
         Low-pass time constant of the ICFN estimate before the hold (s).
     """
@@ -226,11 +233,13 @@ class RelaxEstimator:
     regulates_hold = True
 
     def __init__(self, icfn: ICFN, rcfn: RCFN, stiffness_window_s: float = 4.0,
-                 onset_window_s: float = 0.6, smoothing_s: float = 0.2) -> None:
+                 onset_window_s: float = 0.6, onset_before_s: float = 1.0,
+                 smoothing_s: float = 0.2) -> None:
         self.icfn = IcfnEstimator(icfn, smoothing_s)
         self.rcfn = rcfn
         self.stiffness_window_s = stiffness_window_s
         self.onset_window_s = onset_window_s
+        self.onset_before_s = onset_before_s
         self.reset()
 
     def reset(self) -> None:
@@ -288,12 +297,14 @@ class RelaxEstimator:
                              self._k, self._tau, hold)
 
     def start_hold(self, t_s: float, motor_position_mm: float) -> None:
-        """Fix the onset, its pose and the closure stiffness; ``F_inst`` averages from here."""
+        """Fix the onset, its pose and the closure stiffness; start ``F_inst`` on the loading."""
         self._onset_t = t_s
         self._onset_motor = motor_position_mm
-        self._onset_sum, self._onset_n = 0.0, 0
-        self.f_onset_n = NAN
         self.closure_stiffness_n_per_mm, self._pose_per_mm = _closure_slopes(self._loading)
+        before = [raw - self.closure_stiffness_n_per_mm * (m - motor_position_mm)
+                  for t, m, raw, _ in self._loading if t >= t_s - self.onset_before_s]
+        self._onset_sum, self._onset_n = float(sum(before)), len(before)
+        self.f_onset_n = self._onset_sum / self._onset_n if before else NAN
         pose = self.features.last_pose
         if pose is not None:
             self.features.start(t_s, pose, motor_position_mm)
