@@ -58,3 +58,14 @@ def test_f_inst_averages_the_frames_before_the_onset_too() -> None:
     # 19 frames after the onset against 19 + 31: sqrt(50 / 19) = 1.6 times smaller.
     assert rms[1.0] < 0.75 * rms[0.0]
     assert rms[1.0] == pytest.approx(0.15 / math.sqrt(50), rel=0.3)
+
+
+@pytest.mark.parametrize("kwargs", [
+    {"stiffness_window_s": 0.0},
+    {"onset_before_s": -1.0},
+    {"onset_window_s": math.nan},
+    {"onset_before_s": 0.0, "onset_window_s": 0.0},
+])
+def test_windows_that_average_nothing_are_refused(kwargs: dict[str, float]) -> None:
+    with pytest.raises(ValueError, match="window"):
+        RelaxEstimator(_Icfn(), rcfn=None, **kwargs)  # type: ignore[arg-type]

@@ -235,6 +235,12 @@ class RelaxEstimator:
     def __init__(self, icfn: ICFN, rcfn: RCFN, stiffness_window_s: float = 4.0,
                  onset_window_s: float = 0.6, onset_before_s: float = 1.0,
                  smoothing_s: float = 0.2) -> None:
+        if not stiffness_window_s > 0:
+            raise ValueError(f"stiffness window must be > 0 s, got {stiffness_window_s}")
+        if not (onset_window_s >= 0 and onset_before_s >= 0
+                and onset_window_s + onset_before_s > 0):
+            raise ValueError("onset windows must be >= 0 s and not both 0, got "
+                             f"{onset_before_s} s before and {onset_window_s} s after")
         self.icfn = IcfnEstimator(icfn, smoothing_s)
         self.rcfn = rcfn
         self.stiffness_window_s = stiffness_window_s
