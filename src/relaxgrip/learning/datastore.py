@@ -29,6 +29,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import read_manifest
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA, FeatureSchema
 from relaxgrip.physics.fitting import osculating_reduced
 
@@ -259,17 +260,10 @@ def load_dataset(directory: Path) -> Dataset:
     manifest_path = d / "manifest.json"
     if not d.is_dir():
         raise InputError(f"{d}: no such dataset directory")
-    try:
-        manifest = json.loads(manifest_path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{d}: no manifest.json, not a relaxgrip dataset") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"{manifest_path}: unreadable manifest ({exc})") from None
-    if not isinstance(manifest, dict) or manifest.get("format") != DATASET_FORMAT:
-        raise InputError(f"{manifest_path}: not a relaxgrip dataset manifest")
-    if int(manifest.get("format_version", 0)) > DATASET_VERSION:
-        raise InputError(f"{manifest_path}: dataset format {manifest.get('format_version')} "
-                         f"is newer than this relaxgrip reads ({DATASET_VERSION})")
+    if not manifest_path.is_file():
+        raise InputError(f"{d}: no manifest.json, not a relaxgrip dataset")
+    manifest = read_manifest(manifest_path, DATASET_FORMAT, DATASET_VERSION, InputError,
+                             "a relaxgrip dataset")
     _check_schema(manifest, "icfn_schema", ICFN_SCHEMA, d)
     _check_schema(manifest, "rcfn_schema", RCFN_SCHEMA, d)
     tables = {}
