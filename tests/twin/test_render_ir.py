@@ -195,3 +195,21 @@ def test_bad_inputs_are_rejected():
         IrObject((0.2, 0.0, 0.0), 0.03, 60.0, 0.0)
     with pytest.raises(InputError, match="radius"):
         IrObject((0.2, 0.0, 0.0), -0.03, 60.0, 0.5)
+
+
+def test_a_frame_does_not_depend_on_the_frames_rendered_before():
+    """The kept ray cast of the last geometry is invisible: same inputs, same frame."""
+    ball = IrObject((0.09, 0.0, 0.0), 0.03, 50.0, 0.9)
+    fresh = IrRenderer(RIG, IrSensorConfig(), seed=2)
+    used = IrRenderer(RIG, IrSensorConfig(), seed=2)
+    for aperture, objects in ((0.075, [ball]), (0.06, []), (0.06, [ball]), (0.075, [ball]),
+                              (0.075, [IrObject((0.09, 0.0, 0.0), 0.03, 30.0, 0.9)])):
+        used.render(1, EXAMPLE_C, NODES, aperture, objects, AMBIENT_C)
+        used.render(2, EXAMPLE_C + 5.0, NODES, aperture, objects, AMBIENT_C)
+        for temps in (EXAMPLE_C, EXAMPLE_C[::-1]):
+            expected = IrRenderer(RIG, IrSensorConfig(), seed=2).render(
+                3, temps, NODES, aperture, objects, AMBIENT_C)
+            assert np.array_equal(used.render(3, temps, NODES, aperture, objects, AMBIENT_C),
+                                  expected)
+    assert not np.array_equal(fresh.render(3, EXAMPLE_C, NODES, 0.075, [ball], AMBIENT_C),
+                              fresh.render(3, EXAMPLE_C, NODES, 0.074, [ball], AMBIENT_C))

@@ -22,6 +22,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -111,6 +112,23 @@ def _radiance(temp_c: ArrayLike, emissivity: float, reflected_c: float) -> Float
     return out
 
 
+class _FaceHits(NamedTuple):
+    """The pixels of a window that see a finger's face, and where along the face (m)."""
+
+    rows: slice
+    cols: slice
+    seen: NDArray[np.bool_]
+    along_m: FloatArray
+
+
+class _SphereHits(NamedTuple):
+    """The pixels of a window that see an object."""
+
+    rows: slice
+    cols: slice
+    seen: NDArray[np.bool_]
+
+
 class IrRenderer:
     """Renders the frames of the infrared camera on the gripper base.
 
@@ -145,6 +163,10 @@ class IrRenderer:
         normalized = self.intrinsics.normalized(grid)
         self._ray_x = np.ascontiguousarray(normalized[..., 0])
         self._ray_y = np.ascontiguousarray(normalized[..., 1])
+        self._hit_cache: tuple[
+            tuple[float, tuple[tuple[tuple[float, float, float], float], ...]],
+            list[_FaceHits], list[_SphereHits | None],
+        ] | None = None
 
     @property
     def offset_k(self) -> float:
@@ -195,11 +217,14 @@ class IrRenderer:
         h, w = self.intrinsics.shape
         background = float(_radiance(ambient, cfg.background_emissivity, ambient))
         img = np.full((h, w), background, dtype=np.float32)
-        depth = np.full((h, w), np.inf)
-        for j in (0, 1):
-            self._draw_face(img, depth, j, aperture, temps[j], nodes, ambient)
-        for obj in objects:
-            self._draw_sphere(img, depth, obj, ambient)
+        faces, spheres = self._hits(aperture, objects)
+        for j, (rows, cols, seen, along) in enumerate(faces):
+            field = np.interp(along, nodes, temps[j])
+            img[rows, cols][seen] = _radiance(field, cfg.finger_emissivity, ambient)
+        for obj, hit in zip(objects, spheres, strict=True):
+            if hit is not None:
+                rows, cols, seen = hit
+                img[rows, cols][seen] = np.float32(_radiance(obj.temp_c, obj.emissivity, ambient))
 
         if cfg.psf_sigma_px > 0:
             cv2.GaussianBlur(
@@ -249,17 +274,27 @@ class IrRenderer:
         y1 = min(h, math.ceil(float(px[:, 1].max()) + pad) + 1)
         return slice(y0, max(y0, y1)), slice(x0, max(x0, x1))
 
-    def _draw_face(
-        self,
-        img: NDArray[np.float32],
-        depth: FloatArray,
-        j: int,
-        aperture_m: float,
-        temps_c: FloatArray,
-        nodes_m: FloatArray,
-        ambient_c: float,
-    ) -> None:
-        """Ray cast finger ``j``'s top face into ``img`` where it is nearest."""
+    def _hits(
+        self, aperture_m: float, objects: Sequence[IrObject]
+    ) -> tuple[list[_FaceHits], list[_SphereHits | None]]:
+        """The pixels that see each finger's face and each object, nearest surface first.
+
+        The geometry moves only with the aperture and the objects, which a
+        hold keeps for minutes: the ray cast of the last geometry is kept, and
+        only the temperatures are painted anew.
+        """
+        key = (aperture_m, tuple((o.center_gripper_m, o.radius_m) for o in objects))
+        if self._hit_cache is not None and self._hit_cache[0] == key:
+            return self._hit_cache[1], self._hit_cache[2]
+        h, w = self.intrinsics.shape
+        depth = np.full((h, w), np.inf)
+        faces = [self._cast_face(depth, j, aperture_m) for j in (0, 1)]
+        spheres = [self._cast_sphere(depth, o) for o in objects]
+        self._hit_cache = (key, faces, spheres)
+        return faces, spheres
+
+    def _cast_face(self, depth: FloatArray, j: int, aperture_m: float) -> _FaceHits:
+        """Ray cast finger ``j``'s top face where it is nearest; mark its depth in ``depth``."""
         finger = self.rig.finger
         half = 0.5 * finger.thickness_m
         # The face's frame in the camera: origin at the root, unit vectors along and across.
@@ -274,8 +309,9 @@ class IrRenderer:
         )
         rows, cols = self._window(corners)
         rx, ry = self._ray_x[rows, cols], self._ray_y[rows, cols]
+        nothing = _FaceHits(rows, cols, np.zeros(rx.shape, bool), np.empty(0))
         if rx.size == 0:
-            return
+            return nothing
         # The ray t (x, y, 1) meets the plane n . (p - o) = 0 at t = n . o / n . (x, y, 1);
         # t is the depth.
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -293,20 +329,17 @@ class IrRenderer:
             & (t < sub_depth)
         )
         if not np.any(seen):
-            return
-        field = np.interp(along[seen], nodes_m, temps_c)
-        img[rows, cols][seen] = _radiance(field, self.config.finger_emissivity, ambient_c)
+            return nothing
         sub_depth[seen] = t[seen]
+        return _FaceHits(rows, cols, seen, along[seen])
 
-    def _draw_sphere(
-        self, img: NDArray[np.float32], depth: FloatArray, obj: IrObject, ambient_c: float
-    ) -> None:
-        """Ray cast an object (a sphere) into ``img`` where it is nearest."""
+    def _cast_sphere(self, depth: FloatArray, obj: IrObject) -> _SphereHits | None:
+        """Ray cast an object (a sphere) where it is nearest; mark its depth in ``depth``."""
         centre = transform_points(self._gripper2cam, np.asarray(obj.center_gripper_m))
         r = obj.radius_m
         dist2 = float(centre @ centre)
         if dist2 <= r * r or centre[2] + r <= _NEAR_M:
-            return  # around the lens or behind it: nothing sensible to draw
+            return None  # around the lens or behind it: nothing sensible to draw
         # The sphere's image lies within that of its bounding cube.
         cube = centre + r * np.array(
             [[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64
@@ -314,7 +347,7 @@ class IrRenderer:
         rows, cols = self._window(cube)
         rx, ry = self._ray_x[rows, cols], self._ray_y[rows, cols]
         if rx.size == 0:
-            return
+            return None
         # |t d - c|^2 = r^2 with d = (x, y, 1): a t^2 - 2 b t + (|c|^2 - r^2) = 0; near root.
         a = rx * rx + ry * ry + 1.0
         b = centre[0] * rx + centre[1] * ry + centre[2]
@@ -325,9 +358,9 @@ class IrRenderer:
         sub_depth = depth[rows, cols]
         seen = hit & (t > _NEAR_M) & (t < sub_depth)
         if not np.any(seen):
-            return
-        img[rows, cols][seen] = np.float32(_radiance(obj.temp_c, obj.emissivity, ambient_c))
+            return None
         sub_depth[seen] = t[seen]
+        return _SphereHits(rows, cols, seen)
 
 
 @lru_cache(maxsize=4)

@@ -93,6 +93,8 @@ class RgbRenderer:
         self._tint = tuple(np.float32(c) for c in _TAB_TINT)
         self._background = _background(self.intrinsics.shape)
         self._noise_pos, self._noise_neg = _noise_banks(self.intrinsics.shape, config.noise_dn)
+        self._scene_cache: tuple[tuple[RgbObject, ...], Image] | None = None
+        self._last_objects: tuple[RgbObject, ...] | None = None
 
     def marker_corners_px(self, marker2cam: FloatArray) -> FloatArray:
         """Image positions of the marker's four corners (OpenCV order), (4, 2)."""
@@ -120,9 +122,7 @@ class RgbRenderer:
         """
         cfg = self.config
         rng = np.random.default_rng([self.seed, 12, seq])
-        img = self._background.copy()
-        for obj in sorted(objects, key=lambda o: -o.center_cam_m[2]):
-            self._draw_object(img, obj)
+        img = self._scene(tuple(objects))
         self._draw_tab(img, marker2cam)
         if cfg.blur_sigma_px > 0:
             cv2.GaussianBlur(img, (0, 0), cfg.blur_sigma_px, dst=img)
@@ -135,6 +135,23 @@ class RgbRenderer:
             h, w = self.intrinsics.shape
             cv2.add(img, self._noise_pos[bank, oy : oy + h, ox : ox + w], dst=img)
             cv2.subtract(img, self._noise_neg[bank, oy : oy + h, ox : ox + w], dst=img)
+        return img
+
+    def _scene(self, objects: tuple[RgbObject, ...]) -> Image:
+        """A new image of the background with ``objects`` drawn, far ones first.
+
+        Objects keep still through a hold at a fixed aperture: a scene seen in
+        two frames running is kept and copied from then on.
+        """
+        cached = self._scene_cache
+        if cached is not None and cached[0] == objects:
+            return cached[1].copy()
+        img = self._background.copy()
+        for obj in sorted(objects, key=lambda o: -o.center_cam_m[2]):
+            self._draw_object(img, obj)
+        if objects == self._last_objects:
+            self._scene_cache = (objects, img.copy())
+        self._last_objects = objects
         return img
 
     def _draw_object(self, img: Image, obj: RgbObject) -> None:
