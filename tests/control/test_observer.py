@@ -74,6 +74,7 @@ def test_observer_tracks_a_continuous_prony_truth() -> None:
     est.model = model
     est.reset = ObserverEstimator.reset.__get__(est)  # type: ignore[method-assign]
     est.icfn = type("Stub", (), {"reset": lambda self: None})()
+    est.relax = None
     est.reset()
     got = []
     for t in frames:
@@ -177,3 +178,77 @@ def test_short_closed_loop_hold_with_observer_and_profiles() -> None:
     assert result.target_t_n[0] == 5.0
     est = result.estimate_n[np.isfinite(result.estimate_n)]
     assert est.size > 100
+
+
+def _scaled_shares(model: ObserverModel, share: float) -> ObserverModel:
+    arrays = {name: np.array(getattr(model, name)) for name in (
+        "temps_c_", "tau_ref_s_", "log_shift_", "branch_share_", "log_stiffness_",
+        "band_t_s_", "band_rel_", "onset_rel_")}
+    arrays["branch_share_"] = arrays["branch_share_"] * share
+    return ObserverModel.from_arrays(arrays, model.get_params())
+
+
+class _RelaxStub:
+    f_onset_n = 5.0
+
+    def reset(self) -> None:
+        pass
+
+
+def test_branch_share_is_fitted_to_eq10_while_it_holds_and_kept_after() -> None:
+    """A run whose branches carry 0.8 of the population's share: the fit finds 0.8 while
+    the temperature stays, then carries the run through a 40 -> 55 °C ramp that Eq. 10
+    (here: 0.5 N off by its end) no longer describes."""
+    from relaxgrip.control.estimators import ForceEstimate
+
+    model = _model()
+    run = ObserverEstimator.__new__(ObserverEstimator)
+    run.model = _scaled_shares(model, 0.8)
+    est = ObserverEstimator.__new__(ObserverEstimator)
+    est.model = model
+    for e in (run, est):
+        e.icfn = type("Stub", (), {"reset": lambda self: None})()  # type: ignore[assignment]
+        e.relax = _RelaxStub()  # type: ignore[assignment]
+        e.onset_window_s, e.share_fit_s, e.share_fit_temp_k = 0.6, 280.0, 1.0
+        e.share_fit_motor_mm_s, e.share_bounds = 0.3, (0.5, 1.5)
+        e.reset()
+    onset, u_onset = 1.2, math.nan
+    errors_after = []
+    for t in np.arange(0.0, 200.0, 1.0 / 30.0):
+        temp = _temp(float(t) - 1.0 / 60.0)
+        d = 1e-3 * min(max((t - 1.0) / 0.1, 0.0), 1.0)
+        run.advance(float(t), d, temp)
+        est.advance(float(t), d, temp)
+        if t < onset:
+            continue
+        if math.isnan(u_onset):
+            u_onset = run.unit_force_m()
+        truth = 5.0 * run.unit_force_m() / u_onset
+        eq10 = truth + 0.5 * (temp - 40.0) / 15.0  # Eq. 10 drifts off as the finger heats
+        got = est._with_share(ForceEstimate(eq10, math.nan), math.nan, float(t) - onset,
+                              est.unit_force_m(), 100.0)
+        if t > 130.0:
+            errors_after.append(got.force_n - truth)
+    assert est.share == pytest.approx(0.8, abs=0.01)
+    assert not est._fitting
+    assert np.max(np.abs(errors_after)) < 0.01
+
+
+def test_a_moving_motor_ends_the_share_fit() -> None:
+    est = ObserverEstimator.__new__(ObserverEstimator)
+    est.model = _model()
+    est.icfn = type("Stub", (), {"reset": lambda self: None})()  # type: ignore[assignment]
+    est.relax = _RelaxStub()  # type: ignore[assignment]
+    est.onset_window_s, est.share_fit_s, est.share_fit_temp_k = 0.6, 280.0, 1.0
+    est.share_fit_motor_mm_s, est.share_bounds = 0.3, (0.5, 1.5)
+    est.reset()
+    from relaxgrip.control.estimators import ForceEstimate
+
+    for i, t in enumerate(np.arange(0.0, 20.0, 1.0 / 30.0)):
+        est.advance(float(t), 1e-3, 40.0)
+        motor = 100.0 if t < 10.0 else 100.0 - 2.0 * min(t - 10.0, 1.0)  # a new target at 10 s
+        est._with_share(ForceEstimate(5.0, math.nan), math.nan, float(t), est.unit_force_m(),
+                        motor)
+        if i == 200:
+            assert est._fitting
+    assert not est._fitting

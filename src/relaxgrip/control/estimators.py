@@ -353,7 +353,7 @@ def make_estimator(kind: EstimatorKind | str, icfn: ICFN, rcfn: RCFN,
         from relaxgrip.learning.observer import load_default_observer
 
         return ObserverEstimator(icfn, observer if observer is not None
-                                 else load_default_observer())
+                                 else load_default_observer(), rcfn=rcfn)
     if kind is EstimatorKind.FIXED:
         return FixedEstimator(icfn)
     if kind is EstimatorKind.ICFN:
