@@ -32,7 +32,9 @@ motor encoder, never ground truth.  Each frame it reports a
   the ``observer`` estimator models every mode.
 * ``observer`` (:mod:`relaxgrip.control.observer`): Prony-series branch
   states in reduced time, driven by the measured deflection and temperature,
-  for any displacement history and temperature path; it reports a 95 % band.
+  for any displacement history and temperature path; started from ``relax``'s
+  ``F_inst``, its branch share fitted to Eq. 10 while Eq. 10 holds; it reports
+  a 95 % band.
 """
 
 from __future__ import annotations

@@ -33,9 +33,9 @@ factor on every branch's stiffness is fitted so that the observer relaxes as
 Eq. 10 says, the RCFN having read the run's relaxation from its pose
 features.  The factor then holds through whatever temperature path and
 displacement follow, where Eq. 10 no longer applies.  On the twin (280 s,
-5 N, 40 °C) this took the observer from 0.121 to 0.05 N mean MAE over seeds
-0-5, the 40 -> 55 °C ramp from 0.128 to 0.10 N and the 5 -> 3 N step from
-0.093 to 0.06 N (seeds 0-2).
+5 N, 40 °C) this took the observer from 0.121 to 0.054 N mean MAE over seeds
+0-5 (0.0429 over seeds 0-11, ``relax`` 0.0430), the 40 -> 55 °C ramp from
+0.128 to 0.096 N and the 5 -> 3 N step from 0.093 to 0.055 N (seeds 0-2).
 
 The band: 95 % half-width ``band_rel(t) F_onset`` from the model's held-out
 residuals (ICFN onset error included), the ICFN's onset error before.
