@@ -207,7 +207,7 @@ def test_branch_share_is_fitted_to_eq10_while_it_holds_and_kept_after() -> None:
     est = ObserverEstimator.__new__(ObserverEstimator)
     est.model = model
     for e in (run, est):
-        e.icfn = type("Stub", (), {"reset": lambda self: None})()  # type: ignore[assignment]
+        e.icfn = type("Stub", (), {"reset": lambda self: None})()
         e.relax = _RelaxStub()  # type: ignore[assignment]
         e.onset_window_s, e.share_fit_s, e.share_fit_temp_k = 0.6, 280.0, 1.0
         e.share_fit_motor_mm_s, e.share_bounds = 0.3, (0.5, 1.5)
@@ -237,7 +237,7 @@ def test_branch_share_is_fitted_to_eq10_while_it_holds_and_kept_after() -> None:
 def test_a_moving_motor_ends_the_share_fit() -> None:
     est = ObserverEstimator.__new__(ObserverEstimator)
     est.model = _model()
-    est.icfn = type("Stub", (), {"reset": lambda self: None})()  # type: ignore[assignment]
+    est.icfn = type("Stub", (), {"reset": lambda self: None})()
     est.relax = _RelaxStub()  # type: ignore[assignment]
     est.onset_window_s, est.share_fit_s, est.share_fit_temp_k = 0.6, 280.0, 1.0
     est.share_fit_motor_mm_s, est.share_bounds = 0.3, (0.5, 1.5)
