@@ -252,3 +252,11 @@ def test_a_moving_motor_ends_the_share_fit() -> None:
         if i == 200:
             assert est._fitting
     assert not est._fitting
+
+
+@pytest.mark.parametrize("kwargs", [{"share_fit_s": -1.0}, {"share_fit_temp_k": 0.0},
+                                    {"share_fit_motor_mm_s": 0.0}, {"share_bounds": (1.1, 1.5)},
+                                    {"share_bounds": (0.0, 1.5)}])
+def test_share_fit_settings_that_cannot_work_are_refused(kwargs: dict[str, object]) -> None:
+    with pytest.raises(ValueError, match="share"):
+        ObserverEstimator(None, _model(), **kwargs)  # type: ignore[arg-type]

@@ -99,6 +99,12 @@ class ObserverEstimator:
                  share_fit_s: float = 280.0, share_fit_temp_k: float = 1.0,
                  share_fit_motor_mm_s: float = 0.3,
                  share_bounds: tuple[float, float] = (0.5, 1.5)) -> None:
+        if not (share_fit_s >= 0 and share_fit_temp_k > 0 and share_fit_motor_mm_s > 0):
+            raise ValueError("the share fit needs a window >= 0 s and temperature and motor "
+                             f"limits > 0, got {share_fit_s} s, {share_fit_temp_k} K, "
+                             f"{share_fit_motor_mm_s} mm/s")
+        if not 0 < share_bounds[0] <= 1.0 <= share_bounds[1]:
+            raise ValueError(f"share bounds must enclose 1 and be > 0, got {share_bounds}")
         self.icfn = IcfnEstimator(icfn, smoothing_s)
         self.model = model
         self.onset_window_s = onset_window_s
