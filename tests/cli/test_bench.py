@@ -6,6 +6,7 @@ import json
 
 import pytest
 
+from relaxgrip.cli.bench import format_duration
 from tests.clitools import assert_one_error_line, run_main
 
 
@@ -35,3 +36,12 @@ def test_bad_flags(
 ) -> None:
     code, out, err = run_main(list(args), monkeypatch, capsys)
     assert_one_error_line(code, out, err, expected)
+
+
+@pytest.mark.parametrize(
+    ("seconds", "shown"),
+    [(1.0095e-5, "10.1 µs"), (9.81e-4, "981 µs"), (2.15e-3, "2.15 ms"), (8.81, "8.81 s")],
+)
+def test_table_durations_keep_three_figures(seconds: float, shown: str) -> None:
+    # A 10 µs median had been printed as "0.0 ms".
+    assert format_duration(seconds) == shown

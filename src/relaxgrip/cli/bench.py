@@ -41,9 +41,18 @@ def bench(
             "name", "description", "runs", "median_s", "min_s", "max_s", "simulated_s",
             "realtime_factor"}}
         table.add_row(
-            r["name"], f"{r['median_s'] * 1e3:.1f} ms", f"{r['min_s'] * 1e3:.1f} ms",
-            f"{r['max_s'] * 1e3:.1f} ms", "" if rt is None else f"{rt:,.0f}×",
+            r["name"], format_duration(r["median_s"]), format_duration(r["min_s"]),
+            format_duration(r["max_s"]), "" if rt is None else f"{rt:,.0f}×",
             ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
                       for k, v in extra.items()),
         )
     console.print(table)
+
+
+def format_duration(seconds: float) -> str:
+    """A duration with three significant figures in a unit that fits (µs, ms or s)."""
+    if seconds < 1e-3:
+        return f"{seconds * 1e6:.3g} µs"
+    if seconds < 1.0:
+        return f"{seconds * 1e3:.3g} ms"
+    return f"{seconds:.3g} s"
