@@ -145,7 +145,7 @@ def test_unknown_mode_is_refused():
 
 
 def test_covered_beams_are_those_nearer_the_background_than_the_warmest():
-    from relaxgrip.control.temperature import covered_beams
+    from relaxgrip.perception.thermal import covered_beams
 
     assert covered_beams([54.5, 56.5, 56.9, 30.2, 26.6], 25.0) == (False, False, False, True,
                                                                    True)

@@ -6,8 +6,14 @@ import numpy as np
 import pytest
 
 from relaxgrip.backend import Frame
+from relaxgrip.perception.features import finger_temperature_c
 from relaxgrip.perception.frames import FrameError
-from relaxgrip.perception.thermal import ThermalFeatures, ThermalPerception
+from relaxgrip.perception.thermal import (
+    FingerThermal,
+    ThermalFeatures,
+    ThermalPerception,
+    uncovered_mean_c,
+)
 from relaxgrip.physics.thermal import HeatParams, node_positions_m
 from relaxgrip.rig import RigGeometry
 from relaxgrip.twin.objects import get_object
@@ -211,3 +217,28 @@ def test_round_trip_through_a_distorted_lens():
     for j in (0, 1):
         truth = np.interp(BEAMS, NODES, EXAMPLE_C[j]) + renderer.offset_k
         assert np.allclose(features.fingers[j].beam_temps_c, truth, atol=0.3)
+
+
+def _finger(beams: list[float], mean_c: float) -> FingerThermal:
+    return FingerThermal(tuple(beams), mean_c, max(beams), min(beams), 1.0, 0.0)
+
+
+def test_finger_temperature_leaves_out_covered_and_half_covered_beams():
+    # Beams read in closed-loop holds on the ball (background 25.8 °C): at 55 °C the
+    # two distal beams show the ball; at 40 °C the fourth is half covered.
+    hot = _finger([54.3, 56.3, 56.6, 29.1, 26.4], mean_c=52.1)
+    assert uncovered_mean_c(hot, 25.8) == pytest.approx((54.3 + 56.3 + 56.6) / 3)
+    warm = _finger([39.8, 40.8, 41.0, 35.3, 30.0], mean_c=39.4)
+    assert uncovered_mean_c(warm, 25.8) == pytest.approx((39.8 + 40.8 + 41.0) / 3)
+    thermal = ThermalFeatures(0.0, (hot, warm), 25.8, ())
+    assert finger_temperature_c(thermal) == pytest.approx(
+        (uncovered_mean_c(hot, 25.8) + uncovered_mean_c(warm, 25.8)) / 2)
+
+
+def test_finger_temperature_falls_back_to_the_face_without_beams_or_contrast():
+    blind = _finger([math.nan] * 5, mean_c=47.0)
+    assert uncovered_mean_c(blind, 25.0) == 47.0
+    cold = _finger([26.0, 26.5, 25.2, 25.1, 25.0], mean_c=25.6)  # no contrast: nothing covered
+    assert uncovered_mean_c(cold, 25.0) == pytest.approx(25.56)
+    gone = FingerThermal((math.nan,) * 5, math.nan, math.nan, math.nan, math.nan, math.nan)
+    assert math.isnan(finger_temperature_c(ThermalFeatures(0.0, (gone, gone), 25.0, ())))

@@ -30,12 +30,11 @@ from __future__ import annotations
 import enum
 import math
 import statistics
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 from relaxgrip.control.pid import PID, PIDGains
 from relaxgrip.errors import InputError
-from relaxgrip.perception.thermal import FingerThermal, ThermalFeatures
+from relaxgrip.perception.thermal import FingerThermal, ThermalFeatures, covered_beams
 from relaxgrip.physics.thermal import HeatParams, duty_for_mean_temp
 
 __all__ = [
@@ -44,28 +43,7 @@ __all__ = [
     "TemperatureLoop",
     "TemperatureStatus",
     "ThermalLimits",
-    "covered_beams",
 ]
-
-#: Below this spread between the warmest beam and the background nothing is told covered (K).
-_MIN_CONTRAST_K = 5.0
-
-
-def covered_beams(beams_c: Sequence[float], background_c: float) -> tuple[bool, ...]:
-    """Which beams an object hides: those closer to the background than to the warmest beam.
-
-    Nothing is covered when the finger is within :data:`_MIN_CONTRAST_K` of the
-    background (a cold finger cannot be told from a cold object) or when the
-    background is unknown; a beam out of view (nan) is not covered either.
-    """
-    finite = [b for b in beams_c if math.isfinite(b)]
-    if not finite or not math.isfinite(background_c):
-        return (False,) * len(beams_c)
-    warmest = max(finite)
-    if warmest - background_c < _MIN_CONTRAST_K:
-        return (False,) * len(beams_c)
-    middle = 0.5 * (warmest + background_c)
-    return tuple(math.isfinite(b) and b < middle for b in beams_c)
 
 
 class StiffnessMode(enum.StrEnum):

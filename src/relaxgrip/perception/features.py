@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relaxgrip.perception.marker import MarkerState
-from relaxgrip.perception.thermal import ThermalFeatures
+from relaxgrip.perception.thermal import ThermalFeatures, uncovered_mean_c
 
 FloatArray = NDArray[np.float64]
 
@@ -159,7 +159,7 @@ def _rcfn_schema() -> FeatureSchema:
             units.append(f"{unit}/s" if suffix else unit)
     names += ["closure_ratio", "hold_time_s"]
     units += ["", "s"]
-    return FeatureSchema("relaxgrip-rcfn-features-v2", tuple(names), tuple(units))
+    return FeatureSchema("relaxgrip-rcfn-features-v3", tuple(names), tuple(units))
 
 
 #: The RCFN input: the paper's (§IV-B) current finger temperature, marker pose at
@@ -181,9 +181,17 @@ def marker_pose(marker: MarkerState) -> FloatArray | None:
 
 
 def finger_temperature_c(thermal: ThermalFeatures) -> float:
-    """Mean temperature of both fingers (°C); nan if neither is in view."""
-    means = [f.mean_c for f in thermal.fingers if math.isfinite(f.mean_c)]
-    return sum(means) / len(means) if means else math.nan
+    """Mean temperature of both fingers over the beams no object covers (°C); nan if none in view.
+
+    See :func:`relaxgrip.perception.thermal.uncovered_mean_c`: the faces' mean
+    read a 55 °C finger holding the room-temperature ball at 52.1 °C in a
+    closed-loop hold and at 53.6 °C on average over the datasets' contact
+    positions, a difference the relaxation models, steep near Tg, took for
+    1.5 K of temperature.
+    """
+    temps = [uncovered_mean_c(f, thermal.background_c) for f in thermal.fingers]
+    seen = [t for t in temps if math.isfinite(t)]
+    return sum(seen) / len(seen) if seen else math.nan
 
 
 class RcfnFeatures:

@@ -27,6 +27,7 @@ reported in apparent temperature: their emissivity is unknown.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
@@ -43,7 +44,14 @@ from relaxgrip.validate import ABSOLUTE_ZERO_C, check_finite
 FloatArray = NDArray[np.float64]
 IndexArray = NDArray[np.intp]
 
-__all__ = ["FingerThermal", "ThermalFeatures", "ThermalObject", "ThermalPerception"]
+__all__ = [
+    "FingerThermal",
+    "ThermalFeatures",
+    "ThermalObject",
+    "ThermalPerception",
+    "covered_beams",
+    "uncovered_mean_c",
+]
 
 #: Aperture resolution of the cached image regions (m).
 _APERTURE_STEP_M = 1.0e-4
@@ -140,6 +148,47 @@ class ThermalFeatures:
     fingers: tuple[FingerThermal, FingerThermal]
     background_c: float
     objects: tuple[ThermalObject, ...]
+
+
+#: Below this spread between the warmest beam and the background nothing is told covered (K).
+_MIN_CONTRAST_K = 5.0
+
+
+def covered_beams(beams_c: Sequence[float], background_c: float,
+                  within: float = 0.5) -> tuple[bool, ...]:
+    """Which beams an object hides: those further below the warmest beam than ``within`` of the
+    contrast between it and the background (0.5: closer to the background than to the warmest).
+
+    Nothing is covered when the finger is within :data:`_MIN_CONTRAST_K` of the
+    background (a cold finger cannot be told from a cold object) or when the
+    background is unknown; a beam out of view (nan) is not covered either.
+    """
+    finite = [b for b in beams_c if math.isfinite(b)]
+    if not finite or not math.isfinite(background_c):
+        return (False,) * len(beams_c)
+    warmest = max(finite)
+    if warmest - background_c < _MIN_CONTRAST_K:
+        return (False,) * len(beams_c)
+    line = warmest - within * (warmest - background_c)
+    return tuple(math.isfinite(b) and b < line for b in beams_c)
+
+
+def uncovered_mean_c(finger: FingerThermal, background_c: float) -> float:
+    """The finger's temperature: the mean of its beams no object covers, even in part (°C).
+
+    A grasped object hides part of the face from the infrared camera and shows
+    its own temperature there (a room-temperature ball reads 26-30 °C over the
+    distal beams of a 55 °C finger), by an amount that changes with the
+    contact position and the finger's bending, so the face's mean is not the
+    finger's temperature.  A beam counts as covered a quarter of the contrast
+    below the warmest (a half-covered beam of a 40 °C finger reads 35 °C; the
+    heated profile spans under a tenth of the contrast).  The face's mean
+    stands in when no beam is in view.
+    """
+    covered = covered_beams(finger.beam_temps_c, background_c, within=0.25)
+    seen = [b for b, c in zip(finger.beam_temps_c, covered, strict=True)
+            if math.isfinite(b) and not c]
+    return sum(seen) / len(seen) if seen else finger.mean_c
 
 
 @dataclass(frozen=True)
