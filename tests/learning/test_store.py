@@ -19,10 +19,11 @@ from relaxgrip.errors import InputError
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.rcfn import RCFN
 from relaxgrip.learning.store import ModelFileError, load_models, save_models
-from relaxgrip.perception.features import ICFN_SCHEMA
+from relaxgrip.perception.features import ICFN_SCHEMA, FeatureSchema
 from relaxgrip.twin.config import TWIN_VERSION
 
 RCFN_NAMES = tuple(f"rcfn_feature_{i}" for i in range(7))
+RCFN_TEST_SCHEMA = FeatureSchema("relaxgrip-rcfn-features-test", RCFN_NAMES, ("",) * 7)
 FINAL_NAMES = {"icfn.npz", "rcfn.npz", "manifest.json"}
 Models = tuple[ICFN, RCFN, NDArray[np.float64], NDArray[np.float64]]
 TRAINING = {"icfn": {"val_mae_n": np.float64(0.42), "n_train": np.int64(300)}, "seed": 7}
@@ -44,7 +45,7 @@ def save(directory: Path, models: Models, **overrides: Any) -> Path:
     icfn, rcfn, _, _ = models
     kwargs = {
         "icfn_feature_schema": ICFN_SCHEMA,
-        "rcfn_feature_names": RCFN_NAMES,
+        "rcfn_feature_schema": RCFN_TEST_SCHEMA,
         "twin_version": TWIN_VERSION,
         "training": TRAINING,
         **overrides,
@@ -61,7 +62,8 @@ def saved(tmp_path, models):
 
 def test_round_trip(saved, models):
     icfn, rcfn, X, Xr = models
-    bundle = load_models(saved, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_names=RCFN_NAMES)
+    bundle = load_models(saved, icfn_feature_schema=ICFN_SCHEMA,
+                         rcfn_feature_schema=RCFN_TEST_SCHEMA)
     np.testing.assert_array_equal(bundle.icfn.predict(X), icfn.predict(X))
     np.testing.assert_array_equal(bundle.rcfn.predict(Xr), rcfn.predict(Xr))
     assert bundle.icfn.predict_one(X[0]) == icfn.predict_one(X[0])
@@ -69,7 +71,7 @@ def test_round_trip(saved, models):
     assert bundle.icfn.get_params() == icfn.get_params()
     assert bundle.rcfn.get_params() == rcfn.get_params()
     assert bundle.icfn_feature_schema == ICFN_SCHEMA
-    assert bundle.rcfn_feature_names == RCFN_NAMES
+    assert bundle.rcfn_feature_schema == RCFN_TEST_SCHEMA
     assert sorted(p.name for p in saved.iterdir()) == sorted(FINAL_NAMES)
 
 
@@ -83,7 +85,7 @@ def test_manifest_contents(saved, models):
     assert manifest["created_utc"].endswith("+00:00")
     assert manifest["training"] == {"icfn": {"val_mae_n": 0.42, "n_train": 300}, "seed": 7}
     assert manifest["icfn"]["feature_schema"] == ICFN_SCHEMA.to_dict()
-    assert manifest["rcfn"]["feature_names"] == list(RCFN_NAMES)
+    assert manifest["rcfn"]["feature_schema"] == RCFN_TEST_SCHEMA.to_dict()
     assert manifest["icfn"]["params"]["hidden_layer_sizes"] == [8]
     assert manifest["rcfn"]["params"] == models[1].get_params()
     for key in ("icfn", "rcfn"):
@@ -208,7 +210,7 @@ def test_damaged_directories_raise_one_line_errors(saved, case):
     damage, file_name, words = CORRUPTIONS[case]
     damage(saved)
     with pytest.raises(ModelFileError, match=words) as info:
-        load_models(saved, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_names=RCFN_NAMES)
+        load_models(saved, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_TEST_SCHEMA)
     message = str(info.value)
     assert file_name in message
     assert "\n" not in message
@@ -234,19 +236,41 @@ def test_same_schema_version_with_other_names(saved):
         load_models(saved, icfn_feature_schema=other)
 
 
+def rcfn_schema(names: tuple[str, ...], version: str = RCFN_TEST_SCHEMA.version) -> FeatureSchema:
+    return FeatureSchema(version, names, ("",) * len(names))
+
+
 def test_rcfn_feature_names_mismatch(saved):
-    with pytest.raises(ModelFileError, match=r"RCFN trained on other features.*7 features vs 6"):
-        load_models(saved, rcfn_feature_names=RCFN_NAMES[:-1])
+    with pytest.raises(ModelFileError, match=r"RCFN trained on features .*7 features vs 6"):
+        load_models(saved, rcfn_feature_schema=rcfn_schema(RCFN_NAMES[:-1]))
     with pytest.raises(ModelFileError, match="feature 2 is 'rcfn_feature_2' vs 'x'"):
-        load_models(saved, rcfn_feature_names=(*RCFN_NAMES[:2], "x", *RCFN_NAMES[3:]))
+        load_models(saved, rcfn_feature_schema=rcfn_schema((*RCFN_NAMES[:2], "x",
+                                                            *RCFN_NAMES[3:])))
+
+
+def test_rcfn_feature_schema_version_mismatch(saved):
+    # The RCFN's temperature input changed meaning with the same names (v2 -> v3): the
+    # version alone must refuse the old models.
+    with pytest.raises(ModelFileError, match="RCFN trained on features "
+                       "relaxgrip-rcfn-features-test but this code computes x-v99"):
+        load_models(saved, rcfn_feature_schema=rcfn_schema(RCFN_NAMES, "x-v99"))
+
+
+def test_unversioned_rcfn_manifest_asks_for_retraining(saved):
+    def to_names(m: dict[str, Any]) -> None:
+        m["rcfn"]["feature_names"] = m["rcfn"].pop("feature_schema")["names"]
+
+    edit_manifest(saved, to_names)
+    with pytest.raises(ModelFileError, match=r"unversioned features.*retrain"):
+        load_models(saved)
 
 
 def test_save_checks_its_inputs(tmp_path, models):
     with pytest.raises(ValueError, match="schema has"):
         save(tmp_path / "a", models, icfn_feature_schema=dataclasses.replace(
             ICFN_SCHEMA, names=ICFN_SCHEMA.names[:-1], units=ICFN_SCHEMA.units[:-1]))
-    with pytest.raises(ValueError, match="RCFN feature names"):
-        save(tmp_path / "b", models, rcfn_feature_names=RCFN_NAMES[:3])
+    with pytest.raises(ValueError, match="RCFN feature schema has"):
+        save(tmp_path / "b", models, rcfn_feature_schema=rcfn_schema(RCFN_NAMES[:3]))
     with pytest.raises(ValueError, match="JSON"):
         save(tmp_path / "c", models, training={"mae": float("nan")})
     with pytest.raises(ValueError, match="JSON"):

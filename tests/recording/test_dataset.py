@@ -49,7 +49,7 @@ def test_from_recordings_then_train(fixed_holds: list[Path], tmp_path: Path,
     models_dir = tmp_path / "models"
     trained.save(models_dir)
     bundle = load_models(models_dir, icfn_feature_schema=ICFN_SCHEMA,
-                         rcfn_feature_names=RCFN_SCHEMA.names)
+                         rcfn_feature_schema=RCFN_SCHEMA)
     pred = bundle.icfn.predict(x)
     assert np.isfinite(pred).all()
     assert float(np.mean(np.abs(pred - y))) < float(np.mean(np.abs(y - y.mean())))

@@ -109,7 +109,7 @@ def hold(
     if plot is not None:
         check_plot_path(plot)
     bundle = load_default_models() if models is None else load_models(
-        models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_names=RCFN_SCHEMA.names)
+        models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
     start = time.perf_counter()
     if compare:
         with console.status("holding with fixed, icfn, relax and observer …") if not json_out \

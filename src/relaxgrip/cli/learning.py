@@ -115,7 +115,7 @@ def evaluate(
         raise InputError(f"--plot {plot}: no such directory")
     dataset = load_dataset(data)
     bundle = load_default_models() if models is None else load_models(
-        models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_names=RCFN_SCHEMA.names)
+        models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
     result = run_evaluation(dataset, bundle, split)
     figure = None
     if plot is not None:

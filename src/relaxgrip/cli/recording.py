@@ -23,7 +23,7 @@ def _models(models: Path | None) -> ModelBundle:
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 
     return load_default_models() if models is None else load_models(
-        models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_names=RCFN_SCHEMA.names)
+        models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
 
 
 @app.command("replay")

@@ -471,7 +471,7 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
     if not record_dir.is_dir():
         raise InputError(f"recording directory {record_dir} does not exist")
     bundle = load_default_models() if models_dir is None else load_models(
-        models_dir, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_names=RCFN_SCHEMA.names)
+        models_dir, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
     if backend.startswith("serial:"):
         from relaxgrip.hardware.gripper import open_rig_gripper
         from relaxgrip.hardware.rig_file import load_rig

@@ -91,9 +91,10 @@ class ModelBundle:
         return FeatureSchema(schema["version"], tuple(schema["names"]), tuple(schema["units"]))
 
     @property
-    def rcfn_feature_names(self) -> tuple[str, ...]:
-        """The feature names the RCFN was trained on, in order."""
-        return tuple(self.manifest["rcfn"]["feature_names"])
+    def rcfn_feature_schema(self) -> FeatureSchema:
+        """The feature schema the RCFN was trained on."""
+        schema = self.manifest["rcfn"]["feature_schema"]
+        return FeatureSchema(schema["version"], tuple(schema["names"]), tuple(schema["units"]))
 
 
 def _json_default(value: object) -> Any:
@@ -108,7 +109,7 @@ def save_models(
     rcfn: RCFN,
     *,
     icfn_feature_schema: FeatureSchema,
-    rcfn_feature_names: Sequence[str],
+    rcfn_feature_schema: FeatureSchema,
     twin_version: str,
     training: Mapping[str, Any],
 ) -> Path:
@@ -123,8 +124,8 @@ def save_models(
         Fitted estimators.
     icfn_feature_schema : FeatureSchema
         The schema of the ICFN's features (its length must match the ICFN).
-    rcfn_feature_names : sequence of str
-        The RCFN's feature names, in order (their number must match the RCFN).
+    rcfn_feature_schema : FeatureSchema
+        The schema of the RCFN's features (its length must match the RCFN).
     twin_version : str
         Version of the twin that generated the training data
         (:data:`relaxgrip.twin.config.TWIN_VERSION`).
@@ -147,7 +148,6 @@ def save_models(
         record that is not JSON-serialisable.
     """
     directory = Path(directory)
-    names = [str(n) for n in rcfn_feature_names]
     icfn_arrays = icfn.to_arrays()
     rcfn_arrays = rcfn.to_arrays()
     if len(icfn_feature_schema) != icfn.n_features_in_:
@@ -155,10 +155,10 @@ def save_models(
             f"the ICFN feature schema has {len(icfn_feature_schema)} entries "
             f"but the ICFN was fitted on {icfn.n_features_in_} features"
         )
-    if len(names) != rcfn.n_features_in_:
+    if len(rcfn_feature_schema) != rcfn.n_features_in_:
         raise ValueError(
-            f"{len(names)} RCFN feature names given but the RCFN was fitted on "
-            f"{rcfn.n_features_in_} features"
+            f"the RCFN feature schema has {len(rcfn_feature_schema)} entries "
+            f"but the RCFN was fitted on {rcfn.n_features_in_} features"
         )
     icfn_data = npz_bytes(icfn_arrays)
     rcfn_data = npz_bytes(rcfn_arrays)
@@ -179,7 +179,7 @@ def save_models(
         "rcfn": {
             "estimator": "RCFN",
             "params": rcfn.get_params(),
-            "feature_names": names,
+            "feature_schema": rcfn_feature_schema.to_dict(),
             **file_entry(RCFN_FILE, rcfn_data),
         },
         "training": dict(training),
@@ -199,29 +199,27 @@ def save_models(
 def _read_manifest(path: Path) -> dict[str, Any]:
     manifest = read_manifest(path, FORMAT_NAME, FORMAT_VERSION, ModelFileError,
                              "a relaxgrip model directory")
-    for key, fields in (
-        ("icfn", ("params", "feature_schema", "file", "bytes", "sha256")),
-        ("rcfn", ("params", "feature_names", "file", "bytes", "sha256")),
-    ):
+    for key in ("icfn", "rcfn"):
         section = manifest.get(key)
         if not isinstance(section, dict):
             raise ModelFileError(f"{path}: manifest lacks the {key!r} section")
-        for field in fields:
+        if key == "rcfn" and "feature_schema" not in section and "feature_names" in section:
+            raise ModelFileError(f"{path}: RCFN trained on unversioned features (before "
+                                 "relaxgrip-rcfn-features-v3); retrain with relaxgrip train")
+        for field in ("params", "feature_schema", "file", "bytes", "sha256"):
             if field not in section:
                 raise ModelFileError(f"{path}: manifest lacks '{key}.{field}'")
         if not isinstance(section["params"], dict):
             raise ModelFileError(f"{path}: manifest '{key}.params' is not an object")
-    schema = manifest["icfn"]["feature_schema"]
-    if not (
-        isinstance(schema, dict)
-        and isinstance(schema.get("version"), str)
-        and isinstance(schema.get("names"), list)
-        and isinstance(schema.get("units"), list)
-        and len(schema["names"]) == len(schema["units"])
-    ):
-        raise ModelFileError(f"{path}: manifest 'icfn.feature_schema' is malformed")
-    if not isinstance(manifest["rcfn"]["feature_names"], list):
-        raise ModelFileError(f"{path}: manifest 'rcfn.feature_names' is not a list")
+        schema = section["feature_schema"]
+        if not (
+            isinstance(schema, dict)
+            and isinstance(schema.get("version"), str)
+            and isinstance(schema.get("names"), list)
+            and isinstance(schema.get("units"), list)
+            and len(schema["names"]) == len(schema["units"])
+        ):
+            raise ModelFileError(f"{path}: manifest '{key}.feature_schema' is malformed")
     return manifest
 
 
@@ -234,39 +232,29 @@ def _first_difference(saved: Sequence[str], expected: Sequence[str]) -> str:
     return "same names"
 
 
-def _check_features(
-    path: Path,
-    manifest: Mapping[str, Any],
-    icfn_schema: FeatureSchema | None,
-    rcfn_names: Sequence[str] | None,
-) -> None:
-    saved = manifest["icfn"]["feature_schema"]
-    if icfn_schema is not None:
-        if saved["version"] != icfn_schema.version:
-            raise ModelFileError(
-                f"{path}: ICFN trained on features {saved['version']} "
-                f"but this code computes {icfn_schema.version}"
-            )
-        if saved != icfn_schema.to_dict():
-            raise ModelFileError(
-                f"{path}: ICFN trained on features {saved['version']} with other names or units "
-                f"than this code computes under the same version "
-                f"({_first_difference(saved['names'], icfn_schema.names)})"
-            )
-    if rcfn_names is not None:
-        names = list(manifest["rcfn"]["feature_names"])
-        if names != list(rcfn_names):
-            raise ModelFileError(
-                f"{path}: RCFN trained on other features than this code computes "
-                f"({_first_difference(names, list(rcfn_names))})"
-            )
+def _check_features(path: Path, manifest: Mapping[str, Any], key: str,
+                    expected: FeatureSchema | None) -> None:
+    """The schema a model (``icfn`` or ``rcfn``) was trained on must be the one computed now."""
+    if expected is None:
+        return
+    saved = manifest[key]["feature_schema"]
+    model = key.upper()
+    if saved["version"] != expected.version:
+        raise ModelFileError(f"{path}: {model} trained on features {saved['version']} "
+                             f"but this code computes {expected.version}")
+    if saved != expected.to_dict():
+        raise ModelFileError(
+            f"{path}: {model} trained on features {saved['version']} with other names or units "
+            f"than this code computes under the same version "
+            f"({_first_difference(saved['names'], expected.names)})"
+        )
 
 
 def load_models(
     directory: Path,
     *,
     icfn_feature_schema: FeatureSchema | None = None,
-    rcfn_feature_names: Sequence[str] | None = None,
+    rcfn_feature_schema: FeatureSchema | None = None,
 ) -> ModelBundle:
     """Load a model directory written by :func:`save_models`, checking everything.
 
@@ -278,9 +266,10 @@ def load_models(
         The schema this code computes ICFN features with (normally
         :data:`relaxgrip.perception.features.ICFN_SCHEMA`); the saved one must
         match.  ``None`` skips the check.
-    rcfn_feature_names : sequence of str, optional
-        The RCFN feature names this code computes; the saved ones must match.
-        ``None`` skips the check.
+    rcfn_feature_schema : FeatureSchema, optional
+        The schema this code computes RCFN features with (normally
+        :data:`relaxgrip.perception.features.RCFN_SCHEMA`); the saved one must
+        match.  ``None`` skips the check.
 
     Returns
     -------
@@ -299,7 +288,8 @@ def load_models(
         raise ModelFileError(f"{directory}: no such model directory")
     manifest_path = directory / MANIFEST_NAME
     manifest = _read_manifest(manifest_path)
-    _check_features(manifest_path, manifest, icfn_feature_schema, rcfn_feature_names)
+    _check_features(manifest_path, manifest, "icfn", icfn_feature_schema)
+    _check_features(manifest_path, manifest, "rcfn", rcfn_feature_schema)
 
     icfn_path, icfn_arrays = read_npz_entry(directory, manifest["icfn"], ModelFileError)
     try:
@@ -318,7 +308,7 @@ def load_models(
             f"{icfn_path}: array shape wrong: {icfn.n_features_in_} features, "
             f"the manifest's schema has {n_icfn}"
         )
-    n_rcfn = len(manifest["rcfn"]["feature_names"])
+    n_rcfn = len(manifest["rcfn"]["feature_schema"]["names"])
     if rcfn.n_features_in_ != n_rcfn:
         raise ModelFileError(
             f"{rcfn_path}: array shape wrong: {rcfn.n_features_in_} features, "

@@ -47,7 +47,7 @@ class TrainedModels:
         """Write the models (no pickle) with their manifest."""
         return save_models(
             Path(directory), self.icfn, self.rcfn, icfn_feature_schema=ICFN_SCHEMA,
-            rcfn_feature_names=RCFN_SCHEMA.names, twin_version=TWIN_VERSION,
+            rcfn_feature_schema=RCFN_SCHEMA, twin_version=TWIN_VERSION,
             training=self.training,
         )
 
@@ -103,4 +103,4 @@ def default_models_dir() -> Path:
 def load_default_models() -> ModelBundle:
     """The shipped models, checked against the feature schemas this code computes."""
     return load_models(default_models_dir(), icfn_feature_schema=ICFN_SCHEMA,
-                       rcfn_feature_names=RCFN_SCHEMA.names)
+                       rcfn_feature_schema=RCFN_SCHEMA)
