@@ -195,6 +195,19 @@ class _RelaxStub:
         pass
 
 
+def _stubbed(model: ObserverModel) -> ObserverEstimator:
+    """An observer with the default share-fit settings and a stub ``relax`` (F_inst 5 N)."""
+    est = ObserverEstimator.__new__(ObserverEstimator)
+    est.model = model
+    est.icfn = type("Stub", (), {"reset": lambda self: None})()
+    est.relax = _RelaxStub()  # type: ignore[assignment]
+    est.onset_window_s, est.share_fit_s, est.share_fit_temp_k = 0.6, 280.0, 1.0
+    est.share_fit_motor_mm_s, est.share_bounds = 0.3, (0.5, 1.5)
+    est.anchor_window_s = (10.0, 2.0)
+    est.reset()
+    return est
+
+
 def test_branch_share_is_fitted_to_eq10_while_it_holds_and_kept_after() -> None:
     """A run whose branches carry 0.8 of the population's share: the fit finds 0.8 while
     the temperature stays, then carries the run through a 40 -> 55 °C ramp that Eq. 10
@@ -202,16 +215,8 @@ def test_branch_share_is_fitted_to_eq10_while_it_holds_and_kept_after() -> None:
     from relaxgrip.control.estimators import ForceEstimate
 
     model = _model()
-    run = ObserverEstimator.__new__(ObserverEstimator)
-    run.model = _scaled_shares(model, 0.8)
-    est = ObserverEstimator.__new__(ObserverEstimator)
-    est.model = model
-    for e in (run, est):
-        e.icfn = type("Stub", (), {"reset": lambda self: None})()
-        e.relax = _RelaxStub()  # type: ignore[assignment]
-        e.onset_window_s, e.share_fit_s, e.share_fit_temp_k = 0.6, 280.0, 1.0
-        e.share_fit_motor_mm_s, e.share_bounds = 0.3, (0.5, 1.5)
-        e.reset()
+    run = _stubbed(_scaled_shares(model, 0.8))
+    est = _stubbed(model)
     onset, u_onset = 1.2, math.nan
     errors_after = []
     for t in np.arange(0.0, 200.0, 1.0 / 30.0):
@@ -235,13 +240,7 @@ def test_branch_share_is_fitted_to_eq10_while_it_holds_and_kept_after() -> None:
 
 
 def test_a_moving_motor_ends_the_share_fit() -> None:
-    est = ObserverEstimator.__new__(ObserverEstimator)
-    est.model = _model()
-    est.icfn = type("Stub", (), {"reset": lambda self: None})()
-    est.relax = _RelaxStub()  # type: ignore[assignment]
-    est.onset_window_s, est.share_fit_s, est.share_fit_temp_k = 0.6, 280.0, 1.0
-    est.share_fit_motor_mm_s, est.share_bounds = 0.3, (0.5, 1.5)
-    est.reset()
+    est = _stubbed(_model())
     from relaxgrip.control.estimators import ForceEstimate
 
     for i, t in enumerate(np.arange(0.0, 20.0, 1.0 / 30.0)):
@@ -256,7 +255,44 @@ def test_a_moving_motor_ends_the_share_fit() -> None:
 
 @pytest.mark.parametrize("kwargs", [{"share_fit_s": -1.0}, {"share_fit_temp_k": 0.0},
                                     {"share_fit_motor_mm_s": 0.0}, {"share_bounds": (1.1, 1.5)},
-                                    {"share_bounds": (0.0, 1.5)}])
+                                    {"share_bounds": (0.0, 1.5)},
+                                    {"anchor_window_s": (2.0, 10.0)}])
 def test_share_fit_settings_that_cannot_work_are_refused(kwargs: dict[str, object]) -> None:
     with pytest.raises(ValueError, match="share"):
-        ObserverEstimator(None, _model(), **kwargs)  # type: ignore[arg-type]
+        ObserverEstimator(None, _model(), **kwargs)
+
+
+def test_eq10_is_the_estimate_while_it_holds_and_the_observer_continues_from_it() -> None:
+    """Eq. 10 0.05 N off the model's force, and noisy: the estimate is Eq. 10 during the fit;
+    after a new target moves the motor the observer carries Eq. 10's mean offset from it
+    over 2-10 s before the fit ended, so the estimate does not jump."""
+    from relaxgrip.control.estimators import ForceEstimate
+
+    est = _stubbed(_model())
+    rng = np.random.default_rng(0)
+    offsets: list[tuple[float, float]] = []
+    after: list[float] = []
+    last = end = math.nan
+    for t in np.arange(0.0, 40.0, 1.0 / 30.0):
+        d = 1e-3 if t < 20.0 else 1e-3 - 1e-4 * min(t - 20.0, 1.0)
+        est.advance(float(t), d, 40.0)
+        u = est.unit_force_m()
+        eq10 = (5.05 * u / est._u_on if math.isfinite(est._u_on) else 5.05)
+        eq10 += 0.01 * rng.standard_normal()
+        motor = 100.0 if t < 20.0 else 100.0 - 2.0 * min(t - 20.0, 1.0)
+        got = est._with_share(ForceEstimate(eq10, math.nan), math.nan, float(t), u, motor)
+        own = est.scale_n_per_m * (u - (est.share - 1.0) * est.relaxed_m())
+        if est._fitting:
+            assert got.force_n == eq10
+            offsets.append((float(t), eq10 - own))
+            last = got.force_n
+            continue
+        if math.isnan(end):
+            end = float(t)
+            assert got.force_n == pytest.approx(last, abs=0.03)
+        after.append(got.force_n - own)
+    assert 20.0 < end < 21.0
+    assert len(after) > 100
+    assert np.ptp(after) == 0.0
+    window = [o for h, o in offsets if end - 10.0 <= h <= end - 2.0]
+    assert after[0] == pytest.approx(float(np.mean(window)), abs=1e-12)
