@@ -259,7 +259,7 @@ def test_a_moving_motor_ends_the_share_fit() -> None:
                                     {"anchor_window_s": (2.0, 10.0)}])
 def test_share_fit_settings_that_cannot_work_are_refused(kwargs: dict[str, object]) -> None:
     with pytest.raises(ValueError, match="share"):
-        ObserverEstimator(None, _model(), **kwargs)
+        ObserverEstimator(None, _model(), **kwargs)  # type: ignore[arg-type]
 
 
 def test_eq10_is_the_estimate_while_it_holds_and_the_observer_continues_from_it() -> None:

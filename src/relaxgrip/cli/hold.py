@@ -40,6 +40,10 @@ def hold(
     models: Annotated[Path | None, typer.Option(
         "--models", help="Model directory (default: the shipped models).", show_default=False)
     ] = None,
+    observer_dir: Annotated[Path | None, typer.Option(
+        "--observer", help="Observer directory for --estimator observer and --compare "
+                           "(relaxgrip fit-observer; default: the shipped one).",
+        show_default=False)] = None,
     compare: Annotated[bool, typer.Option(
         "--compare", help="Run fixed, icfn, relax and observer on the same seed.")] = False,
     plot: Annotated[Path | None, typer.Option(
@@ -75,6 +79,7 @@ def hold(
         parse_target_profile,
         parse_temp_profile,
     )
+    from relaxgrip.learning.observer import load_observer
     from relaxgrip.learning.store import load_models
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
@@ -108,15 +113,20 @@ def hold(
         plot = DEFAULT_COMPARE_PLOT
     if plot is not None:
         check_plot_path(plot)
+    if observer_dir is not None and not (compare or estimator == "observer"):
+        raise InputError("--observer sets the observer estimator's parameters: use it with "
+                         "--estimator observer or --compare")
     bundle = load_default_models() if models is None else load_models(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
+    observer = None if observer_dir is None else load_observer(observer_dir)
     start = time.perf_counter()
     if compare:
         with console.status("holding with fixed, icfn, relax and observer …") if not json_out \
                 else nullcontext():
             comparison = compare_holds(("fixed", "icfn", "relax", "observer"), target_n=target_n,
                                        duration_s=duration_s, temp_c=temp_c,
-                                       seed=seed, models=bundle, n_jobs=jobs)
+                                       seed=seed, models=bundle, n_jobs=jobs,
+                                       observer=observer)
         figure = None
         if plot is not None:
             from relaxgrip.plots.holding import plot_hold_comparison
@@ -137,14 +147,15 @@ def hold(
         if record is None:
             result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
                               backend=backend, temp_profile=temps,
-                              target_profile=targets, disturbance=push)
+                              target_profile=targets, disturbance=push, observer=observer)
         else:
             from relaxgrip.recording import McapRecorder
 
             with McapRecorder(record) as recorder:
                 result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
                                   backend=backend, recorder=recorder,
-                                  temp_profile=temps, target_profile=targets, disturbance=push)
+                                  temp_profile=temps, target_profile=targets, disturbance=push,
+                                  observer=observer)
     figure = None
     if plot is not None:
         from relaxgrip.plots.holding import plot_hold

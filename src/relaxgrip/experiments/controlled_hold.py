@@ -33,6 +33,7 @@ from relaxgrip.control import (
 from relaxgrip.control.runner import LoopRecorder
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.profiles import Profile, band_coverage
+from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
@@ -201,6 +202,7 @@ def run_hold(
     temp_profile: Profile | None = None,
     target_profile: Profile | None = None,
     disturbance: Profile | None = None,
+    observer: ObserverModel | None = None,
 ) -> HoldResult:
     """Close on the force ball to ``target_n`` at ``temp_c`` and hold it for ``duration_s``.
 
@@ -231,6 +233,8 @@ def run_hold(
     temp_profile, target_profile, disturbance : Profile, optional
         Temperature setpoint (°C), force target (N) and push on the object (N,
         twin backend only) over the hold time (:mod:`relaxgrip.experiments.profiles`).
+    observer : ObserverModel, optional
+        The ``observer`` estimator's parameters (default: the shipped ones).
 
     Returns
     -------
@@ -250,7 +254,7 @@ def run_hold(
     cfg = replace(base, initial_temp_c=temp_c)
     clock = VirtualClock()
     twin = _make_backend(backend, cfg, seed, clock)
-    controller = GraspController(cfg.rig, make_estimator(kind, bundle.icfn, bundle.rcfn),
+    controller = GraspController(cfg.rig, make_estimator(kind, bundle.icfn, bundle.rcfn, observer),
                                  heat=cfg.heat)
     plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False)
     on_step = _scenario(twin, temp_profile, target_profile, disturbance, temp_c, target_n)
@@ -325,13 +329,14 @@ class HoldComparison:
                 "mae_reduction": self.reductions()}
 
 
-def _run_one(args: tuple[str, float, float, float, int, ModelBundle]) -> HoldResult:
+def _run_one(args: tuple[str, float, float, float, int, ModelBundle, ObserverModel | None]
+             ) -> HoldResult:
     """One hold in a worker: OpenCV on one thread (the parallelism is across holds)."""
     import cv2
 
     cv2.setNumThreads(1)
-    kind, target, duration, temp, seed, models = args
-    return run_hold(kind, target, duration, temp, seed, models)
+    kind, target, duration, temp, seed, models, observer = args
+    return run_hold(kind, target, duration, temp, seed, models, observer=observer)
 
 
 def compare_holds(
@@ -342,12 +347,13 @@ def compare_holds(
     seed: int = 0,
     models: ModelBundle | None = None,
     n_jobs: int = 1,
+    observer: ObserverModel | None = None,
 ) -> HoldComparison:
     """Run every estimator on the same seed (in parallel with ``n_jobs`` > 1)."""
     for kind in estimators:
         _check(kind, target_n, temp_c, duration_s)
     bundle = models if models is not None else load_default_models()
-    jobs = [(k, target_n, duration_s, temp_c, seed, bundle) for k in estimators]
+    jobs = [(k, target_n, duration_s, temp_c, seed, bundle, observer) for k in estimators]
     if n_jobs > 1 and len(jobs) > 1:
         from joblib import Parallel, delayed
 

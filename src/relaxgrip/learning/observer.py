@@ -77,6 +77,7 @@ __all__ = [
     "load_default_observer",
     "load_observer",
     "save_observer",
+    "set_band_scale",
 ]
 
 #: Closing speed of the twin datasets' RCFN loadings (``relaxgrip.learning.datasets``, mm/s).
@@ -509,6 +510,34 @@ def load_observer(directory: Path) -> ObserverModel:
         return ObserverModel.from_arrays(arrays, section["params"])
     except Exception as exc:  # shape and value checks of the arrays and parameters
         raise ObserverFileError(f"{npz_path}: {one_line(exc)}") from None
+
+
+def set_band_scale(directory: Path, band_scale: float,
+                   record: Mapping[str, Any]) -> ObserverModel:
+    """Rewrite an observer directory with a recalibrated band scale, atomically.
+
+    The parameters and the training record are kept; ``record`` (how the
+    scale was measured) becomes the record's ``band_recalibration``.
+
+    Raises
+    ------
+    ObserverFileError
+        The directory cannot be loaded.
+    InputError
+        A scale that is not a positive number.
+    """
+    directory = Path(directory)
+    model = load_observer(directory)
+    if not (math.isfinite(band_scale) and band_scale > 0):
+        raise InputError(f"band scale must be a positive number, got {band_scale}")
+    manifest = read_manifest(directory / MANIFEST_NAME, OBSERVER_FORMAT, OBSERVER_VERSION,
+                             ObserverFileError, "an observer model directory")
+    training = manifest.get("training")
+    training = dict(training) if isinstance(training, dict) else {}
+    training["band_recalibration"] = dict(record)
+    model.band_scale = float(band_scale)
+    save_observer(directory, model, training)
+    return model
 
 
 def default_observer_dir() -> Path:

@@ -1,0 +1,216 @@
+"""Recalibrating the observer's band on closed-loop holds (``relaxgrip calibrate-band``).
+
+The observer's 95 % band is identified on the dataset's fixed-aperture holds
+(:meth:`relaxgrip.learning.observer.ObserverModel.fit`); in closed loop its
+error is another thing (the ICFN's onset reading, the share fitted online,
+a temperature ramp or a new target).  The band is therefore recalibrated the
+way it is used: closed-loop holds of the standard hold and of the issue's
+scenarios on seeds the models never saw, and ``band_scale`` set to the
+``band_level`` quantile of ``|estimate - truth|`` over the *identified*
+half-width, so that the stated share of those samples lies inside the band.
+The ratio does not depend on the scale the observer had while holding: the
+identified half-width is the recorded one over that scale.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from relaxgrip.errors import InputError
+from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
+from relaxgrip.experiments.profiles import Profile, parse_target_profile, parse_temp_profile
+from relaxgrip.learning.observer import ObserverModel
+from relaxgrip.learning.store import ModelBundle
+
+__all__ = ["SCENARIOS", "BandCalibration", "band_ratios", "calibrate_band", "parse_seeds"]
+
+FloatArray = NDArray[np.float64]
+
+#: The holds the band is calibrated on: name -> (temperature profile, target profile).
+SCENARIOS: dict[str, tuple[str | None, str | None]] = {
+    "standard": (None, None),
+    "ramp": ("ramp:40:55:150:30", None),
+    "step": (None, "step:3:150"),
+}
+
+
+def parse_seeds(text: str) -> list[int]:
+    """Seeds from ``10-15``, ``3,5,8`` or a mix (``0-2,7``); non-negative, no repeats.
+
+    Raises
+    ------
+    InputError
+        Anything else.
+    """
+    seeds: list[int] = []
+    for part in text.split(","):
+        lo, sep, hi = part.strip().partition("-")
+        try:
+            first = int(lo)
+            last = int(hi) if sep else first
+        except ValueError:
+            raise InputError(f"seeds must look like 10-15 or 3,5,8, got {text!r}") from None
+        if first < 0 or last < first:
+            raise InputError(f"seed range {part.strip()!r} must be non-negative and ascending")
+        seeds.extend(range(first, last + 1))
+    if len(set(seeds)) != len(seeds):
+        raise InputError(f"seeds repeat in {text!r}")
+    return seeds
+
+
+def band_ratios(hold: HoldResult, band_scale: float) -> FloatArray:
+    """``|estimate - truth|`` over the identified half-width, every hold sample with a band.
+
+    Parameters
+    ----------
+    hold : HoldResult
+        A closed-loop hold of the ``observer`` estimator.
+    band_scale : float
+        The scale the observer's band had in that hold.
+    """
+    loop = hold.loop
+    t = loop["t_s"] - (loop.hold_onset_s() or 0.0)
+    rows = (t >= 0.0) & (t <= hold.duration_s + 1e-9)
+    lo, hi = loop["band_lo_n"][rows], loop["band_hi_n"][rows]
+    est, truth = loop["estimate_n"][rows], loop["truth_force_n"][rows]
+    half = 0.5 * (hi - lo) / band_scale
+    ok = np.isfinite(half) & (half > 0) & np.isfinite(est) & np.isfinite(truth)
+    out: FloatArray = np.abs(est[ok] - truth[ok]) / half[ok]
+    return out
+
+
+@dataclass(frozen=True)
+class BandCalibration:
+    """What a recalibration measured.
+
+    Attributes
+    ----------
+    band_scale : float
+        The new scale: the ``level`` quantile of the ratios.
+    level : float
+        Coverage the band states.
+    samples : int
+        Hold samples the quantile is over.
+    seeds : list of int
+    scenarios : dict of str to dict
+        Per scenario: its profiles, and per seed the MAE (N) and the coverage
+        of the hold samples at the old and at the new scale.
+    previous_scale : float
+    """
+
+    band_scale: float
+    level: float
+    samples: int
+    seeds: list[int]
+    previous_scale: float
+    scenarios: dict[str, dict[str, Any]] = field(default_factory=dict)
+
+    def record(self) -> dict[str, Any]:
+        """The manifest's ``band_recalibration`` entry."""
+        return {
+            "band_scale": self.band_scale, "level": self.level,
+            "method": f"{self.level:g} quantile of |estimate - truth| / identified half-width "
+                      "over closed-loop holds (relaxgrip calibrate-band)",
+            "seeds": self.seeds, "samples": self.samples,
+            "previous_scale": self.previous_scale, "scenarios": self.scenarios,
+        }
+
+
+def _coverage_at(hold: HoldResult, ratios_scale: float, new_scale: float) -> float:
+    """Coverage of the hold samples had the band been ``new_scale`` wide."""
+    r = band_ratios(hold, ratios_scale)
+    return float(np.mean(r <= new_scale)) if r.size else math.nan
+
+
+def calibrate_band(observer: ObserverModel, seeds: Sequence[int],
+                   scenarios: Sequence[str] = tuple(SCENARIOS), duration_s: float = 280.0,
+                   models: ModelBundle | None = None, n_jobs: int = 1) -> BandCalibration:
+    """Run the observer's closed-loop holds and set its band's scale from their errors.
+
+    Parameters
+    ----------
+    observer : ObserverModel
+        Fitted observer (its ``band_scale`` is what the holds run with; the
+        result does not depend on it).
+    seeds : sequence of int
+        Twin seeds (take ones the models were not checked on).
+    scenarios : sequence of str
+        Names in :data:`SCENARIOS`.
+    duration_s : float
+        Hold length (s); the profiles' times are scaled with it from 280 s.
+    models : ModelBundle, optional
+        ICFN and RCFN (default: the shipped models).
+    n_jobs : int
+        Holds in parallel.
+
+    Returns
+    -------
+    BandCalibration
+        ``observer`` itself is not changed.
+
+    Raises
+    ------
+    InputError
+        No seeds, an unknown scenario, or holds without a band.
+    """
+    if not seeds:
+        raise InputError("calibrating the band needs at least one seed")
+    unknown = [s for s in scenarios if s not in SCENARIOS]
+    if unknown or not scenarios:
+        raise InputError(f"unknown scenario {unknown[0] if unknown else '(none)'}; known: "
+                         f"{', '.join(SCENARIOS)}")
+    jobs = [(name, seed) for name in scenarios for seed in seeds]
+    args = [(name, seed, duration_s, models, observer) for name, seed in jobs]
+    if n_jobs > 1 and len(args) > 1:
+        from joblib import Parallel, delayed
+
+        holds = Parallel(n_jobs=min(n_jobs, len(args)))(delayed(_hold)(a) for a in args)
+    else:
+        holds = [_hold(a) for a in args]
+    used = observer.band_scale
+    ratios = [band_ratios(h, used) for h in holds]
+    every = np.concatenate(ratios)
+    if every.size == 0:
+        raise InputError("the holds recorded no band to calibrate")
+    scale = float(np.quantile(every, observer.band_level))
+    report: dict[str, dict[str, Any]] = {}
+    for (name, seed), hold in zip(jobs, holds, strict=True):
+        entry = report.setdefault(name, {"temp_profile": SCENARIOS[name][0],
+                                         "target_profile": SCENARIOS[name][1], "seeds": {}})
+        entry["seeds"][str(seed)] = {
+            "mae_n": hold.metrics()["mae_n"],
+            "coverage_before": _coverage_at(hold, used, used),
+            "coverage_after": _coverage_at(hold, used, scale),
+        }
+    return BandCalibration(scale, observer.band_level, int(every.size), list(seeds), used,
+                           report)
+
+
+def _scaled(profile: Profile | None, factor: float) -> Profile | None:
+    if profile is None or factor == 1.0:
+        return profile
+    return replace(profile, start_s=profile.start_s * factor, over_s=profile.over_s * factor,
+                   until_s=profile.until_s * factor)
+
+
+def _hold(args: tuple[str, int, float, ModelBundle | None, ObserverModel]) -> HoldResult:
+    """One scenario's hold in a worker (OpenCV on one thread)."""
+    import cv2
+
+    cv2.setNumThreads(1)
+    name, seed, duration_s, models, observer = args
+    temp, target = SCENARIOS[name]
+    factor = duration_s / 280.0
+    return run_hold("observer", duration_s=duration_s, seed=seed, models=models,
+                    observer=observer,
+                    temp_profile=_scaled(None if temp is None else parse_temp_profile(temp),
+                                         factor),
+                    target_profile=_scaled(None if target is None
+                                           else parse_target_profile(target), factor))
+

@@ -1,0 +1,144 @@
+"""Recalibrating the observer's band on closed-loop holds (``relaxgrip calibrate-band``)."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from relaxgrip.errors import InputError
+from relaxgrip.experiments.band_calibration import band_ratios, calibrate_band, parse_seeds
+from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
+from relaxgrip.learning.observer import (
+    ObserverFileError,
+    default_observer_dir,
+    load_default_observer,
+    load_observer,
+    set_band_scale,
+)
+from tests.clitools import assert_one_error_line, run_main
+
+
+@pytest.mark.parametrize(("text", "seeds"), [("10-15", [10, 11, 12, 13, 14, 15]),
+                                             ("3,5,8", [3, 5, 8]), ("0-2, 7", [0, 1, 2, 7]),
+                                             ("4", [4])])
+def test_seed_lists(text: str, seeds: list[int]) -> None:
+    assert parse_seeds(text) == seeds
+
+
+@pytest.mark.parametrize("text", ["", "a-b", "3-1", "-2", "1,1", "2-4,3"])
+def test_bad_seed_lists_are_refused(text: str) -> None:
+    with pytest.raises(InputError, match="seed"):
+        parse_seeds(text)
+
+
+@pytest.fixture(scope="module")
+def short_hold() -> HoldResult:
+    return run_hold("observer", duration_s=8.0, seed=0)
+
+
+def test_ratios_do_not_depend_on_the_scale_the_observer_held_with(short_hold: HoldResult) -> None:
+    """The same seed with the band twice as wide: the same ratios (the loop is unchanged:
+    the band is only reported), and the coverage of the recorded band is the share of
+    ratios within the scale it had."""
+    model = load_default_observer()
+    wide = load_default_observer()
+    wide.band_scale = 2.0 * model.band_scale
+    other = run_hold("observer", duration_s=8.0, seed=0, observer=wide)
+    r = band_ratios(short_hold, model.band_scale)
+    assert r.size > 100
+    np.testing.assert_allclose(band_ratios(other, wide.band_scale), r, rtol=1e-9)
+    assert short_hold.metrics()["band_coverage"] == pytest.approx(
+        float(np.mean(r <= model.band_scale)))
+    np.testing.assert_array_equal(other.estimate_n, short_hold.estimate_n)
+
+
+def test_calibration_sets_the_scale_to_the_quantile_of_the_ratios() -> None:
+    model = load_default_observer()
+    result = calibrate_band(model, [0], ["standard"], duration_s=8.0)
+    hold = run_hold("observer", duration_s=8.0, seed=0)
+    r = band_ratios(hold, model.band_scale)
+    assert result.band_scale == pytest.approx(float(np.quantile(r, 0.95)))
+    assert result.samples == r.size
+    row = result.scenarios["standard"]["seeds"]["0"]
+    assert row["coverage_after"] >= 0.95
+    assert row["coverage_before"] == pytest.approx(hold.metrics()["band_coverage"])
+    assert model.band_scale == load_default_observer().band_scale  # the model is not changed
+
+
+@pytest.mark.parametrize(("seeds", "scenarios", "match"), [([], ["standard"], "seed"),
+                                                          ([0], ["warp"], "warp"),
+                                                          ([0], [], "scenario")])
+def test_calibration_refuses_what_cannot_run(seeds: list[int], scenarios: list[str],
+                                             match: str) -> None:
+    with pytest.raises(InputError, match=match):
+        calibrate_band(load_default_observer(), seeds, scenarios)
+
+
+def test_set_band_scale_keeps_the_parameters_and_records_how(tmp_path: Path) -> None:
+    directory = tmp_path / "obs"
+    shutil.copytree(default_observer_dir(), directory)
+    before = load_observer(directory)
+    set_band_scale(directory, 0.42, {"method": "test", "seeds": [1]})
+    after = load_observer(directory)
+    assert after.band_scale == 0.42
+    for name in ("tau_ref_s_", "log_shift_", "branch_share_", "band_rel_"):
+        np.testing.assert_array_equal(getattr(after, name), getattr(before, name))
+    manifest = json.loads((directory / "manifest.json").read_text())
+    assert manifest["training"]["band_recalibration"] == {"method": "test", "seeds": [1]}
+    assert manifest["training"]["n_sequences"] == 80
+    for bad in (0.0, -1.0, math.nan):
+        with pytest.raises(InputError, match="band scale"):
+            set_band_scale(directory, bad, {})
+    assert load_observer(directory).band_scale == 0.42
+    with pytest.raises(ObserverFileError):
+        set_band_scale(tmp_path / "missing", 0.5, {})
+
+
+def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    directory = tmp_path / "obs"
+    shutil.copytree(default_observer_dir(), directory)
+    code, out, _ = run_main(["calibrate-band", directory, "--seeds", "0", "--scenarios",
+                             "standard", "--duration-s", "8", "--jobs", "1", "--json"],
+                            monkeypatch, capsys)
+    assert code == 0
+    record = json.loads(out)
+    assert record["written"] is True
+    assert load_observer(directory).band_scale == pytest.approx(record["band_scale"])
+    code, out, _ = run_main(["hold", "--estimator", "observer", "--observer", directory,
+                             "--duration-s", "8", "--json"], monkeypatch, capsys)
+    assert code == 0
+    coverage = json.loads(out)["band_coverage"]
+    assert coverage == pytest.approx(
+        record["scenarios"]["standard"]["seeds"]["0"]["coverage_after"])
+    code, out, _ = run_main(["calibrate-band", directory, "--seeds", "1", "--scenarios",
+                             "standard", "--duration-s", "8", "--jobs", "1", "--dry-run",
+                             "--json"], monkeypatch, capsys)
+    assert code == 0
+    assert json.loads(out)["written"] is False
+    assert load_observer(directory).band_scale == pytest.approx(record["band_scale"])
+
+
+@pytest.mark.parametrize(("args", "expected"), [
+    (["calibrate-band", "{missing}"], "manifest.json"),
+    (["calibrate-band", "{obs}", "--seeds", "5-2"], "5-2"),
+    (["calibrate-band", "{obs}", "--scenarios", "warp"], "warp"),
+    (["calibrate-band", "{obs}", "--jobs", "0"], "--jobs"),
+    (["calibrate-band", "{obs}", "--duration-s", "-1"], "--duration-s"),
+    (["hold", "--estimator", "relax", "--observer", "{obs}"], "--observer"),
+    (["hold", "--estimator", "observer", "--observer", "{missing}"], "manifest.json"),
+])
+def test_cli_bad_input(args: list[str], expected: str, tmp_path: Path,
+                       monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    directory = tmp_path / "obs"
+    shutil.copytree(default_observer_dir(), directory)
+    before = (directory / "manifest.json").read_bytes()
+    filled: list[str | Path] = [a.format(obs=directory, missing=tmp_path / "missing")
+                                for a in args]
+    assert_one_error_line(*run_main(filled, monkeypatch, capsys), expected)
+    assert (directory / "manifest.json").read_bytes() == before
