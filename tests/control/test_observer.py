@@ -296,3 +296,69 @@ def test_eq10_is_the_estimate_while_it_holds_and_the_observer_continues_from_it(
     assert np.ptp(after) == 0.0
     window = [o for h, o in offsets if end - 10.0 <= h <= end - 2.0]
     assert after[0] == pytest.approx(float(np.mean(window)), abs=1e-12)
+
+
+def test_band_widens_after_the_fit_by_what_a_share_error_would_move_the_estimate() -> None:
+    """Spread 0.1 of the relaxing share: after the fit ends (a new target at 20 s) and a
+    40 -> 55 °C ramp relaxes the branches, the band grows by z_0.975 times the drift
+    between two runs whose shares differ by that spread; none at the end of the fit, and
+    none at all for an observer file without a spread."""
+    from scipy.stats import norm
+
+    from relaxgrip.control.estimators import ForceEstimate
+
+    arrays = {name: np.array(getattr(_model(), name)) for name in (
+        "temps_c_", "tau_ref_s_", "log_shift_", "branch_share_", "log_stiffness_",
+        "band_t_s_", "band_rel_", "onset_rel_")}
+    no_spread = ObserverModel.from_arrays(arrays, ObserverModel().get_params())
+    arrays["share_spread_"] = np.full(4, 0.1)
+    model = ObserverModel.from_arrays(arrays, ObserverModel().get_params())
+    assert no_spread.band_drift_rel(50.0) == 0.0
+    assert model.band_drift_rel(50.0) == pytest.approx(0.1 * norm.ppf(0.975))
+
+    est, plain, other = _stubbed(model), _stubbed(no_spread), _stubbed(_scaled_shares(model, 1.1))
+    rows = []
+    for t in np.arange(0.0, 120.0, 1.0 / 30.0):
+        temp = 40.0 + 15.0 * min(max((t - 30.0) / 30.0, 0.0), 1.0)
+        d = 1e-3 * min(max((t - 1.0) / 0.1, 0.0), 1.0) if t < 20.0 else 1e-3 - 1e-4 * min(
+            t - 20.0, 1.0)
+        motor = 100.0 if t < 20.0 else 100.0 - 2.0 * min(t - 20.0, 1.0)
+        for e in (est, plain, other):
+            e.advance(float(t), d, temp)
+        if t < 1.2:
+            continue
+        u = est.unit_force_m()
+        eq10 = 5.0 * u / est._u_on if math.isfinite(est._u_on) else 5.0  # share 1 fits
+        got = est._with_share(ForceEstimate(eq10, math.nan), math.nan, float(t) - 1.2, u, motor)
+        ref = plain._with_share(ForceEstimate(eq10, math.nan), math.nan, float(t) - 1.2,
+                                plain.unit_force_m(), motor)
+        assert got.force_n == ref.force_n
+        assert ref.band_hi_n - ref.force_n == pytest.approx(no_spread.band_rel(t - 1.2) * 5.0)
+        rows.append((t, est._fitting, got.force_n, got.band_hi_n - got.force_n,
+                     other.unit_force_m(), model.band_rel(t - 1.2) * 5.0))
+    assert est.share == pytest.approx(1.0, abs=1e-6)
+    end = next(i for i, r in enumerate(rows) if not r[1])
+    t_end, _, f_end, half_end, u_other_end, base_end = rows[end]
+    assert half_end == pytest.approx(base_end)
+    u_other_on = rows[0][4]
+    for t, _, f, half, u_other, base in rows[end + 100::200]:
+        drift = abs((f - f_end) - 5.0 * (u_other - u_other_end) / u_other_on)
+        # The share also moves the onset scale: a second-order term the band leaves out.
+        assert half - base == pytest.approx(norm.ppf(0.975) * drift, rel=0.1, abs=2e-3)
+    assert rows[-1][3] - rows[-1][5] > 0.02  # the ramp relaxes the finger: a real widening
+
+
+def test_share_spread_is_saved_and_checked(tmp_path: Path) -> None:
+    arrays = {name: np.array(getattr(_model(), name)) for name in (
+        "temps_c_", "tau_ref_s_", "log_shift_", "branch_share_", "log_stiffness_",
+        "band_t_s_", "band_rel_", "onset_rel_")}
+    arrays["share_spread_"] = np.array([0.05, 0.1, 0.15, 0.2])
+    model = ObserverModel.from_arrays(arrays, ObserverModel().get_params())
+    save_observer(tmp_path / "m", model, {})
+    back = load_observer(tmp_path / "m")
+    assert np.array_equal(back.share_spread_, arrays["share_spread_"])
+    assert back.band_drift_rel(45.0) == model.band_drift_rel(45.0) > 0
+    for bad in (np.array([0.1, 0.1]), np.array([0.1, -0.1, 0.1, 0.1])):
+        arrays["share_spread_"] = bad
+        with pytest.raises(ValueError, match="share_spread_"):
+            ObserverModel.from_arrays(arrays, ObserverModel().get_params())

@@ -45,7 +45,11 @@ step went from 0.058 to 0.053 N mean MAE, the ramp from 0.113 to 0.105 N;
 the standard hold is ``relax``'s.
 
 The band: 95 % half-width ``band_rel(t) F_onset`` from the model's held-out
-residuals (ICFN onset error included), the ICFN's onset error before.
+residuals (ICFN onset error included), the ICFN's onset error before; once
+the share fit has ended, plus the run-to-run spread of the relaxing share
+times what the branches have relaxed since (``band_drift_rel``): a
+temperature ramp relaxes the finger by a share the fit at the old
+temperature did not see.
 """
 
 from __future__ import annotations
@@ -153,7 +157,7 @@ class ObserverEstimator:
         self._temp_sum, self._temp_n = 0.0, 0
         self._motor: deque[tuple[float, float]] = deque()
         self._offsets: deque[tuple[float, float]] = deque()
-        self._offset_n = NAN
+        self._offset_n = self._r_end = NAN
 
     def _anchor_offset(self, hold: float) -> float:
         """Eq. 10 less the observer, averaged over the anchor window before ``hold`` (N).
@@ -293,8 +297,13 @@ class ObserverEstimator:
         else:
             if math.isnan(self._offset_n):
                 self._offset_n = self._anchor_offset(hold)
+                self._r_end = r
             est += self._offset_n
         half = self.model.band_rel(hold) * f_on
+        if math.isfinite(self._r_end):
+            # What the branches relax after the fit carries the run's share spread.
+            unseen = self.scale_n_per_m * self.share * abs(r - self._r_end)
+            half += self.model.band_drift_rel(self.temp_c) * unseen
         return ForceEstimate(est, raw, f_on, relax.k_n, relax.tau_s, hold,
                              band_lo_n=est - half, band_hi_n=est + half)
 

@@ -34,6 +34,12 @@ aperture after a loading at a known closing speed):
 4. The 95 % band: the observer run on the held-out (validation and test)
    sequences, its force scaled by the ICFN's onset estimate as in closed loop;
    the 95th percentile of ``|estimate - truth| / F_onset`` per hold-time bin.
+   And the spread of the relaxing share between runs (the relative SD of
+   each sequence's total branch share within its temperature group; groups
+   of fewer than three holds take the spread pooled over all groups): the
+   observer fits the run's share where Eq. 10 holds, and relaxation elsewhere
+   carries that spread (:meth:`ObserverModel.band_drift_rel`).
+   ``relaxgrip calibrate-band`` then scales the band on closed-loop holds.
 """
 
 from __future__ import annotations
@@ -205,6 +211,21 @@ class ObserverModel:
         shift = math.exp(float(np.interp(temp_c, temps, self.log_shift_)))
         return k * (1.0 - float(shares.sum())), k * shares, self.tau_ref_s_ * shift
 
+    def band_drift_rel(self, temp_c: float) -> float:
+        """Band half-width per newton of relaxation the share fit did not see, at ``temp_c``.
+
+        The run's relaxing share scatters around the population's by
+        ``share_spread_`` (relative SD between the dataset's holds of one
+        temperature); the observer identifies it where Eq. 10 holds, and the
+        relaxation that follows elsewhere (another temperature, a new
+        displacement) carries that scatter.  ``band_scale`` applies.
+        """
+        from scipy.stats import norm
+
+        self._check_fitted()
+        z = float(norm.ppf(0.5 + 0.5 * self.band_level))
+        return self.band_scale * z * float(np.interp(temp_c, self.temps_c_, self.share_spread_))
+
     def band_rel(self, hold_s: float) -> float:
         """Half-width of the band relative to the onset force, ``hold_s`` into the hold."""
         self._check_fitted()
@@ -252,10 +273,12 @@ class ObserverModel:
         # the coldest up, each searched at or below the previous one's shift, which keeps
         # the modes from swapping between groups where two local optima compete.
         shifts, shares = [0.0] * len(groups), [np.zeros(self.n_terms)] * len(groups)
+        totals: list[FloatArray] = [np.zeros(0)] * len(groups)
         bounds = (-6.0, 6.0)
         for i in np.argsort(group_temps).tolist():
-            s, share = self._fit_group([h for h in train if h.group == groups[i]], bounds)
-            shifts[i], shares[i] = s, share
+            s, share, total = self._fit_group([h for h in train if h.group == groups[i]],
+                                              bounds)
+            shifts[i], shares[i], totals[i] = s, share, total
             bounds = (s - _MAX_SHIFT_DROP, s + _SHIFT_SLACK)
         log_shift = np.array(shifts) - shifts[ref]
         self.tau_ref_s_ = self.tau_ref_s_ * math.exp(shifts[ref])
@@ -263,6 +286,7 @@ class ObserverModel:
         self.temps_c_ = group_temps[order]
         self.log_shift_ = log_shift[order]
         self.branch_share_ = np.array(shares)[order]
+        self.share_spread_ = _share_spread(totals)[order]
         shift_of = dict(zip(groups, log_shift.tolist(), strict=True))
         self.log_stiffness_ = self._stiffness(train, groups, ref, shift_of)[order]
         self._fit_band(held, icfn)
@@ -322,7 +346,11 @@ class ObserverModel:
 
     def _group_error(self, group: list[_Hold], log_shift: float
                      ) -> tuple[float, FloatArray, list[float]]:
-        """Normalised squared error of a group at one shift; mean shares; each stiffness."""
+        """Normalised squared error of a group at one shift; mean shares; each stiffness.
+
+        Each sequence's own shares are kept in ``self._last_shares`` (for the
+        spread of the relaxing share between runs).
+        """
         from scipy.optimize import nnls
 
         tau = self.tau_ref_s_ * math.exp(log_shift)
@@ -336,10 +364,11 @@ class ObserverModel:
             total = float(theta.sum())
             stiff.append(total)
             shares.append(theta[1:] / total if total > 0 else np.zeros(self.n_terms))
+        self._last_shares = shares
         return err, np.mean(shares, axis=0), stiff
 
     def _fit_group(self, group: list[_Hold], bounds: tuple[float, float]
-                   ) -> tuple[float, FloatArray]:
+                   ) -> tuple[float, FloatArray, FloatArray]:
         from scipy.optimize import minimize_scalar
 
         grid = np.linspace(bounds[0], bounds[1], max(9, round(4 * (bounds[1] - bounds[0])) + 1))
@@ -349,7 +378,8 @@ class ObserverModel:
         res = minimize_scalar(lambda s: self._group_error(group, float(s))[0],
                               bounds=(lo, hi), method="bounded", options={"xatol": 1e-3})
         s = float(res.x) if res.fun <= errs[best] else float(grid[best])
-        return s, self._group_error(group, s)[1]
+        mean_share = self._group_error(group, s)[1]
+        return s, mean_share, np.array([float(np.sum(x)) for x in self._last_shares])
 
     def _stiffness(self, holds: list[_Hold], groups: list[float], ref: int,
                    shift: dict[float, float]) -> FloatArray:
@@ -420,6 +450,7 @@ class ObserverModel:
         self._check_fitted()
         out = {name: np.asarray(getattr(self, name), dtype=np.float64) for name in _ARRAYS}
         out["onset_rel_"] = np.array([self.onset_rel_])
+        out["share_spread_"] = np.asarray(self.share_spread_, dtype=np.float64)
         return out
 
     @classmethod
@@ -439,6 +470,8 @@ class ObserverModel:
         if onset.size != 1 or not np.isfinite(onset).all():
             raise ValueError("array 'onset_rel_' missing or bad")
         model.onset_rel_ = float(onset[0])
+        # Files written before the share spread was identified: no drift band.
+        spread = arrays.get("share_spread_")
         for name in _ARRAYS:
             if name not in arrays:
                 raise ValueError(f"array {name!r} missing")
@@ -448,6 +481,11 @@ class ObserverModel:
             setattr(model, name, value)
         n_k = model.temps_c_.size
         n = model.tau_ref_s_.size
+        model.share_spread_ = (np.zeros(n_k) if spread is None
+                               else np.asarray(spread, dtype=np.float64))
+        if model.share_spread_.shape != (n_k,) or not (
+                np.isfinite(model.share_spread_).all() and (model.share_spread_ >= 0).all()):
+            raise ValueError("array 'share_spread_' must hold one spread >= 0 per temperature")
         if not (model.temps_c_.ndim == 1 and n_k >= 1 and model.log_shift_.shape == (n_k,)
                 and model.log_stiffness_.shape == (n_k,) and model.branch_share_.shape == (n_k, n)
                 and model.tau_ref_s_.shape == (n,) and n == model.n_terms
@@ -538,6 +576,19 @@ def set_band_scale(directory: Path, band_scale: float,
     model.band_scale = float(band_scale)
     save_observer(directory, model, training)
     return model
+
+
+def _share_spread(totals: list[FloatArray]) -> FloatArray:
+    """Relative SD of each group's per-sequence total branch share.
+
+    A group of fewer than three holds says little about its spread: it takes
+    the spread pooled over every group of two or more (0 when there is none).
+    """
+    rel = [t / np.mean(t) - 1.0 for t in totals if t.size >= 2 and np.mean(t) > 0]
+    dof = sum(r.size - 1 for r in rel)
+    pooled = math.sqrt(sum(float(r @ r) for r in rel) / dof) if dof > 0 else 0.0
+    return np.array([float(np.std(t, ddof=1) / np.mean(t))
+                     if t.size >= 3 and np.mean(t) > 0 else pooled for t in totals])
 
 
 def default_observer_dir() -> Path:
