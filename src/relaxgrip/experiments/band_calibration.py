@@ -16,28 +16,24 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
-from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
-from relaxgrip.experiments.profiles import Profile, parse_target_profile, parse_temp_profile
+from relaxgrip.experiments.controlled_hold import HoldResult
+from relaxgrip.experiments.scenarios import SCENARIOS, check_scenarios, scenario_hold
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
 
-__all__ = ["SCENARIOS", "BandCalibration", "band_ratios", "calibrate_band", "parse_seeds"]
+__all__ = ["DEFAULT_SCENARIOS", "BandCalibration", "band_ratios", "calibrate_band", "parse_seeds"]
 
 FloatArray = NDArray[np.float64]
 
-#: The holds the band is calibrated on: name -> (temperature profile, target profile).
-SCENARIOS: dict[str, tuple[str | None, str | None]] = {
-    "standard": (None, None),
-    "ramp": ("ramp:40:55:150:30", None),
-    "step": (None, "step:3:150"),
-}
+#: The scenarios the band is calibrated on by default (any of :data:`SCENARIOS` can be).
+DEFAULT_SCENARIOS = ("standard", "ramp", "step")
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -129,7 +125,7 @@ def _coverage_at(hold: HoldResult, ratios_scale: float, new_scale: float) -> flo
 
 
 def calibrate_band(observer: ObserverModel, seeds: Sequence[int],
-                   scenarios: Sequence[str] = tuple(SCENARIOS), duration_s: float = 280.0,
+                   scenarios: Sequence[str] = DEFAULT_SCENARIOS, duration_s: float = 280.0,
                    models: ModelBundle | None = None, n_jobs: int = 1) -> BandCalibration:
     """Run the observer's closed-loop holds and set its band's scale from their errors.
 
@@ -141,7 +137,7 @@ def calibrate_band(observer: ObserverModel, seeds: Sequence[int],
     seeds : sequence of int
         Twin seeds (take ones the models were not checked on).
     scenarios : sequence of str
-        Names in :data:`SCENARIOS`.
+        Names in :data:`relaxgrip.experiments.scenarios.SCENARIOS`.
     duration_s : float
         Hold length (s); the profiles' times are scaled with it from 280 s.
     models : ModelBundle, optional
@@ -161,10 +157,7 @@ def calibrate_band(observer: ObserverModel, seeds: Sequence[int],
     """
     if not seeds:
         raise InputError("calibrating the band needs at least one seed")
-    unknown = [s for s in scenarios if s not in SCENARIOS]
-    if unknown or not scenarios:
-        raise InputError(f"unknown scenario {unknown[0] if unknown else '(none)'}; known: "
-                         f"{', '.join(SCENARIOS)}")
+    scenarios = check_scenarios(scenarios)
     jobs = [(name, seed) for name in scenarios for seed in seeds]
     args = [(name, seed, duration_s, models, observer) for name, seed in jobs]
     if n_jobs > 1 and len(args) > 1:
@@ -181,8 +174,7 @@ def calibrate_band(observer: ObserverModel, seeds: Sequence[int],
     scale = float(np.quantile(every, observer.band_level))
     report: dict[str, dict[str, Any]] = {}
     for (name, seed), hold in zip(jobs, holds, strict=True):
-        entry = report.setdefault(name, {"temp_profile": SCENARIOS[name][0],
-                                         "target_profile": SCENARIOS[name][1], "seeds": {}})
+        entry = report.setdefault(name, {**SCENARIOS[name].to_dict(), "seeds": {}})
         entry["seeds"][str(seed)] = {
             "mae_n": hold.metrics()["mae_n"],
             "coverage_before": _coverage_at(hold, used, used),
@@ -192,25 +184,10 @@ def calibrate_band(observer: ObserverModel, seeds: Sequence[int],
                            report)
 
 
-def _scaled(profile: Profile | None, factor: float) -> Profile | None:
-    if profile is None or factor == 1.0:
-        return profile
-    return replace(profile, start_s=profile.start_s * factor, over_s=profile.over_s * factor,
-                   until_s=profile.until_s * factor)
-
-
 def _hold(args: tuple[str, int, float, ModelBundle | None, ObserverModel]) -> HoldResult:
     """One scenario's hold in a worker (OpenCV on one thread)."""
     import cv2
 
     cv2.setNumThreads(1)
     name, seed, duration_s, models, observer = args
-    temp, target = SCENARIOS[name]
-    factor = duration_s / 280.0
-    return run_hold("observer", duration_s=duration_s, seed=seed, models=models,
-                    observer=observer,
-                    temp_profile=_scaled(None if temp is None else parse_temp_profile(temp),
-                                         factor),
-                    target_profile=_scaled(None if target is None
-                                           else parse_target_profile(target), factor))
-
+    return scenario_hold("observer", name, seed, duration_s, models, observer)

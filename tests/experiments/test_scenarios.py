@@ -1,0 +1,66 @@
+"""Scenarios beyond Eq. 10: definitions, time scaling, the comparison and its figure."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from relaxgrip.errors import InputError
+from relaxgrip.experiments.scenarios import (
+    SCENARIOS,
+    check_scenarios,
+    compare_scenarios,
+    scenario_hold,
+)
+from relaxgrip.plots.scenarios import plot_scenarios
+
+
+def test_profiles_scale_with_the_hold_and_describe_it() -> None:
+    ramp = SCENARIOS["ramp"]
+    full, half = ramp.profiles(280.0)["temp_profile"], ramp.profiles(140.0)["temp_profile"]
+    assert full is not None and half is not None
+    assert (full.start_s, full.over_s) == (150.0, 30.0)
+    assert (half.start_s, half.over_s, half.after) == (75.0, 15.0, 55.0)
+    assert ramp.describe(140.0) == "stiffness switch: 40 → 55 °C over 15 s from 75 s"
+    assert SCENARIOS["push"].describe() == "push on the object: 2 N from 200 s"
+    assert SCENARIOS["standard"].profiles(280.0) == {
+        "temp_profile": None, "target_profile": None, "disturbance": None}
+
+
+@pytest.mark.parametrize("names", [[], ["warp"], ["ramp", "warp"]])
+def test_unknown_scenarios_are_refused(names: list[str]) -> None:
+    with pytest.raises(InputError, match="unknown scenario"):
+        check_scenarios(names)
+    with pytest.raises(InputError, match="unknown scenario"):
+        compare_scenarios(names, duration_s=5.0)
+
+
+def test_a_short_comparison_runs_both_estimators_and_draws_them(tmp_path: Path) -> None:
+    result = compare_scenarios(("step",), seed=0, duration_s=14.0)
+    runs = result.holds["step"]
+    assert set(runs) == {"relax", "observer"}
+    hold = runs["observer"]
+    # The new target acts at 150/280 of the hold: 7.5 s into 14 s.
+    assert np.all(hold.target_t_n[hold.t_s < 7.4] == 5.0)
+    assert np.all(hold.target_t_n[hold.t_s > 7.6] == 3.0)
+    d = result.to_dict()["scenarios"]["step"]
+    assert d["target_profile"] == "step:3:150"
+    assert math.isfinite(d["relax_over_observer"]) and d["relax_over_observer"] > 0
+    assert "band_coverage" in d["holds"]["observer"]
+    assert "band_coverage" not in d["holds"]["relax"]
+    assert result.degradation("step") == pytest.approx(
+        result.mae_n("step", "relax") / result.mae_n("step", "observer"))
+    png = plot_scenarios(result, tmp_path / "scenarios.png")
+    assert png.stat().st_size > 10_000
+
+
+def test_scenario_hold_is_run_hold_with_the_profiles() -> None:
+    from relaxgrip.experiments.controlled_hold import run_hold
+
+    a = scenario_hold("relax", "push", seed=1, duration_s=6.0)
+    p = SCENARIOS["push"].profiles(6.0)
+    b = run_hold("relax", duration_s=6.0, seed=1, disturbance=p["disturbance"])
+    np.testing.assert_array_equal(a.truth_n, b.truth_n)
