@@ -338,10 +338,10 @@ def test_band_widens_after_the_fit_by_what_a_share_error_would_move_the_estimate
                      other.unit_force_m(), model.band_rel(t - 1.2) * 5.0))
     assert est.share == pytest.approx(1.0, abs=1e-6)
     end = next(i for i, r in enumerate(rows) if not r[1])
-    t_end, _, f_end, half_end, u_other_end, base_end = rows[end]
+    _t_end, _, f_end, half_end, u_other_end, base_end = rows[end]
     assert half_end == pytest.approx(base_end)
     u_other_on = rows[0][4]
-    for t, _, f, half, u_other, base in rows[end + 100::200]:
+    for _t, _, f, half, u_other, base in rows[end + 100::200]:
         drift = abs((f - f_end) - 5.0 * (u_other - u_other_end) / u_other_on)
         # The share also moves the onset scale: a second-order term the band leaves out.
         assert half - base == pytest.approx(norm.ppf(0.975) * drift, rel=0.1, abs=2e-3)

@@ -21,7 +21,8 @@ from relaxgrip.plots.scenarios import plot_scenarios
 def test_profiles_scale_with_the_hold_and_describe_it() -> None:
     ramp = SCENARIOS["ramp"]
     full, half = ramp.profiles(280.0)["temp_profile"], ramp.profiles(140.0)["temp_profile"]
-    assert full is not None and half is not None
+    assert full is not None
+    assert half is not None
     assert (full.start_s, full.over_s) == (150.0, 30.0)
     assert (half.start_s, half.over_s, half.after) == (75.0, 15.0, 55.0)
     assert ramp.describe(140.0) == "stiffness switch: 40 → 55 °C over 15 s from 75 s"
@@ -48,7 +49,8 @@ def test_a_short_comparison_runs_both_estimators_and_draws_them(tmp_path: Path) 
     assert np.all(hold.target_t_n[hold.t_s > 7.6] == 3.0)
     d = result.to_dict()["scenarios"]["step"]
     assert d["target_profile"] == "step:3:150"
-    assert math.isfinite(d["relax_over_observer"]) and d["relax_over_observer"] > 0
+    assert math.isfinite(d["relax_over_observer"])
+    assert d["relax_over_observer"] > 0
     assert "band_coverage" in d["holds"]["observer"]
     assert "band_coverage" not in d["holds"]["relax"]
     assert result.degradation("step") == pytest.approx(

@@ -29,10 +29,13 @@ def test_fit_on_twin_holds_gives_physical_parameters_and_a_share_spread(holds: P
     _, k_cold, tau_cold = model.parameters(float(temps[0]))
     _, k_hot, tau_hot = model.parameters(float(temps[-1]))
     assert np.all(tau_hot < tau_cold)  # time-temperature superposition: hot relaxes faster
-    assert np.all(model.branch_share_ >= 0) and np.all(model.branch_share_.sum(axis=1) < 1)
-    assert k_hot.sum() > 0 and k_cold.sum() > 0
+    assert np.all(model.branch_share_ >= 0)
+    assert np.all(model.branch_share_.sum(axis=1) < 1)
+    assert k_hot.sum() > 0
+    assert k_cold.sum() > 0
     # The twin scatters the relaxing share between runs: the fit sees it, within reason.
-    assert np.all(np.isfinite(model.share_spread_)) and np.all(model.share_spread_ >= 0)
+    assert np.all(np.isfinite(model.share_spread_))
+    assert np.all(model.share_spread_ >= 0)
     assert 0.01 < float(np.max(model.share_spread_)) < 0.5
     assert 0 < model.band_rel(100.0) < 0.5
     back = load_observer(tmp_path / "obs")

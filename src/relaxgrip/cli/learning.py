@@ -180,7 +180,8 @@ def calibrate_band_command(
     ] = "10-15",
     scenarios: Annotated[str, typer.Option(
         "--scenarios", help="Comma-separated: standard, ramp (40 -> 55 °C from 150 s), "
-                            "step (5 -> 3 N at 150 s), push (2 N from 200 s).")] = "standard,ramp,step",
+                            "step (5 -> 3 N at 150 s), push (2 N from 200 s).")
+    ] = "standard,ramp,step",
     duration_s: Annotated[float, typer.Option(
         "--duration-s", help="Hold length (s); profile times scale with it.")] = 280.0,
     models: Annotated[Path | None, typer.Option(
