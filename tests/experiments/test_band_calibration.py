@@ -83,6 +83,7 @@ def test_set_band_scale_keeps_the_parameters_and_records_how(tmp_path: Path) -> 
     directory = tmp_path / "obs"
     shutil.copytree(default_observer_dir(), directory)
     before = load_observer(directory)
+    shipped = json.loads((directory / "manifest.json").read_text())["training"]
     set_band_scale(directory, 0.42, {"method": "test", "seeds": [1]})
     after = load_observer(directory)
     assert after.band_scale == 0.42
@@ -90,7 +91,8 @@ def test_set_band_scale_keeps_the_parameters_and_records_how(tmp_path: Path) -> 
         np.testing.assert_array_equal(getattr(after, name), getattr(before, name))
     manifest = json.loads((directory / "manifest.json").read_text())
     assert manifest["training"]["band_recalibration"] == {"method": "test", "seeds": [1]}
-    assert manifest["training"]["n_sequences"] == 80
+    assert manifest["training"]["n_sequences"] == shipped["n_sequences"]  # the record is kept
+    assert manifest["training"]["dataset"] == shipped["dataset"]
     for bad in (0.0, -1.0, math.nan):
         with pytest.raises(InputError, match="band scale"):
             set_band_scale(directory, bad, {})

@@ -70,11 +70,8 @@ def band_ratios(hold: HoldResult, band_scale: float) -> FloatArray:
     band_scale : float
         The scale the observer's band had in that hold.
     """
-    loop = hold.loop
-    t = loop["t_s"] - (loop.hold_onset_s() or 0.0)
-    rows = (t >= 0.0) & (t <= hold.duration_s + 1e-9)
-    lo, hi = loop["band_lo_n"][rows], loop["band_hi_n"][rows]
-    est, truth = loop["estimate_n"][rows], loop["truth_force_n"][rows]
+    lo, hi = hold.series("band_lo_n"), hold.series("band_hi_n")
+    est, truth = hold.series("estimate_n"), hold.series("truth_force_n")
     half = 0.5 * (hi - lo) / band_scale
     ok = np.isfinite(half) & (half > 0) & np.isfinite(est) & np.isfinite(truth)
     out: FloatArray = np.abs(est[ok] - truth[ok]) / half[ok]

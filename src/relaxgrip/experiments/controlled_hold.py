@@ -122,6 +122,13 @@ class HoldResult:
         """The steady-state interval (s since the onset)."""
         return steady_window_s(self.duration_s)
 
+    def series(self, name: str) -> FloatArray:
+        """A column of the loop over the hold's samples (aligned with ``t_s``)."""
+        t_loop = self.loop["t_s"] - (self.loop.hold_onset_s() or 0.0)
+        rows = (t_loop >= 0.0) & (t_loop <= self.duration_s + 1e-9)
+        out: FloatArray = self.loop[name][rows]
+        return out
+
     def _mask(self) -> NDArray[np.bool_]:
         lo, hi = self.window
         return (self.t_s >= lo - 1e-9) & (self.t_s <= hi + 1e-9)
@@ -135,11 +142,8 @@ class HoldResult:
         est = self.estimate_n[mask] - self.truth_n[mask]
         est = est[np.isfinite(est)]
         q25, q75 = np.percentile(err, [25, 75])
-        # The loop's rows of the hold, as run_hold kept them.
-        t_loop = self.loop["t_s"] - (self.loop.hold_onset_s() or 0.0)
-        rows = (t_loop >= 0.0) & (t_loop <= self.duration_s + 1e-9)
-        coverage = band_coverage(self.loop["truth_force_n"][rows], self.loop["band_lo_n"][rows],
-                                 self.loop["band_hi_n"][rows])
+        coverage = band_coverage(self.series("truth_force_n"), self.series("band_lo_n"),
+                                 self.series("band_hi_n"))
         extra = {} if math.isnan(coverage) else {"band_coverage": coverage}
         return {**extra,
             "mae_n": float(np.mean(np.abs(err))),

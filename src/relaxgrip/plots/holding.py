@@ -98,9 +98,7 @@ def _force_panel(ax: Axes, name: str, hold: HoldResult) -> None:
     ax.plot(hold.t_s[idx], hold.truth_n[idx], color="tab:blue", lw=1.2, label="true force")
     ax.plot(hold.t_s[idx], hold.estimate_n[idx], color="tab:orange", lw=1.2, ls="--",
             label="estimate")
-    t_loop = hold.loop["t_s"] - (hold.loop.hold_onset_s() or 0.0)
-    rows = (t_loop >= 0.0) & (t_loop <= hold.duration_s + 1e-9)
-    lo_n, hi_n = hold.loop["band_lo_n"][rows][idx], hold.loop["band_hi_n"][rows][idx]
+    lo_n, hi_n = hold.series("band_lo_n")[idx], hold.series("band_hi_n")[idx]
     if np.isfinite(lo_n).any():
         ax.fill_between(hold.t_s[idx], lo_n, hi_n, color="tab:orange", alpha=0.2, lw=0,
                         label="95 % band")

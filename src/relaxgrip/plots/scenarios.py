@@ -6,19 +6,11 @@ from pathlib import Path
 
 import numpy as np
 
-from relaxgrip.experiments.controlled_hold import HoldResult
 from relaxgrip.experiments.scenarios import SCENARIOS, ScenarioComparison
 from relaxgrip.plots.common import check_plot_path, new_figure, save_figure
 from relaxgrip.plots.holding import _COLORS, _thin
 
 __all__ = ["plot_scenarios"]
-
-
-def _band_rows(hold: HoldResult) -> tuple[np.ndarray, np.ndarray]:
-    """The loop's band over the hold's samples (as :class:`HoldResult` keeps them)."""
-    t_loop = hold.loop["t_s"] - (hold.loop.hold_onset_s() or 0.0)
-    rows = (t_loop >= 0.0) & (t_loop <= hold.duration_s + 1e-9)
-    return hold.loop["band_lo_n"][rows], hold.loop["band_hi_n"][rows]
 
 
 def plot_scenarios(comparison: ScenarioComparison, path: str | Path) -> Path:
@@ -65,7 +57,7 @@ def plot_scenarios(comparison: ScenarioComparison, path: str | Path) -> Path:
                      label=f"true force, {est}")
             bottom.plot(hold.t_s[idx], (hold.estimate_n - hold.truth_n)[idx], color=color,
                         lw=1.0, label=est)
-            band_lo, band_hi = _band_rows(hold)
+            band_lo, band_hi = hold.series("band_lo_n"), hold.series("band_hi_n")
             if np.isfinite(band_lo).any():
                 bottom.fill_between(hold.t_s[idx], (band_lo - hold.truth_n)[idx],
                                     (band_hi - hold.truth_n)[idx], color=color, alpha=0.2,
