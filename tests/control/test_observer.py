@@ -180,10 +180,15 @@ def test_short_closed_loop_hold_with_observer_and_profiles() -> None:
     assert est.size > 100
 
 
-def _scaled_shares(model: ObserverModel, share: float) -> ObserverModel:
-    arrays = {name: np.array(getattr(model, name)) for name in (
+def _arrays(model: ObserverModel) -> dict[str, np.ndarray]:
+    """A model's arrays as a file written before the share spread would hold them."""
+    return {name: np.array(getattr(model, name)) for name in (
         "temps_c_", "tau_ref_s_", "log_shift_", "branch_share_", "log_stiffness_",
         "band_t_s_", "band_rel_", "onset_rel_")}
+
+
+def _scaled_shares(model: ObserverModel, share: float) -> ObserverModel:
+    arrays = _arrays(model)
     arrays["branch_share_"] = arrays["branch_share_"] * share
     return ObserverModel.from_arrays(arrays, model.get_params())
 
@@ -307,9 +312,7 @@ def test_band_widens_after_the_fit_by_what_a_share_error_would_move_the_estimate
 
     from relaxgrip.control.estimators import ForceEstimate
 
-    arrays = {name: np.array(getattr(_model(), name)) for name in (
-        "temps_c_", "tau_ref_s_", "log_shift_", "branch_share_", "log_stiffness_",
-        "band_t_s_", "band_rel_", "onset_rel_")}
+    arrays = _arrays(_model())
     no_spread = ObserverModel.from_arrays(arrays, ObserverModel().get_params())
     arrays["share_spread_"] = np.full(4, 0.1)
     model = ObserverModel.from_arrays(arrays, ObserverModel().get_params())
@@ -349,9 +352,7 @@ def test_band_widens_after_the_fit_by_what_a_share_error_would_move_the_estimate
 
 
 def test_share_spread_is_saved_and_checked(tmp_path: Path) -> None:
-    arrays = {name: np.array(getattr(_model(), name)) for name in (
-        "temps_c_", "tau_ref_s_", "log_shift_", "branch_share_", "log_stiffness_",
-        "band_t_s_", "band_rel_", "onset_rel_")}
+    arrays = _arrays(_model())
     arrays["share_spread_"] = np.array([0.05, 0.1, 0.15, 0.2])
     model = ObserverModel.from_arrays(arrays, ObserverModel().get_params())
     save_observer(tmp_path / "m", model, {})

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.controlled_hold import HoldResult
-from relaxgrip.experiments.scenarios import SCENARIOS, check_scenarios, scenario_hold
+from relaxgrip.experiments.scenarios import SCENARIOS, check_scenarios, scenario_holds
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
 
@@ -156,13 +156,8 @@ def calibrate_band(observer: ObserverModel, seeds: Sequence[int],
         raise InputError("calibrating the band needs at least one seed")
     scenarios = check_scenarios(scenarios)
     jobs = [(name, seed) for name in scenarios for seed in seeds]
-    args = [(name, seed, duration_s, models, observer) for name, seed in jobs]
-    if n_jobs > 1 and len(args) > 1:
-        from joblib import Parallel, delayed
-
-        holds = Parallel(n_jobs=min(n_jobs, len(args)))(delayed(_hold)(a) for a in args)
-    else:
-        holds = [_hold(a) for a in args]
+    holds = scenario_holds([("observer", name, seed) for name, seed in jobs], duration_s,
+                           models, observer, n_jobs)
     used = observer.band_scale
     ratios = [band_ratios(h, used) for h in holds]
     every = np.concatenate(ratios)
@@ -180,11 +175,3 @@ def calibrate_band(observer: ObserverModel, seeds: Sequence[int],
     return BandCalibration(scale, observer.band_level, int(every.size), list(seeds), used,
                            report)
 
-
-def _hold(args: tuple[str, int, float, ModelBundle | None, ObserverModel]) -> HoldResult:
-    """One scenario's hold in a worker (OpenCV on one thread)."""
-    import cv2
-
-    cv2.setNumThreads(1)
-    name, seed, duration_s, models, observer = args
-    return scenario_hold("observer", name, seed, duration_s, models, observer)

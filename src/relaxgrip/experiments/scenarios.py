@@ -28,7 +28,7 @@ from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
 
 __all__ = ["SCENARIOS", "Scenario", "ScenarioComparison", "check_scenarios",
-           "compare_scenarios", "scenario_hold"]
+           "compare_scenarios", "scenario_hold", "scenario_holds"]
 
 
 @dataclass(frozen=True)
@@ -157,13 +157,29 @@ class ScenarioComparison:
         }
 
 
-def _one(args: tuple[str, str, int, float, ModelBundle | None, ObserverModel | None]
-         ) -> HoldResult:
+#: One hold to run: estimator, scenario name, seed.
+Run = tuple[str, str, int]
+
+
+def _one(args: tuple[Run, float, ModelBundle | None, ObserverModel | None]) -> HoldResult:
+    """One scenario's hold in a worker (OpenCV on one thread)."""
     import cv2
 
     cv2.setNumThreads(1)
-    estimator, name, seed, duration_s, models, observer = args
+    (estimator, name, seed), duration_s, models, observer = args
     return scenario_hold(estimator, name, seed, duration_s, models, observer)
+
+
+def scenario_holds(runs: Sequence[Run], duration_s: float = PAPER_DURATION_S,
+                   models: ModelBundle | None = None, observer: ObserverModel | None = None,
+                   n_jobs: int = 1) -> list[HoldResult]:
+    """Each run's :func:`scenario_hold`, in order, ``n_jobs`` at once."""
+    args = [(run, duration_s, models, observer) for run in runs]
+    if n_jobs > 1 and len(args) > 1:
+        from joblib import Parallel, delayed
+
+        return list(Parallel(n_jobs=min(n_jobs, len(args)))(delayed(_one)(a) for a in args))
+    return [_one(a) for a in args]
 
 
 def compare_scenarios(names: Sequence[str] = ("ramp", "step", "push"), seed: int = 0,
@@ -172,16 +188,9 @@ def compare_scenarios(names: Sequence[str] = ("ramp", "step", "push"), seed: int
                       models: ModelBundle | None = None, observer: ObserverModel | None = None,
                       n_jobs: int = 1) -> ScenarioComparison:
     """Run every estimator through every scenario on ``seed`` (``n_jobs`` holds at once)."""
-    names = check_scenarios(names)
-    args = [(est, name, seed, duration_s, models, observer)
-            for name in names for est in estimators]
-    if n_jobs > 1 and len(args) > 1:
-        from joblib import Parallel, delayed
-
-        holds = Parallel(n_jobs=min(n_jobs, len(args)))(delayed(_one)(a) for a in args)
-    else:
-        holds = [_one(a) for a in args]
+    runs = [(est, name, seed) for name in check_scenarios(names) for est in estimators]
+    holds = scenario_holds(runs, duration_s, models, observer, n_jobs)
     out: dict[str, dict[str, HoldResult]] = {}
-    for (est, name, *_), hold in zip(args, holds, strict=True):
+    for (est, name, _), hold in zip(runs, holds, strict=True):
         out.setdefault(name, {})[est] = hold
     return ScenarioComparison(seed, duration_s, out)
