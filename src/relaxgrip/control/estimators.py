@@ -30,7 +30,7 @@ motor encoder, never ground truth.  Each frame it reports a
   steps' own relaxation is left out: superposing it with Eq. 10's single mode
   measured worse on the twin (mean MAE 0.087 against 0.077 N over seeds 0–5;
   0.135 / 0.049 / 0.126 / 0.142 N on seeds 0–3 against 0.047 / 0.035 / 0.052 /
-  0.054 N with today's models).  Growing the RCFN's pose shift as those
+  0.054 N with the shipped models).  Growing the RCFN's pose shift as those
   steps creep (the object gives back 0.9 of the finger's deflection, from the
   dataset's fixed-aperture holds) fed back through the RCFN's share and
   oscillated when it took the share the RCFN predicts (0.151–0.164 N on

@@ -345,8 +345,11 @@ class ObserverModel:
 
     def _group_error(self, group: list[_Hold], log_shift: float
                      ) -> tuple[float, FloatArray, list[float]]:
-        """Normalised squared error of a group at one shift; each sequence's shares (one row
-        per sequence); each stiffness."""
+        """Normalised squared error of a group at one shift, its shares and stiffnesses.
+
+        The shares come one row per sequence (for their mean and for the spread
+        of the relaxing share between runs), the stiffnesses one per sequence.
+        """
         from scipy.optimize import nnls
 
         tau = self.tau_ref_s_ * math.exp(log_shift)
