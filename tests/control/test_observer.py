@@ -156,6 +156,14 @@ def test_cli_rejects_bad_profiles(args: list[str], monkeypatch: pytest.MonkeyPat
     assert len(err.strip().splitlines()) == 1
 
 
+def test_cli_error_echoes_the_input_as_typed(monkeypatch: pytest.MonkeyPatch,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    # ":abc:" is an emoji code to rich: the error must show what the user typed.
+    code, _, err = run_main(["hold", "--disturbance", "push:abc:1"], monkeypatch, capsys)
+    assert code == 2
+    assert "'push:abc:1'" in err
+
+
 def test_band_coverage() -> None:
     truth = np.array([1.0, 2.0, 3.0, 4.0, np.nan])
     lo = np.array([0.5, 2.5, np.nan, 3.0, 0.0])

@@ -18,8 +18,9 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-console = Console()
-err_console = Console(stderr=True)
+# No emoji codes: paths and values the user typed (``push:abc:1``) are printed as typed.
+console = Console(emoji=False)
+err_console = Console(stderr=True, emoji=False)
 
 
 def emit_json(obj: dict[str, Any]) -> None:
