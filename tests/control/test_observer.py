@@ -18,6 +18,7 @@ from relaxgrip.experiments.profiles import (
     parse_target_profile,
     parse_temp_profile,
 )
+from relaxgrip.learning.history import LoadingHistory
 from relaxgrip.learning.observer import (
     ObserverFileError,
     ObserverModel,
@@ -72,6 +73,7 @@ def test_observer_tracks_a_continuous_prony_truth() -> None:
         + sol.y.sum(axis=0)
     est = ObserverEstimator.__new__(ObserverEstimator)
     est.model = model
+    est.history = LoadingHistory(model)
     est.reset = ObserverEstimator.reset.__get__(est)  # type: ignore[method-assign]
     est.icfn = type("Stub", (), {"reset": lambda self: None})()
     est.relax = None
@@ -212,6 +214,7 @@ def _stubbed(model: ObserverModel) -> ObserverEstimator:
     """An observer with the default share-fit settings and a stub ``relax`` (F_inst 5 N)."""
     est = ObserverEstimator.__new__(ObserverEstimator)
     est.model = model
+    est.history = LoadingHistory(model)
     est.icfn = type("Stub", (), {"reset": lambda self: None})()
     est.relax = _RelaxStub()  # type: ignore[assignment]
     est.onset_window_s, est.share_fit_s, est.share_fit_temp_k = 0.6, 280.0, 1.0

@@ -66,15 +66,28 @@ def train(
     out: Annotated[Path, typer.Option("--out", help="Model directory to write.",
                                       show_default=False)],
     seed: Annotated[int, typer.Option("--seed", help="Random state of the training.")] = 0,
+    observer: Annotated[Path | None, typer.Option(
+        "--observer", help="Observer directory whose branch parameters give the loading "
+        "history's retained shares (default: the shipped observer).", show_default=False)
+    ] = None,
+    unrelaxed: Annotated[bool, typer.Option(
+        "--unrelaxed/--no-unrelaxed", help="Also train the ICFN on unrelaxed forces, which "
+        "relax and observer read with the loading history.")] = True,
     json_out: Annotated[bool, typer.Option("--json", help="Print the training summary.")] = False,
 ) -> None:
     """Train the ICFN and the RCFN, selecting each on the validation split."""
     from relaxgrip.learning.datastore import load_dataset
+    from relaxgrip.learning.observer import load_default_observer, load_observer
     from relaxgrip.learning.training import train_models
 
+    if observer is not None and not unrelaxed:
+        raise InputError("--observer gives the unrelaxed ICFN's shares: drop --no-unrelaxed")
     dataset = load_dataset(data)
+    history = None
+    if unrelaxed:
+        history = load_default_observer() if observer is None else load_observer(observer)
     start = time.perf_counter()
-    trained = train_models(dataset, random_state=seed)
+    trained = train_models(dataset, random_state=seed, history=history)
     trained.save(out)
     seconds = time.perf_counter() - start
     if json_out:
@@ -88,6 +101,10 @@ def train(
                       f"{row['params']['alpha']:g}", f"{row['val_mae_n']:.3f}",
                       f"{row['val_rmse_n']:.3f}")
     console.print(table)
+    if (record := trained.training.get("icfn_unrelaxed")) is not None:
+        console.print(f"unrelaxed ICFN (relax, observer): val MAE {record['val_mae_n']:.3f} N "
+                      f"of unrelaxed force, retained share median "
+                      f"{record['retained_share_percentiles']['p50']:.3f}")
     console.print(f"models written to {out}")
 
 

@@ -38,6 +38,14 @@ motor encoder, never ground truth.  Each frame it reports a
   60 s) in the pose shift alone, the mean over seeds 0–23 was 0.059 N
   against 0.060.  The two left-out terms err by +0.06 and +0.10 N and offset
   each other.  The ``observer`` estimator models every mode.
+* With a model directory's unrelaxed ICFN (:mod:`relaxgrip.learning.history`),
+  ``relax`` and ``observer`` read every frame's force as that network's
+  unrelaxed force times the share the finger retains after its loading
+  history, which one frame cannot show: a closing at 3 mm/s, as the
+  controller's, retains more than the dataset's average closing, and the
+  per-frame ICFN read the hold onset 0.07-0.21 N low on average over five
+  training seeds at 5 N (0.43-0.76 N at 8 N).  The baselines keep the
+  paper's per-frame ICFN.
 * ``observer`` (:mod:`relaxgrip.control.observer`): Prony-series branch
   states in reduced time, driven by the measured deflection and temperature,
   for any displacement history and temperature path; started from ``relax``'s
@@ -56,10 +64,16 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from relaxgrip.learning.history import LoadingHistory, UnrelaxedIcfn, features_temp_c
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
-from relaxgrip.perception.features import RcfnFeatures, finger_temperature_c, marker_pose
+from relaxgrip.perception.features import (
+    ICFN_SCHEMA,
+    RcfnFeatures,
+    finger_temperature_c,
+    marker_pose,
+)
 from relaxgrip.perception.pipeline import Percept
 
 __all__ = [
@@ -73,6 +87,7 @@ __all__ = [
 ]
 
 NAN = math.nan
+_DX = ICFN_SCHEMA.index("marker_dx_m")
 #: The closure slopes are measured where the loading estimate is above this share of its end.
 _SLOPE_FORCE_SHARE = 0.5
 FloatArray = NDArray[np.float64]
@@ -150,30 +165,52 @@ class IcfnEstimator:
     ----------
     icfn : ICFN
         A fitted instantaneous contact force network.
+    smoothing_s : float
+        Low-pass time constant of the estimate (s).
+    unrelaxed : UnrelaxedIcfn, optional
+        With it, each frame's reading is the unrelaxed ICFN times the share of
+        its force the finger retains after the loading so far
+        (:mod:`relaxgrip.learning.history`), and ``icfn`` is not used.
+        ``relax`` and ``observer`` read the force this way; the paper's
+        baselines read the per-frame ICFN.
     """
 
     name = "icfn"
     regulates_hold = True
 
-    def __init__(self, icfn: ICFN, smoothing_s: float = 0.2) -> None:
+    def __init__(self, icfn: ICFN, smoothing_s: float = 0.2,
+                 unrelaxed: UnrelaxedIcfn | None = None) -> None:
         if not smoothing_s >= 0:
             raise ValueError(f"smoothing time must be >= 0 s, got {smoothing_s}")
         self.icfn = icfn
         self.smoothing_s = smoothing_s
+        self.unrelaxed = unrelaxed
+        self.history = None if unrelaxed is None else LoadingHistory(unrelaxed.model)
         self.reset()
 
     def reset(self) -> None:
-        """Forget the hold onset and the filter's state."""
+        """Forget the hold onset, the loading history and the filter's state."""
         self._onset_t: float | None = None
         self._onset_f = self._last = NAN
         self._smooth = NAN
         self._t: float | None = None
+        if self.history is not None:
+            self.history.reset()
 
     def instantaneous(self, percept: Percept) -> float:
-        """The ICFN on this frame (N, never negative); nan without features."""
-        if percept.features is None:
+        """The force read on this frame (N, never negative); nan without features.
+
+        Call it once per frame, in order: with an unrelaxed ICFN it advances
+        the loading history.
+        """
+        x = percept.features
+        if x is None:
             return NAN
-        return max(0.0, self.icfn.predict_one(percept.features))
+        if self.unrelaxed is None or self.history is None:
+            return max(0.0, self.icfn.predict_one(x))
+        # The labels' shares were computed from these same measured entries.
+        self.history.advance(percept.t_s, float(x[_DX]), float(features_temp_c(x)))
+        return max(0.0, self.unrelaxed.icfn.predict_one(x)) * self.history.retained()
 
     def smoothed(self, f: float, t_s: float) -> float:
         """First-order low-pass of the per-frame estimate (time constant ``smoothing_s``).
@@ -237,6 +274,9 @@ class RelaxEstimator:
         1.5 s after the onset, the mean is higher again).
     smoothing_s : float
         Low-pass time constant of the ICFN estimate before the hold (s).
+    unrelaxed : UnrelaxedIcfn, optional
+        Read the force as the unrelaxed ICFN times the share the loading
+        history retains (:class:`IcfnEstimator`), instead of the per-frame ICFN.
     """
 
     name = "relax"
@@ -244,14 +284,14 @@ class RelaxEstimator:
 
     def __init__(self, icfn: ICFN, rcfn: RCFN, stiffness_window_s: float = 4.0,
                  onset_window_s: float = 0.6, onset_before_s: float = 1.0,
-                 smoothing_s: float = 0.2) -> None:
+                 smoothing_s: float = 0.2, unrelaxed: UnrelaxedIcfn | None = None) -> None:
         if not stiffness_window_s > 0:
             raise ValueError(f"stiffness window must be > 0 s, got {stiffness_window_s}")
         if not (onset_window_s >= 0 and onset_before_s >= 0
                 and onset_window_s + onset_before_s > 0):
             raise ValueError("onset windows must be >= 0 s and not both 0, got "
                              f"{onset_before_s} s before and {onset_window_s} s after")
-        self.icfn = IcfnEstimator(icfn, smoothing_s)
+        self.icfn = IcfnEstimator(icfn, smoothing_s, unrelaxed)
         self.rcfn = rcfn
         self.stiffness_window_s = stiffness_window_s
         self.onset_window_s = onset_window_s
@@ -355,17 +395,24 @@ def _closure_slopes(
 
 
 def make_estimator(kind: EstimatorKind | str, icfn: ICFN, rcfn: RCFN,
-                   observer: ObserverModel | None = None) -> ForceEstimator:
-    """The estimator named ``kind`` on the given models (``observer``: default the shipped one)."""
+                   observer: ObserverModel | None = None,
+                   unrelaxed: UnrelaxedIcfn | None = None) -> ForceEstimator:
+    """The estimator named ``kind`` on the given models.
+
+    ``observer`` defaults to the shipped parameters.  With ``unrelaxed`` (a
+    model directory's :attr:`~relaxgrip.learning.store.ModelBundle.unrelaxed`),
+    ``relax`` and ``observer`` read the force from the loading history; the
+    baselines ``fixed`` and ``icfn`` always read the paper's per-frame ICFN.
+    """
     kind = EstimatorKind(kind)
     if kind is EstimatorKind.OBSERVER:
         from relaxgrip.control.observer import ObserverEstimator
         from relaxgrip.learning.observer import load_default_observer
 
         return ObserverEstimator(icfn, observer if observer is not None
-                                 else load_default_observer(), rcfn=rcfn)
+                                 else load_default_observer(), rcfn=rcfn, unrelaxed=unrelaxed)
     if kind is EstimatorKind.FIXED:
         return FixedEstimator(icfn)
     if kind is EstimatorKind.ICFN:
         return IcfnEstimator(icfn)
-    return RelaxEstimator(icfn, rcfn)
+    return RelaxEstimator(icfn, rcfn, unrelaxed=unrelaxed)

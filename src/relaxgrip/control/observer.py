@@ -61,19 +61,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relaxgrip.control.estimators import ForceEstimate, IcfnEstimator, RelaxEstimator
+from relaxgrip.learning.history import CONTACT_DEFLECTION_M, LoadingHistory, UnrelaxedIcfn
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
 from relaxgrip.perception.features import finger_temperature_c, marker_pose
 from relaxgrip.perception.pipeline import Percept
-from relaxgrip.physics.viscoelastic import branch_update
 
 __all__ = ["ObserverEstimator"]
 
 NAN = math.nan
 FloatArray = NDArray[np.float64]
-#: Marker deflection that starts the branch states (m): the controller's contact threshold.
-CONTACT_DEFLECTION_M = 3e-5
 
 
 class ObserverEstimator:
@@ -106,6 +104,9 @@ class ObserverEstimator:
         the observer continues from Eq. 10's last value: its own estimate plus
         Eq. 10's mean offset from it between ``anchor_window_s[0]`` and
         ``anchor_window_s[1]`` seconds before the end.
+    unrelaxed : UnrelaxedIcfn, optional
+        Read the force from the loading history, as ``relax`` does
+        (:class:`relaxgrip.control.estimators.IcfnEstimator`).
     """
 
     name = "observer"
@@ -116,7 +117,8 @@ class ObserverEstimator:
                  share_fit_s: float = 280.0, share_fit_temp_k: float = 1.0,
                  share_fit_motor_mm_s: float = 0.3,
                  share_bounds: tuple[float, float] = (0.5, 1.5),
-                 anchor_window_s: tuple[float, float] = (10.0, 2.0)) -> None:
+                 anchor_window_s: tuple[float, float] = (10.0, 2.0),
+                 unrelaxed: UnrelaxedIcfn | None = None) -> None:
         if not (share_fit_s >= 0 and share_fit_temp_k > 0 and share_fit_motor_mm_s > 0):
             raise ValueError("the share fit needs a window >= 0 s and temperature and motor "
                              f"limits > 0, got {share_fit_s} s, {share_fit_temp_k} K, "
@@ -126,10 +128,12 @@ class ObserverEstimator:
         if not anchor_window_s[0] > anchor_window_s[1] >= 0:
             raise ValueError("the share fit's anchor window must start before it ends, got "
                              f"{anchor_window_s[0]} s to {anchor_window_s[1]} s before")
-        self.icfn = IcfnEstimator(icfn, smoothing_s)
+        self.icfn = IcfnEstimator(icfn, smoothing_s, unrelaxed)
         self.model = model
+        self.history = LoadingHistory(model, CONTACT_DEFLECTION_M)
         self.onset_window_s = onset_window_s
-        self.relax = None if rcfn is None else RelaxEstimator(icfn, rcfn, smoothing_s=smoothing_s)
+        self.relax = None if rcfn is None else RelaxEstimator(icfn, rcfn, smoothing_s=smoothing_s,
+                                                              unrelaxed=unrelaxed)
         self.share_fit_s = share_fit_s
         self.share_fit_temp_k = share_fit_temp_k
         self.share_fit_motor_mm_s = share_fit_motor_mm_s
@@ -140,10 +144,8 @@ class ObserverEstimator:
     def reset(self) -> None:
         """Forget the grasp."""
         self.icfn.reset()
-        self.branches_m: FloatArray | None = None  # per unit reference stiffness
-        self.deflection_m = NAN
+        self.history.reset()
         self.temp_c = NAN
-        self._t: float | None = None
         self._onset_t: float | None = None
         self._sum_f = self._sum_u = 0.0
         self.scale_n_per_m = NAN
@@ -175,10 +177,7 @@ class ObserverEstimator:
 
     def unit_force_m(self) -> float:
         """The model's force per unit reference stiffness now (m); nan before contact."""
-        if self.branches_m is None:
-            return NAN
-        k_e, _, _ = self.model.parameters(self.temp_c)
-        return k_e * self.deflection_m + float(self.branches_m.sum())
+        return self.history.unit_force_m()
 
     def advance(self, t_s: float, deflection_m: float, temp_c: float) -> None:
         """Step the branches to ``t_s`` (deflection linear, temperature constant over the step).
@@ -192,24 +191,12 @@ class ObserverEstimator:
         temp_c : float
             Finger temperature over the step (°C).
         """
-        if self.branches_m is None:
-            if deflection_m <= CONTACT_DEFLECTION_M:
-                return
-            _, k_i, tau = self.model.parameters(temp_c)
-            # Contact: the deflection so far arrived within the last frame.
-            self.branches_m, _ = branch_update(np.zeros(k_i.size), deflection_m, 0.0, k_i, tau)
-        elif self._t is not None and t_s > self._t:
-            _, k_i, tau = self.model.parameters(temp_c)
-            self.branches_m, _ = branch_update(self.branches_m, deflection_m - self.deflection_m,
-                                               t_s - self._t, k_i, tau)
-        self.deflection_m, self.temp_c, self._t = deflection_m, temp_c, t_s
+        self.history.advance(t_s, deflection_m, temp_c)
+        self.temp_c = temp_c
 
     def relaxed_m(self) -> float:
         """What the branches have relaxed of the instantaneous response now (m, per unit)."""
-        if self.branches_m is None:
-            return NAN
-        _, k_i, _ = self.model.parameters(self.temp_c)
-        return float(k_i.sum()) * self.deflection_m - float(self.branches_m.sum())
+        return self.history.relaxed_m()
 
     def update(self, percept: Percept, motor_position_mm: float) -> ForceEstimate:
         """Advance the observer: the estimate is the ICFN before the hold, the observer in it."""

@@ -479,11 +479,13 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
         rig = load_rig(backend.removeprefix("serial:"))
         gripper = open_rig_gripper(rig, clock)
         gripper.reset()
-        controller = GraspController(rig.geometry, make_estimator(kind, bundle.icfn, bundle.rcfn))
+        controller = GraspController(rig.geometry, make_estimator(
+            kind, bundle.icfn, bundle.rcfn, unrelaxed=bundle.unrelaxed))
         return LiveSession(gripper, controller, clock, record_dir=record_dir)
     cfg = TwinConfig(object_name=object_name)
     virtual = VirtualClock(clock.now())
-    controller = GraspController(cfg.rig, make_estimator(kind, bundle.icfn, bundle.rcfn),
+    controller = GraspController(cfg.rig, make_estimator(kind, bundle.icfn, bundle.rcfn,
+                                                        unrelaxed=bundle.unrelaxed),
                                  heat=cfg.heat)
     if backend == "emulator":
         from relaxgrip.hardware.emulator import ready_emulated_gripper

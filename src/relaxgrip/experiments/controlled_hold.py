@@ -258,7 +258,8 @@ def run_hold(
     cfg = replace(base, initial_temp_c=temp_c)
     clock = VirtualClock()
     twin = _make_backend(backend, cfg, seed, clock)
-    controller = GraspController(cfg.rig, make_estimator(kind, bundle.icfn, bundle.rcfn, observer),
+    controller = GraspController(cfg.rig, make_estimator(kind, bundle.icfn, bundle.rcfn, observer,
+                                                        unrelaxed=bundle.unrelaxed),
                                  heat=cfg.heat)
     plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False)
     on_step = _scenario(twin, temp_profile, target_profile, disturbance, temp_c, target_n)

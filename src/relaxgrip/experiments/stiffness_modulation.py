@@ -760,7 +760,8 @@ def run_grasp(
     clock = VirtualClock()
     twin = GripperTwin(cfg, seed=seed, clock=clock)
     recorder = _TruthRecorder(twin)
-    controller = GraspController(cfg.rig, make_estimator(est_kind, bundle.icfn, bundle.rcfn),
+    controller = GraspController(cfg.rig, make_estimator(est_kind, bundle.icfn, bundle.rcfn,
+                                                        unrelaxed=bundle.unrelaxed),
                                  heat=cfg.heat)
     plan = GraspPlan(target_n=target_n, mode=kind, hold_s=hold_s, lift_mm=lift_mm,
                      sustain_s=sustain_s, release=False)

@@ -38,7 +38,9 @@ from relaxgrip.fileio import (
     read_npz_entry,
     write_files_atomically,
 )
+from relaxgrip.learning.history import UnrelaxedIcfn
 from relaxgrip.learning.icfn import ICFN
+from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
 from relaxgrip.perception.features import FeatureSchema
 
@@ -60,6 +62,8 @@ FORMAT_VERSION = 1
 MANIFEST_NAME = "manifest.json"
 ICFN_FILE = "icfn.npz"
 RCFN_FILE = "rcfn.npz"
+UNRELAXED_FILE = "icfn_unrelaxed.npz"
+HISTORY_FILE = "history.npz"
 
 
 class ModelFileError(InputError):
@@ -78,11 +82,16 @@ class ModelBundle:
         Fitted relaxation model.
     manifest : dict
         The parsed ``manifest.json``.
+    unrelaxed : UnrelaxedIcfn or None
+        The ICFN on unrelaxed forces and the branch parameters of its labels
+        (:mod:`relaxgrip.learning.history`); None in directories without them,
+        where every estimator reads the paper's ICFN.
     """
 
     icfn: ICFN
     rcfn: RCFN
     manifest: dict[str, Any]
+    unrelaxed: UnrelaxedIcfn | None = None
 
     @property
     def icfn_feature_schema(self) -> FeatureSchema:
@@ -112,6 +121,7 @@ def save_models(
     rcfn_feature_schema: FeatureSchema,
     twin_version: str,
     training: Mapping[str, Any],
+    unrelaxed: UnrelaxedIcfn | None = None,
 ) -> Path:
     """Save both fitted estimators and their manifest to ``directory``.
 
@@ -133,6 +143,9 @@ def save_models(
         JSON-serialisable record of the training: metrics, dataset sizes and
         seeds, selection tables (NumPy scalars and arrays are converted; NaN
         and infinity are not allowed).
+    unrelaxed : UnrelaxedIcfn, optional
+        The ICFN on unrelaxed forces (same feature schema as the ICFN) and its
+        branch parameters, saved beside them.
 
     Returns
     -------
@@ -162,6 +175,23 @@ def save_models(
         )
     icfn_data = npz_bytes(icfn_arrays)
     rcfn_data = npz_bytes(rcfn_arrays)
+    extra: list[tuple[str, bytes]] = []
+    sections: dict[str, Any] = {}
+    if unrelaxed is not None:
+        if unrelaxed.icfn.n_features_in_ != icfn.n_features_in_:
+            raise ValueError(
+                f"the unrelaxed ICFN was fitted on {unrelaxed.icfn.n_features_in_} features "
+                f"but the ICFN on {icfn.n_features_in_}")
+        unrelaxed_data = npz_bytes(unrelaxed.icfn.to_arrays())
+        history_data = npz_bytes(unrelaxed.model.to_arrays())
+        sections = {
+            "icfn_unrelaxed": {"estimator": "ICFN", "params": unrelaxed.icfn.get_params(),
+                               "feature_schema": icfn_feature_schema.to_dict(),
+                               **file_entry(UNRELAXED_FILE, unrelaxed_data)},
+            "history": {"estimator": "ObserverModel", "params": unrelaxed.model.get_params(),
+                        **file_entry(HISTORY_FILE, history_data)},
+        }
+        extra = [(UNRELAXED_FILE, unrelaxed_data), (HISTORY_FILE, history_data)]
     manifest = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
@@ -182,6 +212,7 @@ def save_models(
             "feature_schema": rcfn_feature_schema.to_dict(),
             **file_entry(RCFN_FILE, rcfn_data),
         },
+        **sections,
         "training": dict(training),
     }
     try:
@@ -191,7 +222,8 @@ def save_models(
     directory.mkdir(parents=True, exist_ok=True)
     write_files_atomically(
         directory,
-        [(ICFN_FILE, icfn_data), (RCFN_FILE, rcfn_data), (MANIFEST_NAME, (text + "\n").encode())],
+        [(ICFN_FILE, icfn_data), (RCFN_FILE, rcfn_data), *extra,
+         (MANIFEST_NAME, (text + "\n").encode())],
     )
     return directory / MANIFEST_NAME
 
@@ -220,6 +252,21 @@ def _read_manifest(path: Path) -> dict[str, Any]:
             and len(schema["names"]) == len(schema["units"])
         ):
             raise ModelFileError(f"{path}: manifest '{key}.feature_schema' is malformed")
+    if ("icfn_unrelaxed" in manifest) != ("history" in manifest):
+        raise ModelFileError(f"{path}: manifest has one of 'icfn_unrelaxed' and 'history' "
+                             "but not the other")
+    for key in ("icfn_unrelaxed", "history"):
+        section = manifest.get(key)
+        if section is None:
+            continue
+        if not (isinstance(section, dict) and isinstance(section.get("params"), dict)):
+            raise ModelFileError(f"{path}: manifest '{key}' lacks its params")
+        for field in ("file", "bytes", "sha256"):
+            if field not in section:
+                raise ModelFileError(f"{path}: manifest lacks '{key}.{field}'")
+    if "icfn_unrelaxed" in manifest and (
+            manifest["icfn_unrelaxed"].get("feature_schema") != manifest["icfn"]["feature_schema"]):
+        raise ModelFileError(f"{path}: the unrelaxed ICFN's features differ from the ICFN's")
     return manifest
 
 
@@ -314,4 +361,26 @@ def load_models(
             f"{rcfn_path}: array shape wrong: {rcfn.n_features_in_} features, "
             f"the manifest names {n_rcfn}"
         )
-    return ModelBundle(icfn=icfn, rcfn=rcfn, manifest=manifest)
+    return ModelBundle(icfn=icfn, rcfn=rcfn, manifest=manifest,
+                       unrelaxed=_load_unrelaxed(directory, manifest, n_icfn))
+
+
+def _load_unrelaxed(directory: Path, manifest: Mapping[str, Any],
+                    n_features: int) -> UnrelaxedIcfn | None:
+    """The unrelaxed ICFN and its branch parameters, when the manifest names them."""
+    if "icfn_unrelaxed" not in manifest:
+        return None
+    path, arrays = read_npz_entry(directory, manifest["icfn_unrelaxed"], ModelFileError)
+    try:
+        icfn = ICFN.from_arrays(arrays, manifest["icfn_unrelaxed"]["params"])
+    except (TypeError, ValueError) as exc:
+        raise ModelFileError(f"{path}: {one_line(exc)}") from exc
+    if icfn.n_features_in_ != n_features:
+        raise ModelFileError(f"{path}: array shape wrong: {icfn.n_features_in_} features, "
+                             f"the manifest's schema has {n_features}")
+    path, arrays = read_npz_entry(directory, manifest["history"], ModelFileError)
+    try:
+        model = ObserverModel.from_arrays(arrays, manifest["history"]["params"])
+    except (TypeError, ValueError) as exc:
+        raise ModelFileError(f"{path}: {one_line(exc)}") from exc
+    return UnrelaxedIcfn(icfn, model)

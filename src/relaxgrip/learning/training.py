@@ -14,7 +14,9 @@ import numpy as np
 
 from relaxgrip.errors import InputError
 from relaxgrip.learning.datastore import Dataset
+from relaxgrip.learning.history import UnrelaxedIcfn, retained_shares
 from relaxgrip.learning.icfn import ICFN, select_icfn
+from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN, select_rcfn
 from relaxgrip.learning.store import ModelBundle, load_models, save_models
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
@@ -35,6 +37,9 @@ class TrainedModels:
         Validation scores of every candidate.
     training : dict
         Metadata saved into the model manifest.
+    unrelaxed : UnrelaxedIcfn or None
+        The ICFN on unrelaxed forces (:mod:`relaxgrip.learning.history`), when
+        branch parameters were given.
     """
 
     icfn: ICFN
@@ -42,13 +47,14 @@ class TrainedModels:
     icfn_candidates: list[dict[str, Any]]
     rcfn_candidates: list[dict[str, Any]]
     training: dict[str, Any]
+    unrelaxed: UnrelaxedIcfn | None = None
 
     def save(self, directory: Path) -> Path:
         """Write the models (no pickle) with their manifest."""
         return save_models(
             Path(directory), self.icfn, self.rcfn, icfn_feature_schema=ICFN_SCHEMA,
             rcfn_feature_schema=RCFN_SCHEMA, twin_version=TWIN_VERSION,
-            training=self.training,
+            training=self.training, unrelaxed=self.unrelaxed,
         )
 
 
@@ -58,8 +64,17 @@ def _fingerprint(data: Dataset) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def train_models(data: Dataset, random_state: int = 0) -> TrainedModels:
+def train_models(data: Dataset, random_state: int = 0,
+                 history: ObserverModel | None = None) -> TrainedModels:
     """Fit both models on the training split and select them on the validation split.
+
+    With ``history`` (branch parameters, normally the shipped observer's), a
+    second ICFN is fitted the same way on each sample's force over its
+    retained share (:func:`relaxgrip.learning.history.retained_shares`): the
+    force the finger would carry had it not relaxed while closing, which
+    ``relax`` and ``observer`` read at run time times the share their
+    loading history retains.  The first ICFN stays the paper's, for the
+    baselines.
 
     Raises
     ------
@@ -81,6 +96,8 @@ def train_models(data: Dataset, random_state: int = 0) -> TrainedModels:
                                    time_column=RCFN_SCHEMA.names.index("hold_time_s"))
     rcfn_s = time.perf_counter() - start - icfn_s
     val = icfn.predict(x_val) - y_val
+    unrelaxed, unrelaxed_record = (None, None) if history is None else _fit_unrelaxed(
+        data, history, random_state)
     training = {
         "dataset": {"fingerprint": _fingerprint(data), "seed": data.manifest["spec"]["seed"],
                     "twin_version": data.manifest["twin_version"],
@@ -92,7 +109,33 @@ def train_models(data: Dataset, random_state: int = 0) -> TrainedModels:
                  "candidates": rcfn_table, "fit_s": rcfn_s},
         "random_state": random_state,
     }
-    return TrainedModels(icfn, rcfn, icfn_table, rcfn_table, training)
+    if unrelaxed_record is not None:
+        training["icfn_unrelaxed"] = unrelaxed_record
+    return TrainedModels(icfn, rcfn, icfn_table, rcfn_table, training, unrelaxed)
+
+
+def _fit_unrelaxed(data: Dataset, history: ObserverModel, random_state: int
+                   ) -> tuple[UnrelaxedIcfn, dict[str, Any]]:
+    """The ICFN on unrelaxed forces, selected like the paper's, and its training record."""
+    start = time.perf_counter()
+    rows = data.icfn
+    shares = retained_shares(rows, history)
+    x = rows[list(ICFN_SCHEMA.names)].to_numpy(np.float64)
+    y = rows["force_n"].to_numpy(np.float64) / shares
+    split = rows["split"].to_numpy()
+    train, val = split == "train", split == "val"
+    icfn, table = select_icfn(x[train], y[train], x[val], y[val], random_state=random_state)
+    contact = x[:, ICFN_SCHEMA.index("marker_dx_m")] > 0
+    record = {
+        "train_rows": int(train.sum()), "val_rows": int(val.sum()),
+        "val_mae_n": float(np.mean(np.abs(icfn.predict(x[val]) - y[val]))),
+        "retained_share_percentiles": dict(zip(
+            ("p1", "p50", "p99"),
+            np.percentile(shares[contact], [1, 50, 99]).tolist() if contact.any()
+            else [1.0, 1.0, 1.0], strict=True)),
+        "candidates": table, "fit_s": time.perf_counter() - start,
+    }
+    return UnrelaxedIcfn(icfn, history), record
 
 
 def default_models_dir() -> Path:

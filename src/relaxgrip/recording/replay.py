@@ -62,7 +62,7 @@ def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
     if name not in {k.value for k in EstimatorKind}:
         raise InputError(f"{path}: cannot replay estimator {name!r} (fixed, icfn or relax)")
     perception = Perception(rig_from_dict(session["rig"]))
-    est = make_estimator(name, models.icfn, models.rcfn)
+    est = make_estimator(name, models.icfn, models.rcfn, unrelaxed=models.unrelaxed)
     perception.reset()
     est.reset()
     frames = 0
