@@ -93,6 +93,14 @@ class LoadingHistory:
         self.deflection_m = math.nan
         self.temp_c = math.nan
         self._t: float | None = None
+        self._params_at = math.nan
+        self._params: tuple[float, FloatArray, FloatArray] | None = None
+
+    def _parameters(self, temp_c: float) -> tuple[float, FloatArray, FloatArray]:
+        """The model's parameters at ``temp_c``, kept while it stays (it changes at 1 Hz)."""
+        if self._params is None or temp_c != self._params_at:
+            self._params, self._params_at = self.model.parameters(temp_c), temp_c
+        return self._params
 
     def advance(self, t_s: float, deflection_m: float, temp_c: float) -> None:
         """Step the branches to ``t_s`` (deflection linear, temperature constant over the step).
@@ -103,10 +111,10 @@ class LoadingHistory:
         if self.branches_m is None:
             if not deflection_m > self.contact_deflection_m:
                 return
-            _, k_i, tau = self.model.parameters(temp_c)
+            _, k_i, tau = self._parameters(temp_c)
             self.branches_m, _ = branch_update(np.zeros(k_i.size), deflection_m, 0.0, k_i, tau)
         elif self._t is not None and t_s > self._t:
-            _, k_i, tau = self.model.parameters(temp_c)
+            _, k_i, tau = self._parameters(temp_c)
             self.branches_m, _ = branch_update(self.branches_m, deflection_m - self.deflection_m,
                                                t_s - self._t, k_i, tau)
         self.deflection_m, self.temp_c, self._t = deflection_m, temp_c, t_s
@@ -115,21 +123,21 @@ class LoadingHistory:
         """Force per unit reference stiffness now, ``k_e d + sum F_i`` (m); nan before contact."""
         if self.branches_m is None:
             return math.nan
-        k_e, _, _ = self.model.parameters(self.temp_c)
+        k_e, _, _ = self._parameters(self.temp_c)
         return k_e * self.deflection_m + float(self.branches_m.sum())
 
     def relaxed_m(self) -> float:
         """What the branches have relaxed of the instantaneous response (m, per unit)."""
         if self.branches_m is None:
             return math.nan
-        _, k_i, _ = self.model.parameters(self.temp_c)
+        _, k_i, _ = self._parameters(self.temp_c)
         return float(k_i.sum()) * self.deflection_m - float(self.branches_m.sum())
 
     def retained(self) -> float:
         """The share of the unrelaxed force the finger carries now (1 before contact)."""
         if self.branches_m is None or not self.deflection_m > self.contact_deflection_m:
             return 1.0
-        k_e, k_i, _ = self.model.parameters(self.temp_c)
+        k_e, k_i, _ = self._parameters(self.temp_c)
         stiff = (k_e + float(k_i.sum())) * self.deflection_m
         return (k_e * self.deflection_m + float(self.branches_m.sum())) / stiff
 
