@@ -133,7 +133,7 @@ def _save(directory: Path, fitted: tuple[ICFN, ICFN, RCFN], with_unrelaxed: bool
     save_models(directory, icfn, rcfn, icfn_feature_schema=ICFN_SCHEMA,
                 rcfn_feature_schema=RCFN_SCHEMA, twin_version=TWIN_VERSION,
                 training={"test": True},
-                unrelaxed=UnrelaxedIcfn(unrelaxed, _model()) if with_unrelaxed else None)
+                unrelaxed=UnrelaxedIcfn((unrelaxed, icfn), _model()) if with_unrelaxed else None)
 
 
 def test_the_unrelaxed_icfn_and_its_branch_parameters_round_trip(
@@ -143,7 +143,12 @@ def test_the_unrelaxed_icfn_and_its_branch_parameters_round_trip(
                          rcfn_feature_schema=RCFN_SCHEMA)
     assert bundle.unrelaxed is not None
     x = _features(1e-3)
-    assert bundle.unrelaxed.icfn.predict_one(x) == fitted[1].predict_one(x)
+    assert len(bundle.unrelaxed.members) == 2
+    assert bundle.unrelaxed.predict_one(x) == pytest.approx(
+        0.5 * (fitted[1].predict_one(x) + fitted[0].predict_one(x)))
+    np.testing.assert_allclose(bundle.unrelaxed.predict(np.stack([x, 2 * x])),
+                               [bundle.unrelaxed.predict_one(x),
+                                bundle.unrelaxed.predict_one(2 * x)])
     for name, value in _model().to_arrays().items():
         np.testing.assert_array_equal(bundle.unrelaxed.model.to_arrays()[name], value)
     _save(tmp_path / "without", fitted, with_unrelaxed=False)
@@ -151,7 +156,8 @@ def test_the_unrelaxed_icfn_and_its_branch_parameters_round_trip(
     assert not (tmp_path / "without" / "icfn_unrelaxed.npz").exists()
 
 
-@pytest.mark.parametrize("damage", ["drop_history", "drop_file", "corrupt", "schema"])
+@pytest.mark.parametrize("damage", ["drop_history", "drop_file", "corrupt", "schema",
+                                    "members", "member_arrays"])
 def test_a_damaged_unrelaxed_section_is_refused_in_one_line(
         tmp_path: Path, fitted: tuple[ICFN, ICFN, RCFN], damage: str) -> None:
     _save(tmp_path, fitted)
@@ -163,8 +169,13 @@ def test_a_damaged_unrelaxed_section_is_refused_in_one_line(
         (tmp_path / "history.npz").unlink()
     elif damage == "corrupt":
         (tmp_path / "icfn_unrelaxed.npz").write_bytes(b"not an npz")
-    else:
+    elif damage == "schema":
         manifest["icfn_unrelaxed"]["feature_schema"]["version"] = "other"
+    elif damage == "members":
+        manifest["icfn_unrelaxed"]["params"] = {"members": "none"}
+    else:  # a third member the file has no arrays for
+        members = manifest["icfn_unrelaxed"]["params"]["members"]
+        members.append(members[0])
     manifest_path.write_text(json.dumps(manifest))
     with pytest.raises(ModelFileError) as info:
         load_models(tmp_path)
@@ -179,7 +190,7 @@ def test_the_estimate_is_the_unrelaxed_icfn_times_the_retained_share(
         fitted: tuple[ICFN, ICFN, RCFN]) -> None:
     icfn, unrelaxed, _ = fitted
     model = _model()
-    est = IcfnEstimator(icfn, unrelaxed=UnrelaxedIcfn(unrelaxed, model))
+    est = IcfnEstimator(icfn, unrelaxed=UnrelaxedIcfn((unrelaxed,), model))
     twin = LoadingHistory(model)
     for i, t in enumerate(np.arange(0.0, 20.0, 1 / 30)):
         d = min(1e-4 * float(t), 1.5e-3)
@@ -196,10 +207,20 @@ def test_the_estimate_is_the_unrelaxed_icfn_times_the_retained_share(
     assert est.history.branches_m is None
 
 
+def test_an_ensemble_needs_members_that_agree(fitted: tuple[ICFN, ICFN, RCFN]) -> None:
+    with pytest.raises(ValueError, match="at least one member"):
+        UnrelaxedIcfn((), _model())
+    rng = np.random.default_rng(1)
+    other = ICFN(hidden_layer_sizes=(4,), max_iter=50).fit(rng.normal(size=(40, 3)),
+                                                           rng.normal(size=40))
+    with pytest.raises(ValueError, match="different feature counts"):
+        UnrelaxedIcfn((fitted[0], other), _model())
+
+
 def test_relax_and_observer_read_the_history_and_the_baselines_never_do(
         fitted: tuple[ICFN, ICFN, RCFN]) -> None:
     icfn, unrelaxed, rcfn = fitted
-    pair = UnrelaxedIcfn(unrelaxed, _model())
+    pair = UnrelaxedIcfn((unrelaxed,), _model())
     relax = make_estimator("relax", icfn, rcfn, unrelaxed=pair)
     assert isinstance(relax, RelaxEstimator)
     assert relax.icfn.unrelaxed is pair

@@ -83,7 +83,7 @@ class ModelBundle:
     manifest : dict
         The parsed ``manifest.json``.
     unrelaxed : UnrelaxedIcfn or None
-        The ICFN on unrelaxed forces and the branch parameters of its labels
+        The ICFN ensemble on unrelaxed forces and the branch parameters of its labels
         (:mod:`relaxgrip.learning.history`); None in directories without them,
         where every estimator reads the paper's ICFN.
     """
@@ -178,14 +178,17 @@ def save_models(
     extra: list[tuple[str, bytes]] = []
     sections: dict[str, Any] = {}
     if unrelaxed is not None:
-        if unrelaxed.icfn.n_features_in_ != icfn.n_features_in_:
+        if unrelaxed.n_features_in_ != icfn.n_features_in_:
             raise ValueError(
-                f"the unrelaxed ICFN was fitted on {unrelaxed.icfn.n_features_in_} features "
+                f"the unrelaxed ICFN was fitted on {unrelaxed.n_features_in_} features "
                 f"but the ICFN on {icfn.n_features_in_}")
-        unrelaxed_data = npz_bytes(unrelaxed.icfn.to_arrays())
+        unrelaxed_data = npz_bytes({f"member{i}/{name}": value
+                                    for i, member in enumerate(unrelaxed.members)
+                                    for name, value in member.to_arrays().items()})
         history_data = npz_bytes(unrelaxed.model.to_arrays())
         sections = {
-            "icfn_unrelaxed": {"estimator": "ICFN", "params": unrelaxed.icfn.get_params(),
+            "icfn_unrelaxed": {"estimator": "ICFN ensemble", "params": {
+                "members": [member.get_params() for member in unrelaxed.members]},
                                "feature_schema": icfn_feature_schema.to_dict(),
                                **file_entry(UNRELAXED_FILE, unrelaxed_data)},
             "history": {"estimator": "ObserverModel", "params": unrelaxed.model.get_params(),
@@ -371,16 +374,27 @@ def _load_unrelaxed(directory: Path, manifest: Mapping[str, Any],
     if "icfn_unrelaxed" not in manifest:
         return None
     path, arrays = read_npz_entry(directory, manifest["icfn_unrelaxed"], ModelFileError)
-    try:
-        icfn = ICFN.from_arrays(arrays, manifest["icfn_unrelaxed"]["params"])
-    except (TypeError, ValueError) as exc:
-        raise ModelFileError(f"{path}: {one_line(exc)}") from exc
-    if icfn.n_features_in_ != n_features:
-        raise ModelFileError(f"{path}: array shape wrong: {icfn.n_features_in_} features, "
-                             f"the manifest's schema has {n_features}")
+    params = manifest["icfn_unrelaxed"]["params"].get("members")
+    if not (isinstance(params, list) and params and all(isinstance(p, dict) for p in params)):
+        raise ModelFileError(f"{path}: manifest 'icfn_unrelaxed.params.members' is not a "
+                             "list of parameter objects")
+    members = []
+    for i, member_params in enumerate(params):
+        prefix = f"member{i}/"
+        member_arrays = {k.removeprefix(prefix): v for k, v in arrays.items()
+                         if k.startswith(prefix)}
+        try:
+            member = ICFN.from_arrays(member_arrays, member_params)
+        except (TypeError, ValueError) as exc:
+            raise ModelFileError(f"{path}: member {i}: {one_line(exc)}") from exc
+        if member.n_features_in_ != n_features:
+            raise ModelFileError(f"{path}: array shape wrong: member {i} reads "
+                                 f"{member.n_features_in_} features, the manifest's schema "
+                                 f"has {n_features}")
+        members.append(member)
     path, arrays = read_npz_entry(directory, manifest["history"], ModelFileError)
     try:
         model = ObserverModel.from_arrays(arrays, manifest["history"]["params"])
     except (TypeError, ValueError) as exc:
         raise ModelFileError(f"{path}: {one_line(exc)}") from exc
-    return UnrelaxedIcfn(icfn, model)
+    return UnrelaxedIcfn(tuple(members), model)

@@ -58,6 +58,10 @@ class TrainedModels:
         )
 
 
+#: Members of the unrelaxed ICFN (:class:`relaxgrip.learning.history.UnrelaxedIcfn`).
+UNRELAXED_MEMBERS = 5
+
+
 def _fingerprint(data: Dataset) -> str:
     """Short hash of a dataset's manifest: which data a model was trained on."""
     text = json.dumps({k: v for k, v in data.manifest.items() if k != "build"}, sort_keys=True)
@@ -116,7 +120,12 @@ def train_models(data: Dataset, random_state: int = 0,
 
 def _fit_unrelaxed(data: Dataset, history: ObserverModel, random_state: int
                    ) -> tuple[UnrelaxedIcfn, dict[str, Any]]:
-    """The ICFN on unrelaxed forces, selected like the paper's, and its training record."""
+    """The ICFN on unrelaxed forces and its training record.
+
+    The hyperparameters are selected like the paper's ICFN's (seed
+    ``random_state``); the other members are the selected network refitted with
+    the next seeds.
+    """
     start = time.perf_counter()
     rows = data.icfn
     shares = retained_shares(rows, history)
@@ -124,18 +133,25 @@ def _fit_unrelaxed(data: Dataset, history: ObserverModel, random_state: int
     y = rows["force_n"].to_numpy(np.float64) / shares
     split = rows["split"].to_numpy()
     train, val = split == "train", split == "val"
-    icfn, table = select_icfn(x[train], y[train], x[val], y[val], random_state=random_state)
+    first, table = select_icfn(x[train], y[train], x[val], y[val], random_state=random_state)
+    members = [first]
+    for seed in range(random_state + 1, random_state + UNRELAXED_MEMBERS):
+        members.append(ICFN(**{**first.get_params(), "random_state": seed}).fit(
+            x[train], y[train]))
+    unrelaxed = UnrelaxedIcfn(tuple(members), history)
     contact = x[:, ICFN_SCHEMA.index("marker_dx_m")] > 0
     record = {
-        "train_rows": int(train.sum()), "val_rows": int(val.sum()),
-        "val_mae_n": float(np.mean(np.abs(icfn.predict(x[val]) - y[val]))),
+        "train_rows": int(train.sum()), "val_rows": int(val.sum()), "members": len(members),
+        "val_mae_n": float(np.mean(np.abs(unrelaxed.predict(x[val]) - y[val]))),
+        "member_val_mae_n": [float(np.mean(np.abs(m.predict(x[val]) - y[val])))
+                             for m in members],
         "retained_share_percentiles": dict(zip(
             ("p1", "p50", "p99"),
             np.percentile(shares[contact], [1, 50, 99]).tolist() if contact.any()
             else [1.0, 1.0, 1.0], strict=True)),
         "candidates": table, "fit_s": time.perf_counter() - start,
     }
-    return UnrelaxedIcfn(icfn, history), record
+    return unrelaxed, record
 
 
 def default_models_dir() -> Path:
