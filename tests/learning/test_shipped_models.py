@@ -4,11 +4,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from relaxgrip.learning.build import build_dataset
 from relaxgrip.learning.datasets import DatasetSpec
 from relaxgrip.learning.datastore import load_dataset
 from relaxgrip.learning.evaluation import evaluate
-from relaxgrip.learning.training import default_models_dir, load_default_models
+from relaxgrip.learning.observer import load_default_observer
+from relaxgrip.learning.training import (
+    UNRELAXED_MEMBERS,
+    default_models_dir,
+    load_default_models,
+)
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 from relaxgrip.twin import TWIN_VERSION
 
@@ -20,6 +27,17 @@ def test_shipped_models_load_with_the_current_schemas() -> None:
     assert bundle.rcfn.n_features_in_ == len(RCFN_SCHEMA)
     assert bundle.manifest["training"]["dataset"]["counts"]["icfn_samples"] == 8258
     assert (default_models_dir() / "manifest.json").is_file()
+
+
+def test_shipped_models_read_the_loading_history_with_the_shipped_observers_branches() -> None:
+    bundle = load_default_models()
+    assert bundle.unrelaxed is not None
+    assert len(bundle.unrelaxed.members) == UNRELAXED_MEMBERS
+    observer = load_default_observer()
+    for temp_c in (25.0, 40.0, 58.0):
+        for got, want in zip(bundle.unrelaxed.model.parameters(temp_c),
+                             observer.parameters(temp_c), strict=True):
+            np.testing.assert_allclose(got, want)
 
 
 def test_shipped_models_meet_their_accuracy_on_a_fresh_dataset(tmp_path: Path) -> None:
