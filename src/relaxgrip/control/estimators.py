@@ -43,8 +43,8 @@ motor encoder, never ground truth.  Each frame it reports a
   unrelaxed force times the share the finger retains after its loading
   history, which one frame cannot show: a closing at 3 mm/s, as the
   controller's, retains more than the dataset's average closing, and the
-  per-frame ICFN read the hold onset 0.07-0.21 N low on average over five
-  training seeds at 5 N (0.43-0.76 N at 8 N).  The baselines keep the
+  per-frame ICFN read the hold onset 0.07-0.21 N low on average for four
+  of five training seeds at 5 N (0.43-0.76 N at 8 N).  The baselines keep the
   paper's per-frame ICFN.
 * ``observer`` (:mod:`relaxgrip.control.observer`): Prony-series branch
   states in reduced time, driven by the measured deflection and temperature,

@@ -8,7 +8,7 @@ their average: on the twin (force ball, 40 °C, 80 mm) it read 0.13-0.32 N
 low at 5-7 N on closings at 2 mm/s and up to 0.1 N high at 0.5 mm/s, by
 how much depending on its training seed.  The controller closes at up to
 3 mm/s, so the hold onset, which every later estimate of ``relax`` builds
-on, read 0.07-0.21 N low on average over five training seeds.
+on, read 0.07-0.21 N low on average for four of five training seeds.
 
 The remedy splits the estimate in two.  :class:`LoadingHistory` integrates the
 finger's Maxwell branches (the observer's parameters,
