@@ -22,8 +22,21 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     assert manifest["counts"]["rcfn_sequences"] == 30
     proc = run_cli("train", "--data", data, "--out", models, "--json")
     assert proc.returncode == 0, proc.stderr
-    assert json.loads(proc.stdout)["icfn"]["train_rows"] > 100
+    summary = json.loads(proc.stdout)
+    assert summary["icfn"]["train_rows"] > 100
+    # Beside the paper's ICFN, the unrelaxed one on the shipped observer's branches.
+    assert summary["icfn_unrelaxed"]["members"] == 5
+    assert 0.5 < summary["icfn_unrelaxed"]["retained_share_percentiles"]["p50"] <= 1.0
+    assert (models / "icfn_unrelaxed.npz").is_file()
     return data, models
+
+
+def test_train_without_the_unrelaxed_icfn(trained: tuple[Path, Path], tmp_path: Path) -> None:
+    proc = run_cli("train", "--data", trained[0], "--out", tmp_path / "m", "--no-unrelaxed",
+                   "--json")
+    assert proc.returncode == 0, proc.stderr
+    assert "icfn_unrelaxed" not in json.loads(proc.stdout)
+    assert not (tmp_path / "m" / "icfn_unrelaxed.npz").exists()
 
 
 def test_evaluate_json_has_the_paper_metrics(trained: tuple[Path, Path], tmp_path: Path) -> None:
@@ -61,6 +74,10 @@ def test_evaluate_table(
          "--backend must be one of"),
         (["dataset", "build", "--out", "{tmp}/d", "--seed", "-2"], "seed must be >= 0"),
         (["train", "--data", "{tmp}/none", "--out", "{tmp}/m"], "no such dataset directory"),
+        (["train", "--data", "{data}", "--out", "{tmp}/m", "--observer", "{tmp}/none"],
+         "not an observer model directory"),
+        (["train", "--data", "{data}", "--out", "{tmp}/m", "--observer", "{tmp}",
+          "--no-unrelaxed"], "drop --no-unrelaxed"),
         (["evaluate", "--data", "{tmp}/none"], "no such dataset directory"),
         (["evaluate", "--data", "{data}", "--models", "{tmp}"], "not a relaxgrip model directory"),
         (["evaluate", "--data", "{data}", "--split", "holdout"], "--split must be"),

@@ -17,6 +17,7 @@ from relaxgrip.control.estimators import (
     RelaxEstimator,
     make_estimator,
 )
+from relaxgrip.errors import InputError
 from relaxgrip.learning.history import (
     LoadingHistory,
     UnrelaxedIcfn,
@@ -236,3 +237,35 @@ def test_relax_and_observer_read_the_history_and_the_baselines_never_do(
     plain = make_estimator("relax", icfn, rcfn)
     assert plain.icfn.instantaneous(_percept(0.0, x)) == max(  # type: ignore[attr-defined]
         0.0, icfn.predict_one(x))
+
+
+def test_training_leaves_out_rows_that_retain_little_of_their_unrelaxed_force(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from relaxgrip.learning import icfn as icfn_module
+    from relaxgrip.learning import training
+
+    monkeypatch.setattr(icfn_module, "ICFN_CANDIDATES",
+                        ({"hidden_layer_sizes": (4,), "max_iter": 50},))
+    monkeypatch.setattr(training, "UNRELAXED_MEMBERS", 2)
+    frames = []
+    for episode in range(6):
+        # Close over 2 s, hold 300 s, then unload to a tenth within a second.
+        t = np.concatenate([np.linspace(0.0, 2.0, 20), np.linspace(10.0, 302.0, 20),
+                            [302.5, 303.0]])
+        d = np.concatenate([np.linspace(0.0, 1e-3, 20), np.full(20, 1e-3), [5e-4, 1e-4]])
+        rows = pd.DataFrame([_features(v) for v in d], columns=list(ICFN_SCHEMA.names))
+        rows.insert(0, "t_s", t)
+        rows.insert(0, "episode", episode)
+        rows["force_n"] = 5000.0 * d
+        rows["split"] = "train" if episode < 4 else "val"
+        frames.append(rows)
+    data = SimpleNamespace(icfn=pd.concat(frames, ignore_index=True))
+    shares = retained_shares(data.icfn, _model())
+    assert shares.min() < training.MIN_RETAINED_SHARE  # the unloading
+    unrelaxed, record = training._fit_unrelaxed(data, _model(), 0)  # type: ignore[arg-type]
+    assert len(unrelaxed.members) == 2
+    assert record["rows_left_out"] == int((shares < training.MIN_RETAINED_SHARE).sum()) > 0
+    assert record["train_rows"] + record["val_rows"] + record["rows_left_out"] == len(data.icfn)
+    data.icfn["split"] = "test"
+    with pytest.raises(InputError, match="--no-unrelaxed"):
+        training._fit_unrelaxed(data, _model(), 0)  # type: ignore[arg-type]

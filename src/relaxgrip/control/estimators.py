@@ -210,7 +210,8 @@ class IcfnEstimator:
             return max(0.0, self.icfn.predict_one(x))
         # The labels' shares were computed from these same measured entries.
         self.history.advance(percept.t_s, float(x[_DX]), float(features_temp_c(x)))
-        return max(0.0, self.unrelaxed.predict_one(x)) * self.history.retained()
+        # An unloading can take the branches below zero: the force is then none.
+        return max(0.0, self.unrelaxed.predict_one(x)) * max(0.0, self.history.retained())
 
     def smoothed(self, f: float, t_s: float) -> float:
         """First-order low-pass of the per-frame estimate (time constant ``smoothing_s``).

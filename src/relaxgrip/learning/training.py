@@ -58,6 +58,8 @@ class TrainedModels:
         )
 
 
+#: Rows retaining less of their unrelaxed force than this are not unrelaxed-ICFN labels.
+MIN_RETAINED_SHARE = 0.3
 #: Members of the unrelaxed ICFN (:class:`relaxgrip.learning.history.UnrelaxedIcfn`).
 UNRELAXED_MEMBERS = 5
 
@@ -132,7 +134,14 @@ def _fit_unrelaxed(data: Dataset, history: ObserverModel, random_state: int
     x = rows[list(ICFN_SCHEMA.names)].to_numpy(np.float64)
     y = rows["force_n"].to_numpy(np.float64) / shares
     split = rows["split"].to_numpy()
-    train, val = split == "train", split == "val"
+    # Where the finger retains little of its unrelaxed force (unloading after a long
+    # hold, in recordings) the label divides by almost nothing: those rows are left out.
+    kept = shares >= MIN_RETAINED_SHARE
+    train, val = kept & (split == "train"), kept & (split == "val")
+    if not (train.any() and val.any()):
+        raise InputError("no ICFN train or val rows retain enough of their unrelaxed force "
+                         f"(share >= {MIN_RETAINED_SHARE}) to train the unrelaxed ICFN: "
+                         "train with --no-unrelaxed")
     first, table = select_icfn(x[train], y[train], x[val], y[val], random_state=random_state)
     members = [first]
     for seed in range(random_state + 1, random_state + UNRELAXED_MEMBERS):
@@ -142,6 +151,7 @@ def _fit_unrelaxed(data: Dataset, history: ObserverModel, random_state: int
     contact = x[:, ICFN_SCHEMA.index("marker_dx_m")] > 0
     record = {
         "train_rows": int(train.sum()), "val_rows": int(val.sum()), "members": len(members),
+        "rows_left_out": int((~kept).sum()),
         "val_mae_n": float(np.mean(np.abs(unrelaxed.predict(x[val]) - y[val]))),
         "member_val_mae_n": [float(np.mean(np.abs(m.predict(x[val]) - y[val])))
                              for m in members],
