@@ -98,13 +98,13 @@ def test_short_hold_over_the_pty_matches_the_twin() -> None:
     assert abs(a["mean_signed_error_n"] - b["mean_signed_error_n"]) < 0.02
     # The loop decelerates into the target, so an estimate a hundredth of a newton apart
     # (the encoder's quantisation over the wire) moves the onset by a few frames.
-    onsets = (twin.loop.hold_onset_s(), emu.loop.hold_onset_s())
-    assert onsets[0] is not None
-    assert onsets[1] is not None
-    assert abs(onsets[0] - onsets[1]) < 0.5
-    at_onset = [float(np.interp(t, r.loop["t_s"], r.loop["truth_force_n"]))
-                for t, r in zip(onsets, (twin, emu), strict=True)]
-    assert abs(at_onset[0] - at_onset[1]) < 0.05
+    on_twin, on_emu = twin.loop.hold_onset_s(), emu.loop.hold_onset_s()
+    assert on_twin is not None
+    assert on_emu is not None
+    assert abs(on_twin - on_emu) < 0.5
+    f_twin = float(np.interp(on_twin, twin.loop["t_s"], twin.loop["truth_force_n"]))
+    f_emu = float(np.interp(on_emu, emu.loop["t_s"], emu.loop["truth_force_n"]))
+    assert abs(f_twin - f_emu) < 0.05
     n = min(twin.truth_n.size, emu.truth_n.size)
     assert float(np.max(np.abs(twin.truth_n[:n] - emu.truth_n[:n]))) < 0.1
     t_end = float(emu.loop["t_s"][-1])
