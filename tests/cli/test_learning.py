@@ -49,6 +49,11 @@ def test_evaluate_json_has_the_paper_metrics(trained: tuple[Path, Path], tmp_pat
     assert set(out["rcfn"]) >= {"nrmse_mean", "nrmse_median", "auc_rel_mean", "auc_rel_median",
                                 "corr_mean"}
     assert set(out["repeatability"]) == {"40", "50", "60"}
+    # The force relax reads: the unrelaxed ensemble times each sample's retained share.
+    history = out["icfn_history"]
+    assert history["samples"] == out["icfn"]["samples"]
+    assert set(history) == set(out["icfn"])
+    assert 0.0 < history["mae_n"] < float("inf")  # 200 training rows: accuracy is not the point
     for group in out["repeatability"].values():
         assert set(group) >= {"nrmse_mean", "nrmse_std", "auc_rel_mean", "corr_mean",
                               "gt_end_std_n"}
@@ -63,6 +68,7 @@ def test_evaluate_table(
     code, out, _ = run_main(["evaluate", "--data", data, "--models", models], monkeypatch, capsys)
     assert code == 0
     assert "ICFN MAE" in out
+    assert "loading history" in out
     assert "repeatability 50 °C" in out
 
 

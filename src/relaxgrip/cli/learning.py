@@ -159,6 +159,10 @@ def evaluate(
                                        f"{rcfn['auc_rel_median']:.3f} [0.065 / 0.049]"),
         ("RCFN curve correlation", f"{rcfn['corr_mean']:.4f} [0.990]"),
     ]
+    if (history := s.get("icfn_history")) is not None:
+        rows.insert(3 + len(icfn["median_ae_n"]), (
+            "ICFN × loading history (relax, observer) MAE / RMSE / R²",
+            f"{history['mae_n']:.3f} N / {history['rmse_n']:.3f} N / {history['r2']:.3f}"))
     for temp, g in s["repeatability"].items():
         rows.append((f"repeatability {temp} °C", f"NRMSE {g['nrmse_mean']:.3f}±{g['nrmse_std']:.3f}"
                      f", AUC {g['auc_rel_mean']:.3f}, corr {g['corr_mean']:.3f}, "

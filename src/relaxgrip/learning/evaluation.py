@@ -8,6 +8,9 @@
   ``F0`` is the true onset force, which isolates the RCFN as the paper's
   curve metrics do; the same curves started from the ICFN's estimate of the
   onset force are scored too.  NRMSE, AUC_rel, correlation and Amp per curve.
+* The force ``relax`` and ``observer`` read (beyond the paper), where the
+  models have an unrelaxed ICFN: its ensemble times each sample's retained
+  share (:mod:`relaxgrip.learning.history`), scored like the ICFN.
 * Repeatability: the 40, 50 and 60 °C groups of six holds from the same start
   force: mean and spread of the curve metrics, and the spread of the true end
   force.
@@ -30,6 +33,7 @@ from relaxgrip.learning.datasets import (
     REPEATS_PER_GROUP,
 )
 from relaxgrip.learning.datastore import Dataset
+from relaxgrip.learning.history import retained_shares
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.metrics import (
     amplitude,
@@ -93,6 +97,9 @@ class Evaluation:
         Every reconstructed hold.
     repeat_groups : dict
         Temperature (``"40"``…) to the curves of its repeatability group.
+    history_predicted_n : ndarray or None
+        The force read from the loading history on the ICFN samples (the
+        unrelaxed ICFN times the retained share); None without one.
     """
 
     split: str
@@ -100,12 +107,17 @@ class Evaluation:
     icfn_predicted_n: FloatArray
     curves: list[CurveScore]
     repeat_groups: dict[str, list[CurveScore]] = field(default_factory=dict)
+    history_predicted_n: FloatArray | None = None
 
     def icfn_summary(self) -> dict[str, Any]:
         """ICFN figures."""
-        p, t = self.icfn_predicted_n, self.icfn_truth_n
-        return {"mae_n": mae(p, t), "rmse_n": rmse(p, t), "r2": r2(p, t),
-                "median_ae_n": median_ae_by_range(p, t), "samples": int(t.size)}
+        return _force_scores(self.icfn_predicted_n, self.icfn_truth_n)
+
+    def history_summary(self) -> dict[str, Any] | None:
+        """The same figures for the force read from the loading history (None without it)."""
+        if self.history_predicted_n is None:
+            return None
+        return _force_scores(self.history_predicted_n, self.icfn_truth_n)
 
     def rcfn_summary(self) -> dict[str, Any]:
         """RCFN figures over the held-out curves."""
@@ -141,8 +153,17 @@ class Evaluation:
 
     def to_dict(self) -> dict[str, Any]:
         """The ``relaxgrip evaluate --json`` object."""
-        return {"split": self.split, "icfn": self.icfn_summary(), "rcfn": self.rcfn_summary(),
-                "repeatability": self.repeatability_summary()}
+        out = {"split": self.split, "icfn": self.icfn_summary(), "rcfn": self.rcfn_summary(),
+               "repeatability": self.repeatability_summary()}
+        if (history := self.history_summary()) is not None:
+            out["icfn_history"] = history
+        return out
+
+
+def _force_scores(predicted: FloatArray, truth: FloatArray) -> dict[str, Any]:
+    return {"mae_n": mae(predicted, truth), "rmse_n": rmse(predicted, truth),
+            "r2": r2(predicted, truth), "median_ae_n": median_ae_by_range(predicted, truth),
+            "samples": int(truth.size)}
 
 
 def reconstruct_online(
@@ -204,5 +225,10 @@ def evaluate(data: Dataset, models: ModelBundle, split: str = "test") -> Evaluat
         chosen = [by_id[int(s)] for s in members["sequence"][:REPEATS_PER_GROUP]]
         if chosen:
             groups[f"{temp:g}"] = chosen
-    return Evaluation(split, y, models.icfn.predict(x), curves, groups)
+    history = None
+    if models.unrelaxed is not None:
+        # Splits are by episode, so each sample's history lies within its split.
+        rows = data.icfn if split == "all" else data.icfn[data.icfn["split"] == split]
+        history = models.unrelaxed.predict(x) * retained_shares(rows, models.unrelaxed.model)
+    return Evaluation(split, y, models.icfn.predict(x), curves, groups, history)
 
