@@ -128,12 +128,14 @@ class ObserverEstimator:
         if not anchor_window_s[0] > anchor_window_s[1] >= 0:
             raise ValueError("the share fit's anchor window must start before it ends, got "
                              f"{anchor_window_s[0]} s to {anchor_window_s[1]} s before")
-        self.icfn = IcfnEstimator(icfn, smoothing_s, unrelaxed)
         self.model = model
         self.history = LoadingHistory(model, CONTACT_DEFLECTION_M)
         self.onset_window_s = onset_window_s
         self.relax = None if rcfn is None else RelaxEstimator(icfn, rcfn, smoothing_s=smoothing_s,
                                                               unrelaxed=unrelaxed)
+        # With relax alongside, its reading is the observer's: one ICFN pass per frame.
+        self.icfn = (IcfnEstimator(icfn, smoothing_s, unrelaxed) if self.relax is None
+                     else self.relax.icfn)
         self.share_fit_s = share_fit_s
         self.share_fit_temp_k = share_fit_temp_k
         self.share_fit_motor_mm_s = share_fit_motor_mm_s
@@ -200,7 +202,9 @@ class ObserverEstimator:
 
     def update(self, percept: Percept, motor_position_mm: float) -> ForceEstimate:
         """Advance the observer: the estimate is the ICFN before the hold, the observer in it."""
-        raw = self.icfn.instantaneous(percept)
+        relax = None if self.relax is None else self.relax.update(percept, motor_position_mm)
+        raw = self.icfn.instantaneous(percept) if relax is None else relax.f_icfn_n
+        # Shared with relax, the filter has taken this frame already; it keeps it.
         f = self.icfn.smoothed(raw, percept.t_s)
         t = percept.t_s
         if percept.thermal is not None:
@@ -211,7 +215,6 @@ class ObserverEstimator:
         if pose is not None and math.isfinite(self.temp_c):
             self.advance(t, float(pose[0]), self.temp_c)
         u = self.unit_force_m()
-        relax = None if self.relax is None else self.relax.update(percept, motor_position_mm)
         if self._onset_t is None:
             half = self.model.onset_rel_ * self.model.band_scale * f
             return ForceEstimate(f, raw, band_lo_n=f - half, band_hi_n=f + half)
