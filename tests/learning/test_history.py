@@ -15,6 +15,7 @@ from relaxgrip.control.estimators import (
     FixedEstimator,
     IcfnEstimator,
     RelaxEstimator,
+    bundle_estimator,
     make_estimator,
 )
 from relaxgrip.errors import InputError
@@ -152,6 +153,9 @@ def test_the_unrelaxed_icfn_and_its_branch_parameters_round_trip(
                                 bundle.unrelaxed.predict_one(2 * x)])
     for name, value in _model().to_arrays().items():
         np.testing.assert_array_equal(bundle.unrelaxed.model.to_arrays()[name], value)
+    relax = bundle_estimator("relax", bundle)
+    assert isinstance(relax, RelaxEstimator)
+    assert relax.icfn.unrelaxed is bundle.unrelaxed
     _save(tmp_path / "without", fitted, with_unrelaxed=False)
     assert load_models(tmp_path / "without").unrelaxed is None
     assert not (tmp_path / "without" / "icfn_unrelaxed.npz").exists()

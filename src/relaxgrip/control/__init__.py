@@ -14,6 +14,7 @@ from relaxgrip.control.estimators import (
     ForceEstimator,
     IcfnEstimator,
     RelaxEstimator,
+    bundle_estimator,
     make_estimator,
 )
 from relaxgrip.control.phases import PHASES, Event, EventKind, GraspPhase, PhaseLog
@@ -51,6 +52,7 @@ __all__ = [
     "TemperatureLoop",
     "TemperatureStatus",
     "ThermalLimits",
+    "bundle_estimator",
     "check_target_n",
     "make_estimator",
     "run_loop",

@@ -68,6 +68,7 @@ from relaxgrip.learning.history import LoadingHistory, UnrelaxedIcfn, features_t
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
+from relaxgrip.learning.store import ModelBundle
 from relaxgrip.perception.features import (
     ICFN_SCHEMA,
     RcfnFeatures,
@@ -83,6 +84,7 @@ __all__ = [
     "ForceEstimator",
     "IcfnEstimator",
     "RelaxEstimator",
+    "bundle_estimator",
     "make_estimator",
 ]
 
@@ -417,3 +419,9 @@ def make_estimator(kind: EstimatorKind | str, icfn: ICFN, rcfn: RCFN,
     if kind is EstimatorKind.ICFN:
         return IcfnEstimator(icfn)
     return RelaxEstimator(icfn, rcfn, unrelaxed=unrelaxed)
+
+
+def bundle_estimator(kind: EstimatorKind | str, bundle: ModelBundle,
+                     observer: ObserverModel | None = None) -> ForceEstimator:
+    """The estimator named ``kind`` on a model directory's models, its unrelaxed ICFN included."""
+    return make_estimator(kind, bundle.icfn, bundle.rcfn, observer, unrelaxed=bundle.unrelaxed)

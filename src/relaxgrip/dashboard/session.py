@@ -41,8 +41,8 @@ from relaxgrip.control import (
     GraspPhase,
     GraspPlan,
     StiffnessMode,
+    bundle_estimator,
     check_target_n,
-    make_estimator,
 )
 from relaxgrip.control.runner import LoopRecorder
 from relaxgrip.errors import InputError
@@ -479,13 +479,11 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
         rig = load_rig(backend.removeprefix("serial:"))
         gripper = open_rig_gripper(rig, clock)
         gripper.reset()
-        controller = GraspController(rig.geometry, make_estimator(
-            kind, bundle.icfn, bundle.rcfn, unrelaxed=bundle.unrelaxed))
+        controller = GraspController(rig.geometry, bundle_estimator(kind, bundle))
         return LiveSession(gripper, controller, clock, record_dir=record_dir)
     cfg = TwinConfig(object_name=object_name)
     virtual = VirtualClock(clock.now())
-    controller = GraspController(cfg.rig, make_estimator(kind, bundle.icfn, bundle.rcfn,
-                                                        unrelaxed=bundle.unrelaxed),
+    controller = GraspController(cfg.rig, bundle_estimator(kind, bundle),
                                  heat=cfg.heat)
     if backend == "emulator":
         from relaxgrip.hardware.emulator import ready_emulated_gripper

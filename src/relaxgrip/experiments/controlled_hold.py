@@ -26,8 +26,8 @@ from relaxgrip.control import (
     GraspController,
     GraspPlan,
     LoopResult,
+    bundle_estimator,
     check_target_n,
-    make_estimator,
     run_loop,
 )
 from relaxgrip.control.runner import LoopRecorder
@@ -258,8 +258,7 @@ def run_hold(
     cfg = replace(base, initial_temp_c=temp_c)
     clock = VirtualClock()
     twin = _make_backend(backend, cfg, seed, clock)
-    controller = GraspController(cfg.rig, make_estimator(kind, bundle.icfn, bundle.rcfn, observer,
-                                                        unrelaxed=bundle.unrelaxed),
+    controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
                                  heat=cfg.heat)
     plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False)
     on_step = _scenario(twin, temp_profile, target_profile, disturbance, temp_c, target_n)

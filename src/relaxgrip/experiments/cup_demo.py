@@ -41,7 +41,7 @@ from relaxgrip.control import (
     EstimatorKind,
     GraspController,
     GraspPlan,
-    make_estimator,
+    bundle_estimator,
 )
 from relaxgrip.control.phases import PHASES, GraspPhase
 from relaxgrip.control.temperature import StiffnessMode
@@ -295,8 +295,7 @@ class _Scenario:
         self.twin = GripperTwin(self.config, seed=seed, clock=self.clock)
         self.models = models
         self.controller = GraspController(
-            self.config.rig, make_estimator(settings.cup_estimator, models.icfn, models.rcfn,
-                                            unrelaxed=models.unrelaxed),
+            self.config.rig, bundle_estimator(settings.cup_estimator, models),
             heat=self.config.heat)
         self.controller.temperature.set_mode(StiffnessMode.STIFF)
         self.rec = _Recorder(self.config.finger.smp)
@@ -573,8 +572,7 @@ def run_cup_demo(seed: int = 0, quick: bool = False, hot_side: Side | None = Non
         plan5 = GraspPlan(target_n=s.glass_target_n, mode=StiffnessMode.STIFF, hold_s=s.hold_s,
                           lift_mm=s.lift_mm, sustain_s=1e6, release=False)
         detector = _HandoverDetector(s)
-        c.estimator = make_estimator(s.glass_estimator, bundle.icfn, bundle.rcfn,
-                                     unrelaxed=bundle.unrelaxed)
+        c.estimator = bundle_estimator(s.glass_estimator, bundle)
 
         def handover(t_sustain: float) -> None:
             if t_sustain >= s.push_delay_s:

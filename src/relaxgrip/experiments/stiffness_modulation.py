@@ -66,8 +66,8 @@ from relaxgrip.control import (
     LoopResult,
     StiffnessMode,
     TemperatureLoop,
+    bundle_estimator,
     check_target_n,
-    make_estimator,
     run_loop,
 )
 from relaxgrip.control.phases import PHASES
@@ -760,8 +760,7 @@ def run_grasp(
     clock = VirtualClock()
     twin = GripperTwin(cfg, seed=seed, clock=clock)
     recorder = _TruthRecorder(twin)
-    controller = GraspController(cfg.rig, make_estimator(est_kind, bundle.icfn, bundle.rcfn,
-                                                        unrelaxed=bundle.unrelaxed),
+    controller = GraspController(cfg.rig, bundle_estimator(est_kind, bundle),
                                  heat=cfg.heat)
     plan = GraspPlan(target_n=target_n, mode=kind, hold_s=hold_s, lift_mm=lift_mm,
                      sustain_s=sustain_s, release=False)

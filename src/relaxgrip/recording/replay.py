@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from relaxgrip.control.estimators import EstimatorKind, ForceEstimate, make_estimator
+from relaxgrip.control.estimators import EstimatorKind, ForceEstimate, bundle_estimator
 from relaxgrip.errors import InputError
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.perception.pipeline import Percept, Perception
@@ -62,7 +62,7 @@ def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
     if name not in {k.value for k in EstimatorKind}:
         raise InputError(f"{path}: cannot replay estimator {name!r} (fixed, icfn or relax)")
     perception = Perception(rig_from_dict(session["rig"]))
-    est = make_estimator(name, models.icfn, models.rcfn, unrelaxed=models.unrelaxed)
+    est = bundle_estimator(name, models)
     perception.reset()
     est.reset()
     frames = 0
