@@ -64,17 +64,17 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from relaxgrip.learning.history import LoadingHistory, UnrelaxedIcfn, features_temp_c
+from relaxgrip.learning.history import (
+    LoadingHistory,
+    UnrelaxedIcfn,
+    features_deflection_m,
+    features_temp_c,
+)
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
 from relaxgrip.learning.store import ModelBundle
-from relaxgrip.perception.features import (
-    ICFN_SCHEMA,
-    RcfnFeatures,
-    finger_temperature_c,
-    marker_pose,
-)
+from relaxgrip.perception.features import RcfnFeatures, finger_temperature_c, marker_pose
 from relaxgrip.perception.pipeline import Percept
 
 __all__ = [
@@ -89,7 +89,6 @@ __all__ = [
 ]
 
 NAN = math.nan
-_DX = ICFN_SCHEMA.index("marker_dx_m")
 #: The closure slopes are measured where the loading estimate is above this share of its end.
 _SLOPE_FORCE_SHARE = 0.5
 FloatArray = NDArray[np.float64]
@@ -211,7 +210,8 @@ class IcfnEstimator:
         if self.unrelaxed is None or self.history is None:
             return max(0.0, self.icfn.predict_one(x))
         # The labels' shares were computed from these same measured entries.
-        self.history.advance(percept.t_s, float(x[_DX]), float(features_temp_c(x)))
+        self.history.advance(percept.t_s, float(features_deflection_m(x)),
+                             float(features_temp_c(x)))
         # An unloading can take the branches below zero: the force is then none.
         return max(0.0, self.unrelaxed.predict_one(x)) * max(0.0, self.history.retained())
 

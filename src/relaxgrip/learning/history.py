@@ -39,8 +39,8 @@ from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.perception.features import ICFN_SCHEMA
 from relaxgrip.physics.viscoelastic import branch_update
 
-__all__ = ["CONTACT_DEFLECTION_M", "LoadingHistory", "UnrelaxedIcfn", "features_temp_c",
-           "retained_shares"]
+__all__ = ["CONTACT_DEFLECTION_M", "LoadingHistory", "UnrelaxedIcfn", "features_deflection_m",
+           "features_temp_c", "retained_shares"]
 
 FloatArray = NDArray[np.float64]
 #: Marker deflection (m) from which the branches load: the controller's contact threshold.
@@ -49,6 +49,19 @@ CONTACT_DEFLECTION_M = 3e-5
 _EPISODE_DT_S = 1.0 / 30.0
 _DX = ICFN_SCHEMA.index("marker_dx_m")
 _TEMPS = (ICFN_SCHEMA.index("f0_temp_mean_c"), ICFN_SCHEMA.index("f1_temp_mean_c"))
+
+
+def features_deflection_m(features: ArrayLike) -> FloatArray:
+    """The marker deflection the share is integrated along: its ``dx`` (m).
+
+    Parameters
+    ----------
+    features : array_like, shape (d,) or (n, d)
+        ICFN feature vectors (:data:`relaxgrip.perception.features.ICFN_SCHEMA`).
+    """
+    x = np.asarray(features, dtype=np.float64)
+    dx: FloatArray = x[..., _DX]
+    return dx
 
 
 def features_temp_c(features: ArrayLike) -> FloatArray:
@@ -138,8 +151,7 @@ class LoadingHistory:
         if self.branches_m is None or not self.deflection_m > self.contact_deflection_m:
             return 1.0
         k_e, k_i, _ = self._parameters(self.temp_c)
-        stiff = (k_e + float(k_i.sum())) * self.deflection_m
-        return (k_e * self.deflection_m + float(self.branches_m.sum())) / stiff
+        return self.unit_force_m() / ((k_e + float(k_i.sum())) * self.deflection_m)
 
 
 def _episode_shares(t_s: FloatArray, d_m: FloatArray, temp_c: FloatArray,
@@ -188,7 +200,8 @@ def retained_shares(rows: pd.DataFrame, model: ObserverModel,
     shares = np.ones(len(rows))
     for episode in np.unique(episodes):
         at = np.flatnonzero(episodes == episode)
-        shares[at] = _episode_shares(t[at], x[at, _DX], features_temp_c(x[at]), model)
+        shares[at] = _episode_shares(t[at], features_deflection_m(x[at]), features_temp_c(x[at]),
+                                     model)
     return shares
 
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from relaxgrip.errors import InputError
 from relaxgrip.learning.datastore import Dataset
-from relaxgrip.learning.history import UnrelaxedIcfn, retained_shares
+from relaxgrip.learning.history import UnrelaxedIcfn, features_deflection_m, retained_shares
 from relaxgrip.learning.icfn import ICFN, select_icfn
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN, select_rcfn
@@ -148,7 +148,7 @@ def _fit_unrelaxed(data: Dataset, history: ObserverModel, random_state: int
         members.append(ICFN(**{**first.get_params(), "random_state": seed}).fit(
             x[train], y[train]))
     unrelaxed = UnrelaxedIcfn(tuple(members), history)
-    contact = x[:, ICFN_SCHEMA.index("marker_dx_m")] > 0
+    contact = features_deflection_m(x) > 0
     record = {
         "train_rows": int(train.sum()), "val_rows": int(val.sum()), "members": len(members),
         "rows_left_out": int((~kept).sum()),
