@@ -203,9 +203,13 @@ class Dataset:
     curves: pd.DataFrame
     manifest: dict[str, Any]
 
+    def icfn_rows(self, split: str) -> pd.DataFrame:
+        """The ICFN table's rows of a split (``"all"``: every row)."""
+        return self.icfn if split == "all" else self.icfn[self.icfn["split"] == split]
+
     def icfn_xy(self, split: str) -> tuple[FloatArray, FloatArray]:
         """ICFN features and force labels of a split (``"all"``: every row)."""
-        rows = self.icfn if split == "all" else self.icfn[self.icfn["split"] == split]
+        rows = self.icfn_rows(split)
         return (rows[list(ICFN_SCHEMA.names)].to_numpy(np.float64),
                 rows["force_n"].to_numpy(np.float64))
 

@@ -228,7 +228,7 @@ def evaluate(data: Dataset, models: ModelBundle, split: str = "test") -> Evaluat
     history = None
     if models.unrelaxed is not None:
         # Splits are by episode, so each sample's history lies within its split.
-        rows = data.icfn if split == "all" else data.icfn[data.icfn["split"] == split]
-        history = models.unrelaxed.predict(x) * retained_shares(rows, models.unrelaxed.model)
+        history = models.unrelaxed.predict(x) * retained_shares(data.icfn_rows(split),
+                                                               models.unrelaxed.model)
     return Evaluation(split, y, models.icfn.predict(x), curves, groups, history)
 
