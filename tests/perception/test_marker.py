@@ -178,6 +178,24 @@ def test_pose_solver_picks_the_solution_nearest_the_previous_pose() -> None:
         assert rotation_angle(solver.solve(corners, prev).rotation @ rot.T) < 0.01
 
 
+def test_pose_solver_falls_back_when_ippe_returns_nan() -> None:
+    # Corners of a tracked frame of a dataset's RCFN sequence on which OpenCV 5.0's
+    # IPPE (square and general) returned nan for both solutions.
+    corners = np.array([[394.7828982371069, 195.40809859020806],
+                        [471.8119418459722, 197.3273261723278],
+                        [471.8181415330879, 281.67222784322365],
+                        [394.7827925022652, 283.59730219802077]])
+    solver = PoseSolver(RIG.marker.size_m, RIG.rgb.intrinsics)
+    pose = solver.solve(corners)
+    assert np.isfinite(pose.tvec_m).all()
+    assert np.isfinite(pose.rotation).all()
+    # The same pose as from the corners a hundredth of a pixel away, where IPPE works.
+    nearby = solver.solve(corners + np.array([[0.01, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]]))
+    assert np.abs(pose.tvec_m - nearby.tvec_m).max() < 5e-6  # depth moves 3 µm a 0.01 px
+    assert rotation_angle(pose.rotation @ nearby.rotation.T) < 1e-3
+    assert pose.reprojection_px < 0.05
+
+
 def test_mean_rotation_of_small_perturbations() -> None:
     base = rotation_z(0.3)
     rots = [base @ rotation_x(e) for e in (-0.01, 0.0, 0.01)]
