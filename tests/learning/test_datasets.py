@@ -12,6 +12,8 @@ import pytest
 from relaxgrip.errors import InputError
 from relaxgrip.learning.build import build_dataset
 from relaxgrip.learning.datasets import (
+    ICFN_MAX_FORCE_N,
+    ICFN_SAMPLES,
     REPEAT_TEMPS_C,
     REPEATS_PER_GROUP,
     DatasetSpec,
@@ -34,11 +36,13 @@ def small(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_plans_cover_the_paper_ranges_and_split_by_condition() -> None:
     spec = DatasetSpec()
     episodes = plan_icfn(spec)
-    assert sum(e.n_samples for e in episodes) == 8258
+    assert sum(e.n_samples for e in episodes) == ICFN_SAMPLES == 10_700
+    # Episode maxima reach beyond the largest force target, up to the ceiling.
+    maxima = [e.max_force_n for e in episodes]
+    assert 10.0 < max(maxima) <= ICFN_MAX_FORCE_N
     temps = [e.temp_c for e in episodes]
     assert 25.0 <= min(temps) < 27.0
     assert 58.0 < max(temps) <= 60.0
-    assert max(e.max_force_n for e in episodes) <= 8.0
     sequences = plan_rcfn(spec)
     assert len(sequences) == 810
     assert len({s.contact_m for s in sequences}) == 4
@@ -77,7 +81,7 @@ def test_tables_readme_and_manifest(small: Path) -> None:
     assert x.shape[1] == len(ICFN_SCHEMA)
     assert np.all(np.isfinite(x))
     assert y.min() == 0.0  # the free-air samples
-    assert y.max() <= 8.5
+    assert y.max() <= ICFN_MAX_FORCE_N + 0.5
 
 
 def test_same_seed_same_dataset_whatever_the_workers(small: Path, tmp_path: Path) -> None:

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from relaxgrip.learning.build import build_dataset
-from relaxgrip.learning.datasets import DatasetSpec
+from relaxgrip.learning.datasets import ICFN_SAMPLES, DatasetSpec
 from relaxgrip.learning.datastore import load_dataset
 from relaxgrip.learning.evaluation import evaluate
 from relaxgrip.learning.observer import load_default_observer
@@ -25,7 +25,7 @@ def test_shipped_models_load_with_the_current_schemas() -> None:
     assert bundle.manifest["twin_version"] == TWIN_VERSION
     assert bundle.icfn.n_features_in_ == len(ICFN_SCHEMA)
     assert bundle.rcfn.n_features_in_ == len(RCFN_SCHEMA)
-    assert bundle.manifest["training"]["dataset"]["counts"]["icfn_samples"] == 8258
+    assert bundle.manifest["training"]["dataset"]["counts"]["icfn_samples"] == ICFN_SAMPLES
     assert (default_models_dir() / "manifest.json").is_file()
 
 

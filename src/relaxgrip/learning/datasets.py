@@ -4,7 +4,8 @@ Every sample comes from rendered frames passed through
 :class:`relaxgrip.perception.Perception`; labels come from the twin's truth.
 Nothing the estimators will not have at run time enters their features.
 
-* **ICFN** (paper §V-B: 8,258 samples, 25–60 °C, ≤ 8 N): *episodes*, each a
+* **ICFN** (paper §V-B: 8,258 samples, 25–60 °C, ≤ 8 N; here 10,700 samples up to
+  11 N, :data:`ICFN_MAX_FORCE_N`): *episodes*, each a
   twin with its own object, contact position, temperature, closing speed
   and material draw.  The tracker is zeroed on the open finger, then the
   gripper closes and a frame is rendered each time the true force crosses the
@@ -54,7 +55,10 @@ from relaxgrip.physics.thermal import duty_for_mean_temp
 from relaxgrip.twin import GripperTwin, TwinConfig, get_object
 
 __all__ = [
+    "ICFN_MAX_FORCE_N",
     "ICFN_OBJECTS",
+    "ICFN_SAMPLES",
+    "PAPER_ICFN_SAMPLES",
     "RCFN_OBJECTS",
     "DatasetSpec",
     "IcfnEpisode",
@@ -77,6 +81,18 @@ RCFN_OBJECTS: tuple[str, ...] = ("force_ball", "orange", "hammer")
 RCFN_LOCATIONS_M: tuple[float, ...] = (0.050, 0.065, 0.080, 0.095)
 RCFN_TEMPS_C: tuple[float, ...] = (25.0, 30.0, 35.0, 40.0, 45.0, 50.0, 55.0, 60.0)
 RCFN_FORCES_N: tuple[float, ...] = (2.0, 3.5, 5.0, 6.5, 8.0)
+#: The paper's ICFN dataset size (samples up to 8 N).
+PAPER_ICFN_SAMPLES = 8258
+#: Largest episode maximum of the ICFN samples (N).  The paper's reach 8 N, and a
+#: network is thin at the edge of its data: trained on episode maxima up to 8 N,
+#: the ICFN read the 7.5-8 N samples 0.10 N low (training split) and the onset of a
+#: hold at 8 N 0.09-0.23 N low.  Targets go up to 10 N, so the samples go a newton
+#: beyond.
+ICFN_MAX_FORCE_N = 11.0
+#: ICFN samples of the default dataset: the paper's 8,258 times the ratio of the
+#: mean episode maxima (6.5 N here, 5 N up to 8 N), which keeps the samples per
+#: newton below 8 N as they were.
+ICFN_SAMPLES = 10_700
 #: The repeatability groups (paper Fig. "acc" f): contact, start force, temperatures.
 REPEAT_CONTACT_M = 0.080
 REPEAT_FORCE_N = 5.0
@@ -101,7 +117,7 @@ class DatasetSpec:
     Attributes
     ----------
     icfn_samples : int
-        ICFN samples (paper: 8,258).
+        ICFN samples (paper: 8,258 up to 8 N; :data:`ICFN_SAMPLES`, up to 11 N).
     rcfn_sequences : int
         RCFN relaxation sequences (paper: 810).
     seed : int
@@ -120,7 +136,7 @@ class DatasetSpec:
         Train / validation / test shares.
     """
 
-    icfn_samples: int = 8258
+    icfn_samples: int = ICFN_SAMPLES
     rcfn_sequences: int = 810
     seed: int = 0
     hold_s: float = 280.0
@@ -216,7 +232,7 @@ def plan_icfn(spec: DatasetSpec) -> list[IcfnEpisode]:
     for i in range(n_episodes):
         name = names[int(rng.choice(len(names), p=shares / shares.sum()))]
         obj = get_object(name)
-        ceiling = min(8.0, 0.85 * obj.yield_force_n)
+        ceiling = min(ICFN_MAX_FORCE_N, 0.85 * obj.yield_force_n)
         n = min(spec.samples_per_episode, remaining)
         remaining -= n
         episodes.append(IcfnEpisode(
