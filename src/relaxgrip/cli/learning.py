@@ -24,7 +24,7 @@ def dataset_build(
                                       show_default=False)],
     icfn_samples: Annotated[int | None, typer.Option(
         "--icfn-samples", show_default=False,
-        help="ICFN samples [default: 10,700, up to 11 N; the paper's 8,258 reach 8 N].")] = None,
+        help="ICFN samples (default 10,700, up to 11 N; the paper's 8,258 reach 8 N).")] = None,
     rcfn_sequences: Annotated[int, typer.Option("--rcfn-sequences",
                                                 help="RCFN relaxation sequences.")] = 810,
     seed: Annotated[int, typer.Option("--seed", help="Master seed.")] = 0,
