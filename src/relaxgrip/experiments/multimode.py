@@ -45,6 +45,7 @@ from relaxgrip.backend import Command
 from relaxgrip.clock import VirtualClock
 from relaxgrip.control import (
     MAX_TARGET_N,
+    EstimatorKind,
     ForceControlConfig,
     IcfnEstimator,
     StiffnessMode,
@@ -128,7 +129,8 @@ def run_pinch(object_name: str, target_n: float, mode: StiffnessMode | str, seed
     GraspRun
         With the whole loop, the truth flags and the criteria of a grasp.
     """
-    return run_grasp(object_name, target_n, mode, seed, models,
+    # The paper's contrast: the warm finger's grip decays under the per-frame ICFN.
+    return run_grasp(object_name, target_n, mode, seed, models, estimator=EstimatorKind.ICFN,
                      contact_position_m=contact_position_m, hold_s=HOLD_S, lift_mm=LIFT_MM,
                      sustain_s=_sustain_s(quick))
 
