@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from contextlib import nullcontext
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated
 
@@ -43,8 +44,9 @@ def dataset_build(
         raise InputError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     if jobs < 1:
         raise InputError(f"--jobs must be >= 1, got {jobs}")
-    sizes = {} if icfn_samples is None else {"icfn_samples": icfn_samples}
-    spec = DatasetSpec(rcfn_sequences=rcfn_sequences, seed=seed, hold_s=hold_s, **sizes)
+    spec = DatasetSpec(rcfn_sequences=rcfn_sequences, seed=seed, hold_s=hold_s)
+    if icfn_samples is not None:
+        spec = replace(spec, icfn_samples=icfn_samples)
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), console=err_console, transient=json_out) as bar:
         task = bar.add_task("episodes and sequences", total=None)
