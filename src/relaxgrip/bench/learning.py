@@ -80,8 +80,7 @@ def bench_learning_pipeline(repeat: int) -> BenchResult:
 
     The paper's size is 8,258 ICFN samples and 810 RCFN sequences of 100 s;
     our default dataset (the shipped models') has 10,700 ICFN samples (up to
-    11 N) and holds each sequence 280 s.  One
-    run each: they take minutes.
+    11 N) and holds each sequence 280 s.  One run each: they take minutes.
     """
     from relaxgrip.learning.build import build_dataset
     from relaxgrip.learning.datasets import PAPER_ICFN_SAMPLES, DatasetSpec
@@ -103,8 +102,8 @@ def bench_learning_pipeline(repeat: int) -> BenchResult:
     default_build, default_train, _ = build_and_train(DatasetSpec())
     return BenchResult(
         "learning-pipeline",
-        "8,258 ICFN samples and 810 RCFN sequences on 2 workers, then training: 100 s holds "
-        "(the paper's), then 280 s (the default)",
+        "810 RCFN sequences on 2 workers, then training: the paper's size (8,258 ICFN "
+        "samples, 100 s holds), then the default (10,700 samples up to 11 N, 280 s holds)",
         [paper_build + paper_train],
         notes={"counts": counts},
         headline={"dataset_build_s": paper_build, "training_s": paper_train,
