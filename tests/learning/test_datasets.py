@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from relaxgrip.control import MAX_TARGET_N
 from relaxgrip.errors import InputError
 from relaxgrip.learning.build import build_dataset
 from relaxgrip.learning.datasets import (
@@ -37,9 +38,9 @@ def test_plans_cover_the_paper_ranges_and_split_by_condition() -> None:
     spec = DatasetSpec()
     episodes = plan_icfn(spec)
     assert sum(e.n_samples for e in episodes) == ICFN_SAMPLES == 10_700
-    # Episode maxima reach beyond the largest force target, up to the ceiling.
+    # Episode maxima reach beyond the controller's largest force target, up to the ceiling.
     maxima = [e.max_force_n for e in episodes]
-    assert 10.0 < max(maxima) <= ICFN_MAX_FORCE_N
+    assert MAX_TARGET_N < max(maxima) <= ICFN_MAX_FORCE_N
     temps = [e.temp_c for e in episodes]
     assert 25.0 <= min(temps) < 27.0
     assert 58.0 < max(temps) <= 60.0

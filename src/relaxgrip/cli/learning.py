@@ -152,21 +152,21 @@ def evaluate(
     table = Table(title=f"Accuracy on the {split} split (paper in brackets)")
     table.add_column("metric")
     table.add_column("value", justify="right")
+    history = s.get("icfn_history")
     rows = [
         ("ICFN MAE", f"{icfn['mae_n']:.3f} N [0.651]"),
         ("ICFN RMSE", f"{icfn['rmse_n']:.3f} N [0.886]"),
         ("ICFN R²", f"{icfn['r2']:.3f} [0.848]"),
         *((f"ICFN median AE {k} N", f"{v:.3f} N") for k, v in icfn["median_ae_n"].items()),
+        *([] if history is None else [(
+            "ICFN × loading history (relax, observer) MAE / RMSE / R²",
+            f"{history['mae_n']:.3f} N / {history['rmse_n']:.3f} N / {history['r2']:.3f}")]),
         ("RCFN NRMSE mean / median", f"{rcfn['nrmse_mean']:.3f} / {rcfn['nrmse_median']:.3f}"
                                      " [0.160 / 0.118]"),
         ("RCFN AUC_rel mean / median", f"{rcfn['auc_rel_mean']:.3f} / "
                                        f"{rcfn['auc_rel_median']:.3f} [0.065 / 0.049]"),
         ("RCFN curve correlation", f"{rcfn['corr_mean']:.4f} [0.990]"),
     ]
-    if (history := s.get("icfn_history")) is not None:
-        rows.insert(3 + len(icfn["median_ae_n"]), (
-            "ICFN × loading history (relax, observer) MAE / RMSE / R²",
-            f"{history['mae_n']:.3f} N / {history['rmse_n']:.3f} N / {history['r2']:.3f}"))
     for temp, g in s["repeatability"].items():
         rows.append((f"repeatability {temp} °C", f"NRMSE {g['nrmse_mean']:.3f}±{g['nrmse_std']:.3f}"
                      f", AUC {g['auc_rel_mean']:.3f}, corr {g['corr_mean']:.3f}, "
