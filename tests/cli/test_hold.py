@@ -65,6 +65,9 @@ def test_compare_json_is_one_object_with_every_hold(monkeypatch, capsys, tmp_pat
     (["--seed", "-1"], "--seed"),
     (["--plot", "out.gif"], "plot format"),
     (["--plot", "/no/such/dir/x.png"], "does not exist"),
+    (["--budget", "--estimator", "icfn"], "--budget"),
+    (["--budget", "--compare"], "--budget"),
+    (["--budget", "--backend", "emulator"], "--budget"),
 ])
 def test_bad_input_is_refused_before_anything_starts(monkeypatch, capsys, args, message):
     code, out, err = run_main(["hold", *args], monkeypatch, capsys)
@@ -72,6 +75,21 @@ def test_bad_input_is_refused_before_anything_starts(monkeypatch, capsys, args, 
     assert message in err
     assert err.count("\n") == 1
     assert out == ""
+
+
+def test_budget_prints_the_parts_of_the_estimate_error(monkeypatch, capsys):
+    code, out, err = run_main(["hold", "--duration-s", "14", "--seed", "3", "--budget", "--json"],
+                              monkeypatch, capsys)
+    assert code == 0, err
+    d = json.loads(out)
+    parts = d["error_budget"]
+    assert set(parts) == {"onset_n", "relaxation_n", "closure_n", "total_n"}
+    assert parts["total_n"] == pytest.approx(d["est_error_mean_n"], abs=1e-9)
+    code, out, err = run_main(["hold", "--duration-s", "14", "--seed", "3", "--budget"],
+                              monkeypatch, capsys)
+    assert code == 0, err
+    assert "error budget" in out
+    assert f"= {parts['total_n']:+.3f} N" in " ".join(out.split())
 
 
 def test_missing_or_foreign_models_are_refused(monkeypatch, capsys, tmp_path: Path):

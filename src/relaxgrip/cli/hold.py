@@ -66,6 +66,10 @@ def hold(
     disturbance: Annotated[str | None, typer.Option(
         "--disturbance", help="Push on the object: push:FORCE_N:AT_S[:FOR_S].",
         show_default=False)] = None,
+    budget: Annotated[bool, typer.Option(
+        "--budget", help="Split relax's estimate error into the onset force, Eq. 10's "
+                         "relaxation and the added closure, against a copy of the twin held "
+                         "at the onset's aperture (relax, twin backend).")] = False,
 ) -> None:
     """Close on the force ball to the target and hold it, scoring the steady state (100-280 s)."""
     from relaxgrip.control import EstimatorKind, check_target_n
@@ -106,6 +110,9 @@ def hold(
                          "--estimator NAME and the profiles instead")
     if compare and backend != "twin":
         raise InputError("--compare runs on the twin backend only")
+    if budget and (compare or estimator != "relax" or backend != "twin"):
+        raise InputError("--budget splits relax's Eq. 10 on the twin: use it with "
+                         "--estimator relax on the twin backend, without --compare")
     if record is not None and compare:
         raise InputError("--record records one run: record each estimator with "
                          "--estimator NAME --record FILE instead of --compare")
@@ -147,7 +154,8 @@ def hold(
         if record is None:
             result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
                               backend=backend, temp_profile=temps,
-                              target_profile=targets, disturbance=push, observer=observer)
+                              target_profile=targets, disturbance=push, observer=observer,
+                              budget=budget)
         else:
             from relaxgrip.recording import McapRecorder
 
@@ -155,7 +163,7 @@ def hold(
                 result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
                                   backend=backend, recorder=recorder,
                                   temp_profile=temps, target_profile=targets, disturbance=push,
-                                  observer=observer)
+                                  observer=observer, budget=budget)
     figure = None
     if plot is not None:
         from relaxgrip.plots.holding import plot_hold
@@ -166,6 +174,13 @@ def hold(
         return
     _print_table({estimator: result.to_dict()}, {}, result.to_dict(),
                  time.perf_counter() - start)
+    if budget:
+        parts = result.error_budget()
+        lo, hi = result.window
+        console.print(f"error budget, estimate − true force over {lo:g}–{hi:g} s: onset "
+                      f"{parts['onset_n']:+.3f} N, Eq. 10 relaxation "
+                      f"{parts['relaxation_n']:+.3f} N, added closure {parts['closure_n']:+.3f} N"
+                      f" = {parts['total_n']:+.3f} N")
     if figure is not None:
         console.print(f"figure: {figure}")
 

@@ -7,10 +7,18 @@ RCFN).  The controller never reads the truth; this experiment does, to score
 the hold over the steady-state interval (100–280 s of a 280 s hold, scaled
 with the duration): the true force against the target, and the estimate
 against the true force.
+
+For ``relax`` it can also say where the estimate's error comes from
+(:meth:`HoldResult.error_budget`): a copy of the twin taken at the hold onset
+is held at the onset's aperture, with the loop's heater duties, and its true
+force is the curve Eq. 10 predicts.  The estimate's mean error over the steady
+state then splits exactly into the onset force ``F_inst``, Eq. 10's relaxation
+and the force of the closure the controller adds after the onset.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -19,10 +27,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from relaxgrip.backend import Gripper, Observation
+from relaxgrip.backend import Command, Gripper, Observation
 from relaxgrip.clock import VirtualClock
 from relaxgrip.control import (
     EstimatorKind,
+    EventKind,
     GraspController,
     GraspPlan,
     LoopResult,
@@ -96,6 +105,11 @@ class HoldResult:
         The whole run (every series, phase log).
     twin_version : str
         Twin that produced it.
+    target_series_n : ndarray or None
+        The target at each sample when a target profile changed it.
+    fixed_aperture_n : ndarray or None
+        True force of a copy of the twin held at the onset's aperture from the
+        onset on, at ``t_s`` (N); only for a hold run with ``budget=True``.
     """
 
     estimator: str
@@ -109,6 +123,7 @@ class HoldResult:
     loop: LoopResult
     twin_version: str = TWIN_VERSION
     target_series_n: FloatArray | None = None
+    fixed_aperture_n: FloatArray | None = None
 
     @property
     def target_t_n(self) -> FloatArray:
@@ -155,13 +170,55 @@ class HoldResult:
             "est_rmse_n": float(np.sqrt(np.mean(est * est))) if est.size else math.nan,
         }
 
+    def error_budget(self) -> dict[str, float]:
+        """Where ``relax``'s estimate error over the steady state comes from (N).
+
+        With ``F_fix(t)`` the true force of the twin held at the onset's
+        aperture, ``F_inst``, ``K`` and ``tau`` the estimator's Eq. 10 and
+        ``F_est`` its estimate, the mean of ``F_est - F_true`` over the steady
+        state is the sum of
+
+        * ``onset_n``: ``F_inst - F_fix(0)``, the onset force as read;
+        * ``relaxation_n``: the true fixed-aperture relaxation
+          ``F_fix(0) - F_fix(t)`` less Eq. 10's ``K (1 - exp(-t / tau))``
+          (negative when Eq. 10 predicts more relaxation than the twin shows);
+        * ``closure_n``: what the estimator adds to Eq. 10 (the closure since the
+          onset) less what that closure adds to the true force, ``F_true - F_fix``.
+
+        ``total_n`` is their sum, the mean estimate error.
+
+        Raises
+        ------
+        InputError
+            If the hold was not run with ``budget=True``.
+        """
+        if self.fixed_aperture_n is None:
+            raise InputError("no error budget: run the relax hold with budget=True (--budget)")
+        mask = self._mask()
+        hold_s, k_n, tau_s, f_inst = (self.series(name)[mask]
+                                      for name in ("hold_s", "k_n", "tau_s", "f_onset_n"))
+        est, truth, fixed = self.estimate_n[mask], self.truth_n[mask], self.fixed_aperture_n[mask]
+        relaxed = k_n * -np.expm1(-hold_s / tau_s)  # Eq. 10's relaxation so far
+        onset = f_inst - self.fixed_aperture_n[0]
+        relaxation = (self.fixed_aperture_n[0] - fixed) - relaxed
+        closure = (est - (f_inst - relaxed)) - (truth - fixed)
+        parts = {"onset_n": onset, "relaxation_n": relaxation, "closure_n": closure}
+        ok = np.all(np.isfinite(np.vstack(list(parts.values()))), axis=0)
+        if not ok.any():
+            raise InputError("no error budget: the estimator gave no Eq. 10 terms in the "
+                             "steady state")
+        out = {name: float(np.mean(value[ok])) for name, value in parts.items()}
+        out["total_n"] = sum(out.values())
+        return out
+
     def to_dict(self) -> dict[str, Any]:
         """The ``relaxgrip hold --json`` object."""
         lo, hi = self.window
+        budget = {} if self.fixed_aperture_n is None else {"error_budget": self.error_budget()}
         return {
             "twin_version": self.twin_version, "estimator": self.estimator,
             "target_n": self.target_n, "temp_c": self.temp_c, "seed": self.seed,
-            "duration_s": self.duration_s, "window_s": [lo, hi], **self.metrics(),
+            "duration_s": self.duration_s, "window_s": [lo, hi], **self.metrics(), **budget,
             "events": [e.to_dict() for e in self.loop.log.events],
         }
 
@@ -207,6 +264,7 @@ def run_hold(
     target_profile: Profile | None = None,
     disturbance: Profile | None = None,
     observer: ObserverModel | None = None,
+    budget: bool = False,
 ) -> HoldResult:
     """Close on the force ball to ``target_n`` at ``temp_c`` and hold it for ``duration_s``.
 
@@ -239,6 +297,9 @@ def run_hold(
         twin backend only) over the hold time (:mod:`relaxgrip.experiments.profiles`).
     observer : ObserverModel, optional
         The ``observer`` estimator's parameters (default: the shipped ones).
+    budget : bool
+        Also hold a copy of the twin at the onset's aperture, for
+        :meth:`HoldResult.error_budget` (``relax`` on the twin backend only).
 
     Returns
     -------
@@ -247,12 +308,16 @@ def run_hold(
     Raises
     ------
     InputError
-        A target, temperature or estimator out of range; or the hold never
-        started (no contact, target out of reach).
+        A target, temperature or estimator out of range; a budget asked of
+        another estimator or backend; or the hold never started (no contact,
+        target out of reach).
     """
     kind = _check(estimator, target_n, temp_c, duration_s)
     if backend not in HOLD_BACKENDS:
         raise InputError(f"unknown backend {backend!r}; known: {', '.join(HOLD_BACKENDS)}")
+    if budget and (kind is not EstimatorKind.RELAX or backend != "twin"):
+        raise InputError("an error budget splits relax's Eq. 10 on the twin: use --estimator "
+                         "relax with the twin backend")
     bundle = models if models is not None else load_default_models()
     base = config if config is not None else TwinConfig()
     cfg = replace(base, initial_temp_c=temp_c)
@@ -262,6 +327,10 @@ def run_hold(
                                  heat=cfg.heat)
     plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False)
     on_step = _scenario(twin, temp_profile, target_profile, disturbance, temp_c, target_n)
+    frozen: list[GripperTwin] = []
+    if budget:
+        assert isinstance(twin, GripperTwin)
+        on_step = _copy_at_onset(twin, frozen, on_step)
     try:
         loop = run_loop(twin, controller, clock, plan, duration_s + SETUP_ALLOWANCE_S,
                         recorder=recorder, on_step=on_step)
@@ -274,9 +343,43 @@ def run_hold(
     t = loop["t_s"] - onset
     keep = (t >= 0.0) & (t <= duration_s + 1e-9)
     targets = None if target_profile is None else target_profile.values(t[keep], target_n)
+    fixed = None
+    if frozen:
+        fixed = _hold_aperture(frozen[0], loop["t_s"][keep], loop["duty_0"][keep],
+                               loop["duty_1"][keep])
     return HoldResult(kind.value, target_n, temp_c, duration_s, seed, t[keep],
                       loop["truth_force_n"][keep], loop["estimate_n"][keep], loop,
-                      target_series_n=targets)
+                      target_series_n=targets, fixed_aperture_n=fixed)
+
+
+def _copy_at_onset(twin: GripperTwin, into: list[GripperTwin],
+                   then: Callable[[Observation, GraspController], bool | None] | None,
+                   ) -> Callable[[Observation, GraspController], bool | None]:
+    """A loop hook that copies the twin once, at the step the hold onset is logged."""
+
+    def step(obs: Observation, controller: GraspController) -> bool | None:
+        if not into and any(e.kind is EventKind.HOLD_ONSET for e in controller.log.events):
+            into.append(copy.deepcopy(twin))
+        return None if then is None else then(obs, controller)
+
+    return step
+
+
+def _hold_aperture(twin: GripperTwin, t_s: FloatArray, duty_0: FloatArray,
+                   duty_1: FloatArray) -> FloatArray:
+    """True force of ``twin`` (a copy from the onset) at ``t_s``, its motor stopped.
+
+    The heaters follow the loop's duties, so the copy's temperature follows
+    the loop's; only the aperture differs.
+    """
+    out = np.empty(t_s.size)
+    out[0] = twin.contact_force_n
+    for k in range(1, t_s.size):
+        twin.clock.sleep_until(float(t_s[k]))
+        twin.act(Command(0.0, (float(duty_0[k]), float(duty_1[k]))))
+        out[k] = twin.contact_force_n
+    twin.close()
+    return out
 
 
 def _scenario(backend: Gripper, temp: Profile | None, target: Profile | None,

@@ -1,0 +1,52 @@
+"""``run_hold(budget=True)``: relax's estimate error split against the twin held at the onset."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from relaxgrip.errors import InputError
+from relaxgrip.experiments.controlled_hold import run_hold
+
+
+@pytest.fixture(scope="module")
+def budgeted():
+    return run_hold("relax", duration_s=20.0, seed=2, budget=True)
+
+
+def test_the_copy_starts_at_the_onset_and_relaxes_while_the_loop_closes(budgeted) -> None:
+    fixed, truth = budgeted.fixed_aperture_n, budgeted.truth_n
+    assert fixed is not None
+    assert fixed.shape == truth.shape
+    assert fixed[0] == truth[0]
+    # The aperture held: the force only relaxes.  The loop closes to make up for it.
+    assert np.all(np.diff(fixed) <= 1e-9)
+    assert fixed[-1] < fixed[0] - 0.05
+    motor = budgeted.series("motor_mm")
+    assert motor[-1] > motor[0] + 0.05
+    assert truth[-1] > fixed[-1] + 0.05
+
+
+def test_the_parts_add_up_to_the_mean_estimate_error(budgeted) -> None:
+    parts = budgeted.error_budget()
+    total = parts["onset_n"] + parts["relaxation_n"] + parts["closure_n"]
+    assert parts["total_n"] == pytest.approx(total, abs=1e-12)
+    assert total == pytest.approx(budgeted.metrics()["est_error_mean_n"], abs=1e-9)
+    f_inst = budgeted.series("f_onset_n")[-1]
+    assert parts["onset_n"] == pytest.approx(f_inst - budgeted.truth_n[0], abs=1e-12)
+    assert budgeted.to_dict()["error_budget"] == parts
+
+
+def test_the_copy_leaves_the_run_as_it_was(budgeted) -> None:
+    plain = run_hold("relax", duration_s=20.0, seed=2)
+    np.testing.assert_array_equal(plain.truth_n, budgeted.truth_n)
+    np.testing.assert_array_equal(plain.estimate_n, budgeted.estimate_n)
+    assert "error_budget" not in plain.to_dict()
+    with pytest.raises(InputError, match="budget=True"):
+        plain.error_budget()
+
+
+@pytest.mark.parametrize(("estimator", "backend"), [("icfn", "twin"), ("relax", "emulator")])
+def test_a_budget_is_relax_on_the_twin(estimator: str, backend: str) -> None:
+    with pytest.raises(InputError, match="budget"):
+        run_hold(estimator, duration_s=5.0, backend=backend, budget=True)
