@@ -43,6 +43,7 @@ from relaxgrip.control.runner import LoopRecorder
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.profiles import Profile, band_coverage
 from relaxgrip.learning.observer import ObserverModel
+from relaxgrip.learning.rcfn import reconstruct
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
@@ -195,19 +196,20 @@ class HoldResult:
         if self.fixed_aperture_n is None:
             raise InputError("no error budget: run the relax hold with budget=True (--budget)")
         mask = self._mask()
-        hold_s, k_n, tau_s, f_inst = (self.series(name)[mask]
-                                      for name in ("hold_s", "k_n", "tau_s", "f_onset_n"))
+        columns = np.vstack([self.series(name)[mask]
+                             for name in ("hold_s", "f_onset_n", "k_n", "tau_s")])
         est, truth, fixed = self.estimate_n[mask], self.truth_n[mask], self.fixed_aperture_n[mask]
-        relaxed = k_n * -np.expm1(-hold_s / tau_s)  # Eq. 10's relaxation so far
-        onset = f_inst - self.fixed_aperture_n[0]
-        relaxation = (self.fixed_aperture_n[0] - fixed) - relaxed
-        closure = (est - (f_inst - relaxed)) - (truth - fixed)
-        parts = {"onset_n": onset, "relaxation_n": relaxation, "closure_n": closure}
-        ok = np.all(np.isfinite(np.vstack(list(parts.values()))), axis=0)
+        ok = np.all(np.isfinite(np.vstack([columns, est])), axis=0)
         if not ok.any():
             raise InputError("no error budget: the estimator gave no Eq. 10 terms in the "
                              "steady state")
-        out = {name: float(np.mean(value[ok])) for name, value in parts.items()}
+        hold_s, f_inst, k_n, tau_s = columns[:, ok]
+        eq10 = reconstruct(hold_s, f_inst, k_n, tau_s)
+        est, truth, fixed = est[ok], truth[ok], fixed[ok]
+        f_fix0 = self.fixed_aperture_n[0]
+        out = {"onset_n": float(np.mean(f_inst - f_fix0)),
+               "relaxation_n": float(np.mean((f_fix0 - fixed) - (f_inst - eq10))),
+               "closure_n": float(np.mean((est - eq10) - (truth - fixed)))}
         out["total_n"] = sum(out.values())
         return out
 
