@@ -101,3 +101,37 @@ def test_missing_or_foreign_models_are_refused(monkeypatch, capsys, tmp_path: Pa
     code, _, err = run_main(["hold", "--models", tmp_path / "foreign"], monkeypatch, capsys)
     assert code == 2
     assert "error:" in err
+
+
+def test_budget_survey_prints_the_parts_over_seeds(monkeypatch, capsys):
+    code, out, err = run_main(["budget", "--seeds", "2,5", "--duration-s", "14", "--jobs", "1",
+                               "--json"], monkeypatch, capsys)
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["seeds"] == [2, 5]
+    assert [r["seed"] for r in d["runs"]] == [2, 5]
+    assert d["parts"]["total_n"]["mean"] == pytest.approx(
+        sum(r["total_n"] for r in d["runs"]) / 2)
+    assert set(d["runs"][0]["twin_scatter"]) >= {"relax_scale_0", "relax_scale_1"}
+    code, out, err = run_main(["budget", "--seeds", "2,5", "--duration-s", "14", "--jobs", "1"],
+                              monkeypatch, capsys)
+    assert code == 0, err
+    text = " ".join(out.split())
+    assert f"{d['parts']['total_n']['mean']:+.3f}" in text
+    assert f"taken off {d['bias_free_mae_n']:.3f} N" in text
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--seeds", "3-1"], "ascending"),
+    (["--seeds", "a"], "seeds must look like"),
+    (["--target-n", "0"], "target force"),
+    (["--temp-c", "90"], "safe range"),
+    (["--duration-s", "-5"], "duration"),
+    (["--jobs", "0"], "--jobs"),
+])
+def test_budget_survey_refuses_bad_input(monkeypatch, capsys, args, message):
+    code, out, err = run_main(["budget", *args], monkeypatch, capsys)
+    assert code == 2
+    assert message in err
+    assert err.count("\n") == 1
+    assert out == ""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from contextlib import nullcontext
 from pathlib import Path
@@ -217,3 +218,63 @@ def _print_table(rows: dict[str, dict[str, Any]], reductions: dict[str, float],
                 err_console.print(f"{name}: {event['kind']} at {event['t_s']:.1f} s "
                                   f"{event['detail']}")
     console.print(f"{first['twin_version']}, {seconds:.1f} s")
+
+
+@app.command("budget")
+def budget_survey(
+    seeds: Annotated[str, typer.Option(
+        "--seeds", help="Twin seeds: 0-23, 3,5,8 or a mix.")] = "0-23",
+    target_n: Annotated[float, typer.Option("--target-n", help="Target force (N), 0-10.")] = 5.0,
+    temp_c: Annotated[float, typer.Option("--temp-c", help="Finger temperature (°C).")] = 40.0,
+    duration_s: Annotated[float, typer.Option("--duration-s", help="Hold length (s).")] = 280.0,
+    models: Annotated[Path | None, typer.Option(
+        "--models", help="Model directory (default: the shipped models).", show_default=False)
+    ] = None,
+    jobs: Annotated[int, typer.Option("--jobs", help="Holds in parallel.")] = 2,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """relax's error budget over seeds: each part's bias and spread, what the draw explains."""
+    from relaxgrip.control import check_target_n
+    from relaxgrip.experiments.band_calibration import parse_seeds
+    from relaxgrip.experiments.budget_survey import SCATTER_GROUPS, survey_budget
+    from relaxgrip.experiments.controlled_hold import check_hold_temp_c, steady_window_s
+    from relaxgrip.learning.store import load_models
+    from relaxgrip.learning.training import load_default_models
+    from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
+    from relaxgrip.validate import check_positive
+
+    seed_list = parse_seeds(seeds)
+    check_target_n(target_n)
+    check_hold_temp_c(temp_c)
+    check_positive(duration_s, "--duration-s")
+    if jobs < 1:
+        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    bundle = load_default_models() if models is None else load_models(
+        models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
+    start = time.perf_counter()
+    with console.status(f"{len(seed_list)} relax holds with their budgets …") if not json_out \
+            else nullcontext():
+        survey = survey_budget(seed_list, target_n, temp_c, duration_s, bundle, n_jobs=jobs)
+    if json_out:
+        emit_json(survey.to_dict())
+        return
+    parts, r2 = survey.parts(), survey.r2()
+    lo, hi = steady_window_s(duration_s)
+    table = Table(title=f"relax, {target_n:g} N, {temp_c:g} °C, seeds {seeds}: estimate − "
+                        f"true force over {lo:.0f}–{hi:.0f} s",
+                  caption="R²: share of the part's spread across seeds that the twin's draw "
+                          "predicts, each seed left out of its fit; f0 / f1: that finger's "
+                          "relaxing shares and times (the marker is on f0), run: contact "
+                          "position and ambient")
+    short = {"finger_0": "R² f0", "finger_1": "R² f1", "contact_ambient": "R² run",
+             "all": "R² all"}
+    for col in ("part", "mean (N)", "SD (N)", *(short[g] for g in SCATTER_GROUPS)):
+        table.add_column(col, justify="left" if col == "part" else "right")
+    for name, p in parts.items():
+        table.add_row(name.removesuffix("_n"), f"{p['mean']:+.3f}", f"{p['sd']:.3f}",
+                      *(f"{r2[name][g]:.2f}" if math.isfinite(r2[name][g]) else "–"
+                        for g in SCATTER_GROUPS))
+    console.print(table)
+    console.print(f"MAE from the target {survey.column('mae_n').mean():.3f} N; with the bias "
+                  f"measured on the other seeds taken off {survey.bias_free_mae_n():.3f} N")
+    console.print(f"{survey.twin_version}, {time.perf_counter() - start:.1f} s")

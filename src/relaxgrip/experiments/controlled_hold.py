@@ -111,6 +111,9 @@ class HoldResult:
     fixed_aperture_n : ndarray or None
         True force of a copy of the twin held at the onset's aperture from the
         onset on, at ``t_s`` (N); only for a hold run with ``budget=True``.
+    twin_scatter : dict of str to float or None
+        The run's scatter as the twin drew it (:meth:`relaxgrip.twin.twin.TwinMaterial.scatter`),
+        ground truth beside the budget; only for a hold run with ``budget=True``.
     """
 
     estimator: str
@@ -125,6 +128,7 @@ class HoldResult:
     twin_version: str = TWIN_VERSION
     target_series_n: FloatArray | None = None
     fixed_aperture_n: FloatArray | None = None
+    twin_scatter: dict[str, float] | None = None
 
     @property
     def target_t_n(self) -> FloatArray:
@@ -217,6 +221,8 @@ class HoldResult:
         """The ``relaxgrip hold --json`` object."""
         lo, hi = self.window
         budget = {} if self.fixed_aperture_n is None else {"error_budget": self.error_budget()}
+        if self.twin_scatter is not None:
+            budget["twin_scatter"] = self.twin_scatter
         return {
             "twin_version": self.twin_version, "estimator": self.estimator,
             "target_n": self.target_n, "temp_c": self.temp_c, "seed": self.seed,
@@ -345,13 +351,14 @@ def run_hold(
     t = loop["t_s"] - onset
     keep = (t >= 0.0) & (t <= duration_s + 1e-9)
     targets = None if target_profile is None else target_profile.values(t[keep], target_n)
-    fixed = None
+    fixed = scatter = None
     if frozen:
         fixed = _hold_aperture(frozen[0], loop["t_s"][keep], loop["duty_0"][keep],
                                loop["duty_1"][keep])
+        scatter = frozen[0].material.scatter()
     return HoldResult(kind.value, target_n, temp_c, duration_s, seed, t[keep],
                       loop["truth_force_n"][keep], loop["estimate_n"][keep], loop,
-                      target_series_n=targets, fixed_aperture_n=fixed)
+                      target_series_n=targets, fixed_aperture_n=fixed, twin_scatter=scatter)
 
 
 def _copy_at_onset(twin: GripperTwin, into: list[GripperTwin],

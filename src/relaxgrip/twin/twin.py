@@ -112,6 +112,16 @@ class TwinMaterial:
             ambient_c=config.ambient_c + sc.ambient_k * rng.standard_normal(),
         )
 
+    def scatter(self) -> dict[str, float]:
+        """This run's draw, flat: each factor per finger (``_0``, ``_1``), contact, ambient."""
+        out: dict[str, float] = {}
+        for name in ("relax_scale", "relax_scale_rubbery", "tau_scale"):
+            for j, value in enumerate(getattr(self, name)):
+                out[f"{name}_{j}"] = value
+        out["contact_position_m"] = self.contact_position_m
+        out["ambient_c"] = self.ambient_c
+        return out
+
 
 class _FingerStiffness:
     """A finger's temperature-dependent contact parameters at one temperature field."""
