@@ -39,6 +39,7 @@ from relaxgrip.experiments.controlled_hold import (
     PAPER_DURATION_S,
     HoldResult,
     check_hold_temp_c,
+    map_holds,
     run_hold,
 )
 from relaxgrip.learning.store import ModelBundle
@@ -146,8 +147,8 @@ def _explained(x: FloatArray, y: FloatArray) -> float:
     """Leave-one-out R² of ``y`` on ``x`` with an intercept (``1 - PRESS / SS``).
 
     Each run is predicted by the fit on the others, so a draw that explains
-    nothing scores about 0 or below, however few the runs.  NaN if there are
-    twice as many runs as coefficients and two more, or ``y`` is constant.
+    nothing scores about 0 or below, however few the runs.  NaN with fewer
+    runs than twice the coefficients and two more, or if ``y`` is constant.
     """
     n, k = x.shape
     ss = float(np.sum((y - y.mean()) ** 2))
@@ -194,13 +195,8 @@ def survey_budget(seeds: Sequence[int], target_n: float = 5.0, temp_c: float = 4
     check_target_n(target_n)
     check_hold_temp_c(temp_c)
     check_positive(duration_s, "hold duration")
-    args = [(int(s), target_n, temp_c, duration_s, models) for s in seeds]
-    if n_jobs > 1 and len(args) > 1:
-        from joblib import Parallel, delayed
-
-        holds = list(Parallel(n_jobs=min(n_jobs, len(args)))(delayed(_one)(a) for a in args))
-    else:
-        holds = [_one(a) for a in args]
+    holds = map_holds(_one, [(int(s), target_n, temp_c, duration_s, models) for s in seeds],
+                      n_jobs)
     budgets, scatter = [], []
     for hold in holds:
         assert hold.twin_scatter is not None  # a budgeted twin hold carries its draw

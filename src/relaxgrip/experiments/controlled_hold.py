@@ -22,7 +22,7 @@ import copy
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -50,6 +50,7 @@ from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
 from relaxgrip.validate import check_positive
 
 FloatArray = NDArray[np.float64]
+_Job = TypeVar("_Job")
 
 __all__ = [
     "HOLD_TEMP_RANGE_C",
@@ -57,6 +58,7 @@ __all__ = [
     "HoldResult",
     "check_hold_temp_c",
     "compare_holds",
+    "map_holds",
     "run_hold",
     "steady_window_s",
 ]
@@ -445,12 +447,27 @@ class HoldComparison:
                 "mae_reduction": self.reductions()}
 
 
-def _run_one(args: tuple[str, float, float, float, int, ModelBundle, ObserverModel | None]
-             ) -> HoldResult:
-    """One hold in a worker: OpenCV on one thread (the parallelism is across holds)."""
+def _one_thread(run: Callable[[_Job], HoldResult], job: _Job) -> HoldResult:
+    """``run(job)`` with OpenCV on one thread (the parallelism is across holds)."""
     import cv2
 
     cv2.setNumThreads(1)
+    return run(job)
+
+
+def map_holds(run: Callable[[_Job], HoldResult], jobs: Sequence[_Job],
+              n_jobs: int = 1) -> list[HoldResult]:
+    """``run`` on every job, results in order, ``n_jobs`` holds at once (joblib)."""
+    if n_jobs > 1 and len(jobs) > 1:
+        from joblib import Parallel, delayed
+
+        return list(Parallel(n_jobs=min(n_jobs, len(jobs)))(
+            delayed(_one_thread)(run, job) for job in jobs))
+    return [_one_thread(run, job) for job in jobs]
+
+
+def _run_one(args: tuple[str, float, float, float, int, ModelBundle, ObserverModel | None]
+             ) -> HoldResult:
     kind, target, duration, temp, seed, models, observer = args
     return run_hold(kind, target, duration, temp, seed, models, observer=observer)
 
@@ -470,10 +487,5 @@ def compare_holds(
         _check(kind, target_n, temp_c, duration_s)
     bundle = models if models is not None else load_default_models()
     jobs = [(k, target_n, duration_s, temp_c, seed, bundle, observer) for k in estimators]
-    if n_jobs > 1 and len(jobs) > 1:
-        from joblib import Parallel, delayed
-
-        results = Parallel(n_jobs=min(n_jobs, len(jobs)))(delayed(_run_one)(job) for job in jobs)
-    else:
-        results = [_run_one(job) for job in jobs]
+    results = map_holds(_run_one, jobs, n_jobs)
     return HoldComparison({r.estimator: r for r in results})

@@ -17,7 +17,12 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from relaxgrip.errors import InputError
-from relaxgrip.experiments.controlled_hold import PAPER_DURATION_S, HoldResult, run_hold
+from relaxgrip.experiments.controlled_hold import (
+    PAPER_DURATION_S,
+    HoldResult,
+    map_holds,
+    run_hold,
+)
 from relaxgrip.experiments.profiles import (
     Profile,
     parse_disturbance,
@@ -162,10 +167,6 @@ Run = tuple[str, str, int]
 
 
 def _one(args: tuple[Run, float, ModelBundle | None, ObserverModel | None]) -> HoldResult:
-    """One scenario's hold in a worker (OpenCV on one thread)."""
-    import cv2
-
-    cv2.setNumThreads(1)
     (estimator, name, seed), duration_s, models, observer = args
     return scenario_hold(estimator, name, seed, duration_s, models, observer)
 
@@ -174,12 +175,7 @@ def scenario_holds(runs: Sequence[Run], duration_s: float = PAPER_DURATION_S,
                    models: ModelBundle | None = None, observer: ObserverModel | None = None,
                    n_jobs: int = 1) -> list[HoldResult]:
     """Each run's :func:`scenario_hold`, in order, ``n_jobs`` at once."""
-    args = [(run, duration_s, models, observer) for run in runs]
-    if n_jobs > 1 and len(args) > 1:
-        from joblib import Parallel, delayed
-
-        return list(Parallel(n_jobs=min(n_jobs, len(args)))(delayed(_one)(a) for a in args))
-    return [_one(a) for a in args]
+    return map_holds(_one, [(run, duration_s, models, observer) for run in runs], n_jobs)
 
 
 def compare_scenarios(names: Sequence[str] = ("ramp", "step", "push"), seed: int = 0,
