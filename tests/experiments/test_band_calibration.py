@@ -11,7 +11,13 @@ import numpy as np
 import pytest
 
 from relaxgrip.errors import InputError
-from relaxgrip.experiments.band_calibration import band_ratios, calibrate_band, parse_seeds
+from relaxgrip.experiments.band_calibration import (
+    band_ratios,
+    calibrate_band,
+    least_covering,
+    parse_seeds,
+    seed_interval,
+)
 from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
 from relaxgrip.learning.observer import (
     ObserverFileError,
@@ -57,12 +63,41 @@ def test_ratios_do_not_depend_on_the_scale_the_observer_held_with(short_hold: Ho
     np.testing.assert_array_equal(other.estimate_n, short_hold.estimate_n)
 
 
-def test_calibration_sets_the_scale_to_the_quantile_of_the_ratios() -> None:
+def test_the_least_covering_scale_by_hand() -> None:
+    ratios = np.arange(1.0, 101.0)[::-1].copy()  # 100 ratios, 1 to 100
+    assert least_covering(ratios, 0.95) == 95.0  # 95 of them are within 95
+    assert least_covering(ratios, 0.951) == 96.0
+    assert least_covering(np.array([3.0]), 0.95) == 3.0
+    assert np.mean(ratios <= least_covering(ratios, 0.9)) >= 0.9
+    with pytest.raises(InputError, match="no band"):
+        least_covering(np.zeros(0), 0.95)
+
+
+def test_seed_interval_shows_how_sure_the_scale_is() -> None:
+    """Resampling seeds: alike seeds leave the scale sure, unlike ones do not, and more
+    seeds narrow the interval."""
+    rng = np.random.default_rng(1)
+    alike = [rng.uniform(0, 1, 500) for _ in range(12)]
+    lo, hi = seed_interval(alike, 0.95)
+    assert lo <= least_covering(np.concatenate(alike), 0.95) <= hi
+    assert hi - lo < 0.03
+    offsets = [rng.uniform(0, 1, 500) * rng.lognormal(0, 0.5) for _ in range(36)]
+    lo12, hi12 = seed_interval(offsets[:12], 0.95)
+    lo36, hi36 = seed_interval(offsets, 0.95)
+    assert hi12 - lo12 > 0.2
+    assert hi36 - lo36 < hi12 - lo12
+    assert seed_interval([alike[0]], 0.95) == pytest.approx((least_covering(alike[0], 0.95),) * 2)
+    assert seed_interval(offsets, 0.95) == (lo36, hi36)  # reproducible
+
+
+def test_calibration_sets_the_least_scale_that_covers_the_level() -> None:
     model = load_default_observer()
     result = calibrate_band(model, [0], ["standard"], duration_s=8.0)
     hold = run_hold("observer", duration_s=8.0, seed=0)
     r = band_ratios(hold, model.band_scale)
-    assert result.band_scale == pytest.approx(float(np.quantile(r, 0.95)))
+    assert result.band_scale == pytest.approx(least_covering(r, 0.95))
+    assert result.scale_interval == pytest.approx((result.band_scale,) * 2)  # one seed
+    assert result.record()["scale_interval_90"] == list(result.scale_interval)
     assert result.samples == r.size
     row = result.scenarios["standard"]["seeds"]["0"]
     assert row["coverage_after"] >= 0.95
@@ -111,6 +146,8 @@ def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: py
     assert code == 0
     record = json.loads(out)
     assert record["written"] is True
+    lo, hi = record["scale_interval_90"]
+    assert lo <= record["band_scale"] <= hi
     assert load_observer(directory).band_scale == pytest.approx(record["band_scale"])
     code, out, _ = run_main(["hold", "--estimator", "observer", "--observer", directory,
                              "--duration-s", "8", "--json"], monkeypatch, capsys)
