@@ -12,6 +12,7 @@ import pytest
 
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.band_calibration import (
+    BandCalibration,
     band_ratios,
     calibrate_band,
     least_covering,
@@ -155,12 +156,25 @@ def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: py
     coverage = json.loads(out)["band_coverage"]
     assert coverage == pytest.approx(
         record["scenarios"]["standard"]["seeds"]["0"]["coverage_after"])
+    assert record["summary"]["standard"]["coverage_after"] == pytest.approx(
+        record["scenarios"]["standard"]["seeds"]["0"]["coverage_after"])
     code, out, _ = run_main(["calibrate-band", directory, "--seeds", "1", "--scenarios",
-                             "standard", "--duration-s", "8", "--jobs", "1", "--dry-run",
-                             "--json"], monkeypatch, capsys)
+                             "standard", "--duration-s", "8", "--jobs", "1", "--dry-run"],
+                            monkeypatch, capsys)
     assert code == 0
-    assert json.loads(out)["written"] is False
+    assert "measured (not written)" in out
+    assert "90 % over resampled seeds" in out
+    assert "per scenario, mean over its holds" in out
     assert load_observer(directory).band_scale == pytest.approx(record["band_scale"])
+
+
+def test_summary_is_the_mean_over_each_scenarios_holds() -> None:
+    rows = {"1": {"mae_n": 0.1, "coverage_before": 0.5, "coverage_after": 1.0},
+            "2": {"mae_n": 0.3, "coverage_before": 0.7, "coverage_after": 0.9}}
+    result = BandCalibration(0.2, (0.1, 0.3), 0.95, 10, [1, 2], 0.25,
+                             {"ramp": {"seeds": rows}})
+    assert result.summary() == {"ramp": pytest.approx(
+        {"mae_n": 0.2, "coverage_before": 0.6, "coverage_after": 0.95})}
 
 
 @pytest.mark.parametrize(("args", "expected"), [

@@ -241,7 +241,8 @@ def calibrate_band_command(
     if not dry_run:
         set_band_scale(observer, result.band_scale, result.record())
     if json_out:
-        emit_json({"observer": str(observer), "written": not dry_run, **result.record()})
+        emit_json({"observer": str(observer), "written": not dry_run, **result.record(),
+                   "summary": result.summary()})
         return
     table = Table(title=f"band coverage at {result.level:.0%}: scale {result.previous_scale:.3g}"
                         f" -> {result.band_scale:.3g}")
@@ -252,6 +253,13 @@ def calibrate_band_command(
             table.add_row(name, seed, f"{row['mae_n']:.3f}", f"{row['coverage_before']:.1%}",
                           f"{row['coverage_after']:.1%}")
     console.print(table)
+    summary = Table(title="per scenario, mean over its holds")
+    for column in ("scenario", "holds", "MAE (N)", "coverage before", "coverage after"):
+        summary.add_column(column)
+    for name, row in result.summary().items():
+        summary.add_row(name, str(len(result.scenarios[name]["seeds"])), f"{row['mae_n']:.3f}",
+                        f"{row['coverage_before']:.1%}", f"{row['coverage_after']:.1%}")
+    console.print(summary)
     verb = "measured (not written)" if dry_run else f"written to {observer}"
     lo, hi = result.scale_interval
     console.print(f"band scale {result.band_scale:.4g} (90 % over resampled seeds: {lo:.3g}-"

@@ -146,6 +146,15 @@ class BandCalibration:
     previous_scale: float
     scenarios: dict[str, dict[str, Any]] = field(default_factory=dict)
 
+    def summary(self) -> dict[str, dict[str, float]]:
+        """Per scenario, the mean over its holds of the MAE and of each coverage."""
+        out: dict[str, dict[str, float]] = {}
+        for name, entry in self.scenarios.items():
+            rows = list(entry["seeds"].values())
+            out[name] = {key: float(np.mean([row[key] for row in rows]))
+                         for key in ("mae_n", "coverage_before", "coverage_after")}
+        return out
+
     def record(self) -> dict[str, Any]:
         """The manifest's ``band_recalibration`` entry."""
         return {
