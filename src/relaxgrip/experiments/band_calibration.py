@@ -5,9 +5,9 @@ The observer's 95 % band is identified on the dataset's fixed-aperture holds
 error is another thing (the ICFN's onset reading, the share fitted online,
 a temperature ramp or a new target).  The band is therefore recalibrated the
 way it is used: closed-loop holds of the standard hold and of the issue's
-scenarios on seeds the models never saw, and ``band_scale`` set to the
-``band_level`` quantile of ``|estimate - truth|`` over the *identified*
-half-width, so that the stated share of those samples lies inside the band.
+scenarios on seeds the models never saw, and ``band_scale`` set to the least
+factor on the *identified* half-width that has ``band_level`` of the samples'
+``|estimate - truth|`` within it, so that the stated share lies inside the band.
 The ratio does not depend on the scale the observer had while holding: the
 identified half-width is the recorded one over that scale.
 
