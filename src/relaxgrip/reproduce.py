@@ -25,6 +25,7 @@ from relaxgrip.errors import InputError
 from relaxgrip.fileio import write_text_atomically
 from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION
+from relaxgrip.validate import check_jobs
 
 __all__ = ["SECTIONS", "TITLES", "Row", "Section", "check_request", "reproduce", "write_report"]
 
@@ -430,8 +431,7 @@ def check_request(out_dir: Path, jobs: int, only: Sequence[str] | None) -> list[
     InputError
         ``jobs`` < 1, an unknown section, or an output directory whose parent is missing.
     """
-    if jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    check_jobs(jobs)
     keys = list(SECTIONS) if only is None else list(only)
     unknown = [k for k in keys if k not in SECTIONS]
     if unknown:

@@ -9,7 +9,7 @@ from relaxgrip.errors import InputError
 
 ABSOLUTE_ZERO_C = -273.15
 
-__all__ = ["check_duty", "check_finite", "check_positive", "check_temp_c"]
+__all__ = ["check_duty", "check_finite", "check_jobs", "check_positive", "check_temp_c"]
 
 
 def check_finite(value: float, name: str) -> float:
@@ -44,3 +44,10 @@ def check_duty(value: float, name: str = "heater duty") -> float:
     if not 0.0 <= v <= 1.0:
         raise InputError(f"{name} {value} is outside 0-1")
     return v
+
+
+def check_jobs(value: int, name: str = "--jobs") -> int:
+    """Return a count of parallel workers if it is at least 1."""
+    if value < 1:
+        raise InputError(f"{name} must be >= 1, got {value}")
+    return value

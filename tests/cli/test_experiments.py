@@ -39,6 +39,11 @@ def test_reproduce_rejects_unknown_sections_and_missing_parents(monkeypatch, cap
     code, _, err = run_main(["reproduce", "--out", tmp_path / "no" / "r"], monkeypatch, capsys)
     assert code == 2
     assert "does not exist" in err
+    code, _, err = run_main(["reproduce", "--out", tmp_path / "r", "--jobs", "0"],
+                            monkeypatch, capsys)
+    assert code == 2
+    assert "--jobs must be >= 1, got 0" in err
+    assert not (tmp_path / "r").exists()
 
 
 def test_reproduce_one_section_writes_report_and_results(monkeypatch, capsys, tmp_path: Path):

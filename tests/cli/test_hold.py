@@ -68,6 +68,7 @@ def test_compare_json_is_one_object_with_every_hold(monkeypatch, capsys, tmp_pat
     (["--budget", "--estimator", "icfn"], "--budget"),
     (["--budget", "--compare"], "--budget"),
     (["--budget", "--backend", "emulator"], "--budget"),
+    (["--compare", "--jobs", "0"], "--jobs must be >= 1, got 0"),
 ])
 def test_bad_input_is_refused_before_anything_starts(monkeypatch, capsys, args, message):
     code, out, err = run_main(["hold", *args], monkeypatch, capsys)

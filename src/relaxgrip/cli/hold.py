@@ -89,7 +89,7 @@ def hold(
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
     from relaxgrip.plots.common import check_plot_path
-    from relaxgrip.validate import check_positive
+    from relaxgrip.validate import check_jobs, check_positive
 
     # Everything is checked before anything starts.
     if estimator not in {k.value for k in EstimatorKind}:
@@ -102,8 +102,7 @@ def hold(
     check_positive(duration_s, "--duration-s")
     if seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
-    if jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    check_jobs(jobs)
     if backend not in ("twin", "emulator"):
         raise InputError(f"--backend must be twin or emulator, got {backend!r}")
     if compare and (temps, targets, push) != (None, None, None):
@@ -241,14 +240,13 @@ def budget_survey(
     from relaxgrip.learning.store import load_models
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
-    from relaxgrip.validate import check_positive
+    from relaxgrip.validate import check_jobs, check_positive
 
     seed_list = parse_seeds(seeds)
     check_target_n(target_n)
     check_hold_temp_c(temp_c)
     check_positive(duration_s, "--duration-s")
-    if jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    check_jobs(jobs)
     bundle = load_default_models() if models is None else load_models(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
     start = time.perf_counter()

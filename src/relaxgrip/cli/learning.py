@@ -39,11 +39,11 @@ def dataset_build(
     """Generate ICFN and RCFN datasets on the twin, through the real perception pipeline."""
     from relaxgrip.learning.build import BACKENDS, build_dataset
     from relaxgrip.learning.datasets import DatasetSpec
+    from relaxgrip.validate import check_jobs
 
     if backend not in BACKENDS:
         raise InputError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
-    if jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    check_jobs(jobs)
     spec = DatasetSpec(rcfn_sequences=rcfn_sequences, seed=seed, hold_s=hold_s)
     if icfn_samples is not None:
         spec = replace(spec, icfn_samples=icfn_samples)
@@ -224,13 +224,12 @@ def calibrate_band_command(
     from relaxgrip.learning.observer import load_observer, set_band_scale
     from relaxgrip.learning.store import load_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
-    from relaxgrip.validate import check_positive
+    from relaxgrip.validate import check_jobs, check_positive
 
     seed_list = parse_seeds(seeds)
     names = [s.strip() for s in scenarios.split(",") if s.strip()]
     check_positive(duration_s, "--duration-s")
-    if jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    check_jobs(jobs)
     model = load_observer(observer)
     bundle = None if models is None else load_models(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
