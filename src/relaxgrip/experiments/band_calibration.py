@@ -168,10 +168,9 @@ class BandCalibration:
         }
 
 
-def _coverage_at(hold: HoldResult, ratios_scale: float, new_scale: float) -> float:
-    """Coverage of the hold samples had the band been ``new_scale`` wide."""
-    r = band_ratios(hold, ratios_scale)
-    return float(np.mean(r <= new_scale)) if r.size else math.nan
+def _coverage_at(ratios: FloatArray, scale: float) -> float:
+    """Coverage of a hold's samples (their :func:`band_ratios`) had the band this scale."""
+    return float(np.mean(ratios <= scale)) if ratios.size else math.nan
 
 
 def calibrate_band(observer: ObserverModel, seeds: Sequence[int],
@@ -219,12 +218,12 @@ def calibrate_band(observer: ObserverModel, seeds: Sequence[int],
                for seed in seeds]
     interval = seed_interval(by_seed, observer.band_level)
     report: dict[str, dict[str, Any]] = {}
-    for (name, seed), hold in zip(jobs, holds, strict=True):
+    for (name, seed), hold, r in zip(jobs, holds, ratios, strict=True):
         entry = report.setdefault(name, {**SCENARIOS[name].to_dict(), "seeds": {}})
         entry["seeds"][str(seed)] = {
             "mae_n": hold.metrics()["mae_n"],
-            "coverage_before": _coverage_at(hold, used, used),
-            "coverage_after": _coverage_at(hold, used, scale),
+            "coverage_before": _coverage_at(r, used),
+            "coverage_after": _coverage_at(r, scale),
         }
     return BandCalibration(scale, interval, observer.band_level, int(every.size), list(seeds),
                            used, report)
