@@ -1,5 +1,6 @@
-"""``check_*`` validators for values that come from outside: return the cleaned value
-or raise :class:`relaxgrip.errors.InputError` with a one-line message."""
+"""Validators for values that come from outside (``check_*`` for one value,
+``parse_*`` for a list given as text): return the cleaned value or raise
+:class:`relaxgrip.errors.InputError` with a one-line message."""
 
 from __future__ import annotations
 
@@ -9,7 +10,8 @@ from relaxgrip.errors import InputError
 
 ABSOLUTE_ZERO_C = -273.15
 
-__all__ = ["check_duty", "check_finite", "check_jobs", "check_positive", "check_temp_c"]
+__all__ = ["check_duty", "check_finite", "check_jobs", "check_positive", "check_temp_c",
+           "parse_seeds"]
 
 
 def check_finite(value: float, name: str) -> float:
@@ -51,3 +53,27 @@ def check_jobs(value: int, name: str = "--jobs") -> int:
     if value < 1:
         raise InputError(f"{name} must be >= 1, got {value}")
     return value
+
+
+def parse_seeds(text: str) -> list[int]:
+    """Seeds from ``10-15``, ``3,5,8`` or a mix (``0-2,7``); non-negative, no repeats.
+
+    Raises
+    ------
+    InputError
+        Anything else.
+    """
+    seeds: list[int] = []
+    for part in text.split(","):
+        lo, sep, hi = part.strip().partition("-")
+        try:
+            first = int(lo)
+            last = int(hi) if sep else first
+        except ValueError:
+            raise InputError(f"seeds must look like 10-15 or 3,5,8, got {text!r}") from None
+        if first < 0 or last < first:
+            raise InputError(f"seed range {part.strip()!r} must be non-negative and ascending")
+        seeds.extend(range(first, last + 1))
+    if len(set(seeds)) != len(seeds):
+        raise InputError(f"seeds repeat in {text!r}")
+    return seeds

@@ -16,7 +16,6 @@ from relaxgrip.experiments.band_calibration import (
     band_ratios,
     calibrate_band,
     least_covering,
-    parse_seeds,
     seed_interval,
 )
 from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
@@ -28,19 +27,6 @@ from relaxgrip.learning.observer import (
     set_band_scale,
 )
 from tests.clitools import assert_one_error_line, run_main
-
-
-@pytest.mark.parametrize(("text", "seeds"), [("10-15", [10, 11, 12, 13, 14, 15]),
-                                             ("3,5,8", [3, 5, 8]), ("0-2, 7", [0, 1, 2, 7]),
-                                             ("4", [4])])
-def test_seed_lists(text: str, seeds: list[int]) -> None:
-    assert parse_seeds(text) == seeds
-
-
-@pytest.mark.parametrize("text", ["", "a-b", "3-1", "-2", "1,1", "2-4,3"])
-def test_bad_seed_lists_are_refused(text: str) -> None:
-    with pytest.raises(InputError, match="seed"):
-        parse_seeds(text)
 
 
 @pytest.fixture(scope="module")

@@ -234,13 +234,12 @@ def budget_survey(
 ) -> None:
     """relax's error budget over seeds: each part's bias and spread, what the draw explains."""
     from relaxgrip.control import check_target_n
-    from relaxgrip.experiments.band_calibration import parse_seeds
     from relaxgrip.experiments.budget_survey import SCATTER_GROUPS, survey_budget
     from relaxgrip.experiments.controlled_hold import check_hold_temp_c, steady_window_s
     from relaxgrip.learning.store import load_models
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
-    from relaxgrip.validate import check_jobs, check_positive
+    from relaxgrip.validate import check_jobs, check_positive, parse_seeds
 
     seed_list = parse_seeds(seeds)
     check_target_n(target_n)

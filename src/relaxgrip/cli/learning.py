@@ -220,11 +220,11 @@ def calibrate_band_command(
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Recalibrate the observer's 95 % band on closed-loop holds, so it covers what it states."""
-    from relaxgrip.experiments.band_calibration import calibrate_band, parse_seeds
+    from relaxgrip.experiments.band_calibration import calibrate_band
     from relaxgrip.learning.observer import load_observer, set_band_scale
     from relaxgrip.learning.store import load_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
-    from relaxgrip.validate import check_jobs, check_positive
+    from relaxgrip.validate import check_jobs, check_positive, parse_seeds
 
     seed_list = parse_seeds(seeds)
     names = [s.strip() for s in scenarios.split(",") if s.strip()]

@@ -36,36 +36,12 @@ from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
 
 __all__ = ["DEFAULT_SCENARIOS", "BandCalibration", "band_ratios", "calibrate_band",
-           "least_covering", "parse_seeds", "seed_interval"]
+           "least_covering", "seed_interval"]
 
 FloatArray = NDArray[np.float64]
 
 #: The scenarios the band is calibrated on by default (any of :data:`SCENARIOS` can be).
 DEFAULT_SCENARIOS = ("standard", "ramp", "step")
-
-
-def parse_seeds(text: str) -> list[int]:
-    """Seeds from ``10-15``, ``3,5,8`` or a mix (``0-2,7``); non-negative, no repeats.
-
-    Raises
-    ------
-    InputError
-        Anything else.
-    """
-    seeds: list[int] = []
-    for part in text.split(","):
-        lo, sep, hi = part.strip().partition("-")
-        try:
-            first = int(lo)
-            last = int(hi) if sep else first
-        except ValueError:
-            raise InputError(f"seeds must look like 10-15 or 3,5,8, got {text!r}") from None
-        if first < 0 or last < first:
-            raise InputError(f"seed range {part.strip()!r} must be non-negative and ascending")
-        seeds.extend(range(first, last + 1))
-    if len(set(seeds)) != len(seeds):
-        raise InputError(f"seeds repeat in {text!r}")
-    return seeds
 
 
 def band_ratios(hold: HoldResult, band_scale: float) -> FloatArray:

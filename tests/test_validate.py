@@ -1,0 +1,21 @@
+"""The validators of values that come from outside (flags, files)."""
+
+from __future__ import annotations
+
+import pytest
+
+from relaxgrip.errors import InputError
+from relaxgrip.validate import parse_seeds
+
+
+@pytest.mark.parametrize(("text", "seeds"), [("10-15", [10, 11, 12, 13, 14, 15]),
+                                             ("3,5,8", [3, 5, 8]), ("0-2, 7", [0, 1, 2, 7]),
+                                             ("4", [4])])
+def test_seed_lists(text: str, seeds: list[int]) -> None:
+    assert parse_seeds(text) == seeds
+
+
+@pytest.mark.parametrize("text", ["", "a-b", "3-1", "-2", "1,1", "2-4,3"])
+def test_bad_seed_lists_are_refused(text: str) -> None:
+    with pytest.raises(InputError, match="seed"):
+        parse_seeds(text)
