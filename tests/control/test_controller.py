@@ -90,6 +90,11 @@ def test_a_grasp_walks_through_its_phases_and_holds_the_target(models):
     hold = during(result, GraspPhase.HOLD)
     assert np.nanmax(np.abs(result["truth_force_n"][hold] - 3.0)) < 0.35
     assert result["truth_force_n"][-1] < 0.05  # released
+    # Opening ends the hold: the estimate is the ICFN's again, not Eq. 10 reading the opening.
+    # (The first frame of Release was estimated before the phase changed.)
+    release = np.flatnonzero(during(result, GraspPhase.RELEASE))[1:]
+    assert np.nanmin(result["estimate_n"][release]) >= 0.0
+    assert np.all(np.isnan(result["hold_s"][release]))
     assert backend.commands[-1] == Command()  # the runner leaves the motor and heaters off
 
 

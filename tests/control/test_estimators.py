@@ -1,13 +1,14 @@
-"""The ``relax`` estimator's F_inst: the loading before the onset and the hold's start."""
+"""The estimators' reading: ``relax``'s F_inst, the tare at contact, the hold's end."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 import pytest
 
-from relaxgrip.control.estimators import RelaxEstimator
+from relaxgrip.control.estimators import IcfnEstimator, RelaxEstimator
 from relaxgrip.perception.marker import MarkerState, TrackStatus
 from relaxgrip.perception.pipeline import Percept
 
@@ -69,3 +70,96 @@ def test_f_inst_averages_the_frames_before_the_onset_too() -> None:
 def test_windows_that_average_nothing_are_refused(kwargs: dict[str, float]) -> None:
     with pytest.raises(ValueError, match="window"):
         RelaxEstimator(_Icfn(), rcfn=None, **kwargs)  # type: ignore[arg-type]
+
+
+class _OffsetIcfn:
+    """An ICFN that reads ``offset`` at rest: the force is the first feature plus it."""
+
+    def __init__(self, offset: float) -> None:
+        self.offset = offset
+
+    def predict_one(self, x: np.ndarray) -> float:
+        return float(x[0]) + self.offset
+
+
+def _free_then_loaded(est: IcfnEstimator, contact_t: float, before: Callable[[float], float],
+                      end_t: float = 3.0) -> list[float]:
+    """The force ``before(t)`` until ``contact_t``, 1 N from it; the estimator told of the
+    contact at ``contact_t``; its readings."""
+    out = []
+    for t in np.arange(0.0, end_t, 1.0 / RATE_HZ):
+        force = 1.0 if t >= contact_t else before(float(t))
+        out.append(est.instantaneous(_percept(float(t), force)))
+        if abs(t - contact_t) < 0.5 / RATE_HZ:
+            est.contact(float(t))
+    return out
+
+
+def test_the_tare_takes_the_rest_reading_off_from_the_contact_on() -> None:
+    est = IcfnEstimator(_OffsetIcfn(0.3), tare_window_s=1.0)  # type: ignore[arg-type]
+    readings = _free_then_loaded(est, 2.0, lambda t: 0.0)
+    assert est.tare_n == pytest.approx(0.3)
+    assert readings[int(1.5 * RATE_HZ)] == pytest.approx(0.3)  # before the contact: untared
+    assert readings[-1] == pytest.approx(1.0)
+    est.reset()
+    assert est.tare_n == 0.0
+
+
+def test_the_tare_leaves_out_the_margin_before_the_contact() -> None:
+    """The last frames before the contact may already touch: they read 5 N here."""
+    touching = {margin: IcfnEstimator(_OffsetIcfn(0.3), tare_window_s=1.0,  # type: ignore[arg-type]
+                                      tare_margin_s=margin) for margin in (0.0, 0.25)}
+    for est in touching.values():
+        _free_then_loaded(est, 2.0, lambda t: 5.0 if t > 1.4 else 0.0)
+    assert touching[0.25].tare_n == pytest.approx(0.3)
+    assert touching[0.0].tare_n == pytest.approx(5.3)
+
+
+def test_a_reading_at_rest_within_the_networks_scatter_is_measured_not_tared() -> None:
+    small = IcfnEstimator(_OffsetIcfn(0.05), tare_window_s=1.0)  # type: ignore[arg-type]
+    readings = _free_then_loaded(small, 2.0, lambda t: 0.0)
+    assert small.rest_n == pytest.approx(0.05)
+    assert small.tare_n == 0.0
+    assert readings[-1] == pytest.approx(1.05)
+    below = IcfnEstimator(_OffsetIcfn(-0.2), tare_window_s=1.0)  # type: ignore[arg-type]
+    _free_then_loaded(below, 2.0, lambda t: 0.0)
+    assert below.tare_n == pytest.approx(-0.2)
+
+
+def test_no_free_frames_or_no_window_means_no_tare() -> None:
+    """No window is the default: the paper's baselines read the paper's ICFN as it is."""
+    at_once = IcfnEstimator(_OffsetIcfn(0.3), tare_window_s=1.0)  # type: ignore[arg-type]
+    _free_then_loaded(at_once, 0.0, lambda t: 0.0)
+    assert at_once.tare_n == 0.0
+    assert math.isnan(at_once.rest_n)
+    off = IcfnEstimator(_OffsetIcfn(0.3))  # type: ignore[arg-type]
+    readings = _free_then_loaded(off, 2.0, lambda t: 0.0)
+    assert off.tare_n == 0.0
+    assert readings[-1] == pytest.approx(1.3)
+    assert RelaxEstimator(_Icfn(), rcfn=None).icfn.tare_window_s > 0  # type: ignore[arg-type]
+
+
+def test_bad_tare_windows_are_refused() -> None:
+    with pytest.raises(ValueError, match="tare"):
+        IcfnEstimator(_Icfn(), tare_window_s=-1.0)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="tare"):
+        IcfnEstimator(_Icfn(), tare_margin_s=math.nan)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="tare"):
+        IcfnEstimator(_Icfn(), tare_min_n=-0.1)  # type: ignore[arg-type]
+
+
+def test_relax_reads_the_icfn_again_once_the_hold_ends() -> None:
+    """Opening the fingers after a hold: Eq. 10's closure term would read the opening."""
+    est = RelaxEstimator(_Icfn(), rcfn=None, smoothing_s=0.0)  # type: ignore[arg-type]
+    t = 0.0
+    for motor in np.linspace(90.0, 100.0, 60):  # load to 4 N along 0.4 N/mm
+        est.update(_percept(t, 4.0 + STIFFNESS_N_PER_MM * (motor - 100.0)), float(motor))
+        t += 1.0 / RATE_HZ
+    est.start_hold(t, 100.0)
+    assert math.isfinite(est.f_onset_n)
+    est.end_hold(t + 1.0)
+    assert math.isnan(est.f_onset_n)
+    after = est.update(_percept(t + 1.1, 0.2), 50.0)  # opened by 50 mm
+    assert after.force_n == pytest.approx(0.2)
+    assert math.isnan(after.hold_s)
+    assert math.isnan(after.f_onset_n)

@@ -306,6 +306,10 @@ class GraspController:
         return duty
 
     def _enter(self, t: float, phase: GraspPhase) -> None:
+        if phase is GraspPhase.RELEASE and self._hold_started:
+            # Opening unloads the fingers: Eq. 10 and the closure term end with the hold.
+            self._hold_started = False
+            self.estimator.end_hold(t)
         self.phase = phase
         self._phase_t = t
         self.log.enter(t, phase)
@@ -317,8 +321,11 @@ class GraspController:
         if not self._in_contact and self._contact_count >= self.config.contact_frames:
             self._in_contact = True
             self.pid.reset(0.0)
-            self.log.event(t, EventKind.CONTACT, f"marker deflection {pose[0] * 1e3:.3f} mm"
-                           if pose is not None else "")
+            tare = self.estimator.contact(t)
+            detail = f"marker deflection {pose[0] * 1e3:.3f} mm" if pose is not None else ""
+            if tare != 0.0:
+                detail += f"; the ICFN read {tare:+.3f} N at rest: tared"
+            self.log.event(t, EventKind.CONTACT, detail)
 
     def _temperature_ready(self, t: float, percept: Percept) -> bool:
         setpoint = self.temperature.setpoint_c

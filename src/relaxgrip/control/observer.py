@@ -60,7 +60,12 @@ from collections import deque
 import numpy as np
 from numpy.typing import NDArray
 
-from relaxgrip.control.estimators import ForceEstimate, IcfnEstimator, RelaxEstimator
+from relaxgrip.control.estimators import (
+    TARE_WINDOW_S,
+    ForceEstimate,
+    IcfnEstimator,
+    RelaxEstimator,
+)
 from relaxgrip.learning.history import CONTACT_DEFLECTION_M, LoadingHistory, UnrelaxedIcfn
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.observer import ObserverModel
@@ -134,8 +139,8 @@ class ObserverEstimator:
         self.relax = None if rcfn is None else RelaxEstimator(icfn, rcfn, smoothing_s=smoothing_s,
                                                               unrelaxed=unrelaxed)
         # With relax alongside, its reading is the observer's: one ICFN pass per frame.
-        self.icfn = (IcfnEstimator(icfn, smoothing_s, unrelaxed) if self.relax is None
-                     else self.relax.icfn)
+        self.icfn = (IcfnEstimator(icfn, smoothing_s, unrelaxed, TARE_WINDOW_S)
+                     if self.relax is None else self.relax.icfn)
         self.share_fit_s = share_fit_s
         self.share_fit_temp_k = share_fit_temp_k
         self.share_fit_motor_mm_s = share_fit_motor_mm_s
@@ -296,6 +301,18 @@ class ObserverEstimator:
             half += self.model.band_drift_rel(self.temp_c) * unseen
         return ForceEstimate(est, raw, f_on, relax.k_n, relax.tau_s, hold,
                              band_lo_n=est - half, band_hi_n=est + half)
+
+    def contact(self, t_s: float) -> float:
+        """Tare the ICFN on the free-space frames before the contact (returns the tare, N)."""
+        return self.icfn.contact(t_s)
+
+    def end_hold(self, t_s: float) -> None:
+        """The fingers open: the estimate is the ICFN again, until a new hold."""
+        self._onset_t = None
+        if self.relax is not None:
+            self.relax.end_hold(t_s)
+        else:
+            self.icfn.end_hold(t_s)
 
     def start_hold(self, t_s: float, motor_position_mm: float) -> None:
         """The hold starts: the scale averages the ICFN over the next ``onset_window_s``."""

@@ -66,6 +66,7 @@ def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
     perception.reset()
     est.reset()
     frames = 0
+    holding = False
     for period in iter_periods(path, tolerant):
         obs = period.messages["/relaxgrip/observation"]
         motor_mm = float(obs["motor_position_mm"])
@@ -75,8 +76,14 @@ def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
         estimate = est.update(percept, motor_mm)
         yield period, percept, estimate
         for event in period.events:
-            if event["kind"] == "hold_onset":
+            if event["kind"] == "contact":
+                est.contact(float(event["t_s"]))
+            elif event["kind"] == "hold_onset":
                 est.start_hold(float(event["t_s"]), motor_mm)
+                holding = True
+            elif event["kind"] == "phase" and event["detail"] == "release" and holding:
+                est.end_hold(float(event["t_s"]))
+                holding = False
             elif event["kind"] == "marker_rezero":
                 perception.tracker.reset()
     if frames == 0:
