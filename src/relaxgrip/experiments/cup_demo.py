@@ -412,7 +412,11 @@ class _Scenario:
             ahead = self.proximity_m
             # The fingers must not close before the cue puts the object between them.
             hold = replace(cmd, motor_velocity_mm_s=min(cmd.motor_velocity_mm_s, 0.0))
-            if goal_mm is None:
+            # An arm that no longer advances has reached the object, whatever the cue
+            # reads (on seed 3 it read 15.9 mm with the cup between the fingers).
+            stall.append(fwd)
+            stalled = len(stall) > 10 and stall[-1] - stall[-10] < 0.05
+            if goal_mm is None and not stalled:
                 near = near + 1 if math.isfinite(ahead) and ahead <= self.s.approach_stop_m else 0
                 if near < 3:
                     speed = (10.0 if not math.isfinite(ahead)
@@ -422,9 +426,7 @@ class _Scenario:
                 # few millimetres on the arm's odometry.
                 goal_mm = fwd + ahead * 1e3
                 self.event("cue_close", cue_ahead_mm=round(ahead * 1e3, 2))
-            stall.append(fwd)
-            stalled = len(stall) > 10 and stall[-1] - stall[-10] < 0.05
-            if fwd >= goal_mm - 0.05 or stalled:
+            if stalled or goal_mm is None or fwd >= goal_mm - 0.05:
                 approached = True
                 travel = fwd - start_fwd
                 self.event("approached", travel_mm=round(travel, 2), stalled=stalled)
