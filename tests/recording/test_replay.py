@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -67,3 +68,35 @@ def test_replay_cli_json_and_plot(relax_hold: tuple[Path, HoldResult], tmp_path:
     assert data["estimator"] == "relax"
     assert data["estimate_max_abs_diff_n"] < 0.15
     assert figure.stat().st_size > 1000
+
+
+def test_replay_tells_the_estimator_of_contact_onset_and_release(
+        tmp_path: Path, models: ModelBundle, monkeypatch: pytest.MonkeyPatch) -> None:
+    """What the controller told the estimator live, the replay tells it at the same times."""
+    replay_module = importlib.import_module("relaxgrip.recording.replay")
+    calls: dict[str, list[tuple[str, float]]] = {"live": [], "replay": []}
+
+    def spying(kind: str, name: str) -> object:
+        est = make_estimator(kind, models.icfn, models.rcfn, unrelaxed=models.unrelaxed)
+        for method in ("contact", "start_hold", "end_hold"):
+            real = getattr(est, method)
+
+            def spy(t_s: float, *args: float, _real=real, _method=method) -> object:
+                calls[name].append((_method, round(t_s, 6)))
+                return _real(t_s, *args)
+            setattr(est, method, spy)
+        return est
+
+    cfg = replace(TwinConfig(), initial_temp_c=40.0)
+    clock = VirtualClock()
+    ctl = GraspController(cfg.rig, spying("relax", "live"), heat=cfg.heat)  # type: ignore[arg-type]
+    path = tmp_path / "release.mcap"
+    with McapRecorder(path) as rec:
+        run_loop(GripperTwin(cfg, seed=1, clock=clock), ctl, clock,
+                 GraspPlan(target_n=3.0, temp_c=40.0, hold_s=1.0), 30.0, recorder=rec)
+    assert [c for c, _ in calls["live"]] == ["contact", "start_hold", "end_hold"]
+    monkeypatch.setattr(replay_module, "bundle_estimator",
+                        lambda kind, bundle: spying(kind, "replay"))
+    r = replay(path, models)
+    assert calls["replay"] == calls["live"]
+    assert r.metrics()["estimate_valid_agreement"] == 1.0
