@@ -25,6 +25,7 @@ from relaxgrip.learning.datasets import DatasetSpec, UnitResult, iter_units, run
 from relaxgrip.learning.datastore import DATASET_FORMAT, DATASET_VERSION, write_dataset
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 from relaxgrip.twin import TWIN_VERSION, TwinConfig
+from relaxgrip.validate import check_jobs
 
 __all__ = ["BACKENDS", "build_dataset", "parallel_backend"]
 
@@ -154,8 +155,7 @@ def build_dataset(
     """
     from joblib import Parallel, delayed
 
-    if jobs < 1:
-        raise InputError(f"--jobs must be >= 1, got {jobs}")
+    check_jobs(jobs)
     if backend not in BACKENDS:
         raise InputError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
     units = list(iter_units(spec))
