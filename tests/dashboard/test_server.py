@@ -241,3 +241,38 @@ def test_session_refuses_bad_construction() -> None:
 
     with pytest.raises(InputError, match="control rate"):
         LiveSession(None, None, WallClock(), rate_hz=0.0)  # type: ignore[arg-type]
+
+
+def test_emulated_mcu_watchdog_does_not_see_the_start_up(tmp_path) -> None:
+    """The web server starts between the session's reset and its loop: longer than the
+    MCU's 200 ms watchdog. The emulator's virtual time carries on from the reset."""
+    from relaxgrip.dashboard.session import open_session
+
+    session = open_session("emulator", clock=WallClock(), record_dir=tmp_path)
+    try:
+        time.sleep(0.5)
+        session.start()
+        deadline = time.monotonic() + 10.0
+        while session.periods < 15 and session.alive and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert session.error is None
+        assert session.alive
+        assert session.periods >= 15
+    finally:
+        session.close()
+
+
+def test_rearm_runs_in_the_loop_before_the_first_period(make_session) -> None:
+    session = make_session()
+    calls: list[tuple[str, int]] = []
+    spy = Spy(session.backend)
+    session.backend = spy
+    session._rearm = lambda: calls.append((threading.current_thread().name, spy.observed))
+    session.start()
+    try:
+        deadline = time.monotonic() + 10.0
+        while session.periods < 3 and time.monotonic() < deadline:
+            time.sleep(0.02)
+    finally:
+        session.close()
+    assert calls == [("relaxgrip-loop", 0)]

@@ -5,8 +5,12 @@
 observe → step → act at the control rate, in the time of an injected clock (a
 :class:`~relaxgrip.clock.WallClock` for the dashboard).  Backends that live in
 virtual time (the twin, the MCU emulator in lockstep) get their virtual clock
-moved to the session clock's time before every period, so they run in real
-time too.
+moved with the session clock before every period, so they run in real time
+too.  Their time is carried on from where it stood when the loop starts, not
+jumped to the session clock's: the emulated MCU's 200 ms watchdog would see
+the web server's start-up as a gap between its enable and the first Command.
+A backend on a real link is opened again (``rearm``) in the loop thread just
+before the first period, for the same watchdog.
 
 The web server never waits on the loop: it reads :meth:`LiveSession.state`
 (a plain dict, under a lock held for one period at most) and asks for changes
@@ -108,8 +112,8 @@ class LiveSession:
     clock : Clock
         Session time: paces the loop.
     backend_clock : VirtualClock, optional
-        The backend's own virtual clock, moved to ``clock``'s time before
-        every period (twin, emulator).
+        The backend's own virtual clock, advanced with ``clock`` before every
+        period from where it stands when the loop starts (twin, emulator).
     rate_hz : float
         Control rate (the camera's, 30 Hz).
     objects : tuple of str
@@ -121,6 +125,10 @@ class LiveSession:
         Where MCAP recordings go.
     recorder_factory : callable, optional
         Makes a recorder for a path (default: :class:`relaxgrip.recording.McapRecorder`).
+    rearm : callable, optional
+        Called in the loop thread just before the first period: opens a link
+        again whose watchdog has run since it was opened (a serial gripper's
+        :meth:`~relaxgrip.backend.Gripper.reset`).
     """
 
     def __init__(self, backend: Gripper, controller: GraspController, clock: Clock, *,
@@ -129,7 +137,8 @@ class LiveSession:
                  set_object: Callable[[str | None], None] | None = None,
                  object_name: str | None = None,
                  record_dir: Path = Path("."),
-                 recorder_factory: Callable[[Path], LoopRecorder] | None = None) -> None:
+                 recorder_factory: Callable[[Path], LoopRecorder] | None = None,
+                 rearm: Callable[[], object] | None = None) -> None:
         if not (math.isfinite(rate_hz) and rate_hz > 0):
             raise InputError(f"control rate must be > 0 Hz, got {rate_hz}")
         self.backend = backend
@@ -141,6 +150,8 @@ class LiveSession:
         self.record_dir = Path(record_dir)
         self._set_object = set_object
         self._recorder_factory = recorder_factory
+        self._rearm = rearm
+        self._backend_offset_s = 0.0
         self._wanted = _Wanted(object_name=object_name)
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -195,8 +206,13 @@ class LiveSession:
 
     def _run(self) -> None:
         dt_s = 1.0 / self.rate_hz
-        t_next = self.clock.now()
         try:
+            if self._rearm is not None:
+                with self._lock:
+                    self._rearm()
+            if self.backend_clock is not None:
+                self._backend_offset_s = self.backend_clock.now() - self.clock.now()
+            t_next = self.clock.now()
             while not self._stop.is_set():
                 with self._lock:
                     self._period()
@@ -215,7 +231,7 @@ class LiveSession:
 
     def _period(self) -> None:
         if self.backend_clock is not None:
-            self.backend_clock.sleep_until(self.clock.now())
+            self.backend_clock.sleep_until(self.clock.now() + self._backend_offset_s)
         obs = self.backend.observe()
         command = self.controller.step(obs)
         self.backend.act(command)
@@ -304,7 +320,8 @@ class LiveSession:
     # -- controls: check, then change --------------------------------------------------
 
     def _now(self) -> float:
-        return self._obs.t_s if self._obs is not None else self.clock.now()
+        return (self._obs.t_s if self._obs is not None
+                else self.clock.now() + self._backend_offset_s)
 
     def _check_running(self) -> None:
         if not self.alive:
@@ -480,7 +497,8 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
         gripper = open_rig_gripper(rig, clock)
         gripper.reset()
         controller = GraspController(rig.geometry, bundle_estimator(kind, bundle))
-        return LiveSession(gripper, controller, clock, record_dir=record_dir)
+        return LiveSession(gripper, controller, clock, record_dir=record_dir,
+                           rearm=gripper.reset)
     cfg = TwinConfig(object_name=object_name)
     virtual = VirtualClock(clock.now())
     controller = GraspController(cfg.rig, bundle_estimator(kind, bundle),
