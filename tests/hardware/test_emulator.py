@@ -135,3 +135,41 @@ def test_wall_clock_emulator_serves_check_rig_over_its_socket(tmp_path: Path) ->
     assert found.marker_offset_mm < 1.0
     assert 20.0 < found.ir_temp_c[1] < 35.0
     assert not emu.endpoint.core.enabled  # the check never enables the outputs
+
+
+def test_wall_clock_watchdog_trips_on_time_when_the_frame_host_stops_reading(
+        tmp_path: Path) -> None:
+    """A host that stops reading the frame channel (suspended, hung) loses frames,
+    as from a real camera, but never delays the MCU: its watchdog trips after 200 ms."""
+    import socket
+
+    from relaxgrip.hardware.protocol.client import McuClient
+    from relaxgrip.hardware.protocol.transport import SerialTransport
+
+    clock = WallClock()
+    emu = McuEmulator(TwinConfig(), seed=0, clock=clock)
+    host = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    client = None
+    try:
+        sock = str(tmp_path / "frames.sock")
+        emu.listen(sock)
+        emu.start()
+        host.connect(sock)  # and never reads
+        client = McuClient(SerialTransport(emu.port), clock)
+        client.handshake()
+        client.set_enabled(True)
+        for _ in range(20):  # 0.7 s of commands: more frames than the socket holds
+            client.command(1.0, (1.0, 1.0))
+            time.sleep(1 / 30)
+        quiet_from = time.monotonic()
+        while emu.endpoint.core.enabled and time.monotonic() - quiet_from < 3.0:
+            time.sleep(0.005)
+        quiet_s = time.monotonic() - quiet_from
+    finally:
+        if client is not None:
+            client.close()
+        emu.stop()
+        host.close()
+    assert emu.endpoint.core.fault_flags & FaultFlag.WATCHDOG
+    assert quiet_s < 0.5
+    assert emu.publisher.messages_dropped > 0

@@ -33,3 +33,48 @@ def test_hold_rejects_an_unknown_backend() -> None:
     out = _run("hold", "--backend", "robot", "--duration-s", "10")
     assert out.returncode == 2
     assert "--backend must be twin or emulator, got 'robot'" in out.stderr
+
+
+def _emulator_rig(tmp_path: Path, port: Path, socket: Path) -> Path:
+    text = (DOCS / "rig-emulator.toml").read_text(encoding="utf-8")
+    text = (text.replace('"/tmp/relaxgrip-emulator/tty"', f'"{port}"')
+            .replace('"/tmp/relaxgrip-emulator/frames.sock"', f'"{socket}"'))
+    rig = tmp_path / "rig.toml"
+    rig.write_text(text, encoding="utf-8")
+    return rig
+
+
+def test_emulator_cleans_up_its_link_and_socket(tmp_path: Path) -> None:
+    port, sock = tmp_path / "dev" / "tty", tmp_path / "run" / "frames.sock"
+    out = _run("emulator", "--rig", str(_emulator_rig(tmp_path, port, sock)),
+               "--duration-s", "0.3")
+    assert out.returncode == 0, out.stderr
+    assert f"linked from {port}" in out.stdout
+    assert not port.is_symlink()
+    assert not sock.exists()
+
+
+def test_emulator_leaves_files_it_did_not_make_alone(tmp_path: Path) -> None:
+    port, sock = tmp_path / "tty", tmp_path / "results.csv"
+    sock.write_text("t,f\n1,2\n", encoding="utf-8")
+    out = _run("emulator", "--rig", str(_emulator_rig(tmp_path, port, sock)), "--duration-s", "5")
+    assert out.returncode == 2
+    assert out.stderr.strip().count("\n") == 0
+    assert "frame channel socket" in out.stderr
+    assert "not a socket" in out.stderr
+    assert sock.read_text(encoding="utf-8") == "t,f\n1,2\n"
+
+    (tmp_path / "device").write_text("", encoding="utf-8")
+    port.symlink_to("device")
+    out = _run("emulator", "--rig", str(_emulator_rig(tmp_path, port, tmp_path / "f.sock")),
+               "--duration-s", "5")
+    assert out.returncode == 2
+    assert "is a link to device, not to an emulator's pseudo-terminal" in out.stderr
+    assert port.is_symlink()
+
+    long_sock = tmp_path / ("d" * 110) / "frames.sock"
+    out = _run("emulator", "--rig", str(_emulator_rig(tmp_path, tmp_path / "tty2", long_sock)),
+               "--duration-s", "5")
+    assert out.returncode == 2
+    assert "107 bytes a Unix socket path may have" in out.stderr
+    assert not (tmp_path / "tty2").exists()

@@ -51,18 +51,12 @@ def emulator(
     try:
         emu.listen(socket_path)
         if spec is not None:
-            link = Path(spec.serial.port)
-            if link.exists() and not link.is_symlink():
-                raise InputError(f"[serial] port {link} exists and is not a link: "
-                                 "the emulator will not replace it")
-            link.parent.mkdir(parents=True, exist_ok=True)
-            with contextlib.suppress(FileNotFoundError):
-                link.unlink()
-            os.symlink(emu.port, link)
+            link = _link_port(Path(spec.serial.port), emu.port)
         emu.start()
+        # One line each, however long the paths: scripts read the port from here.
         console.print(f"port: {emu.port}" + (f" (linked from {link})" if link else ""),
-                      highlight=False)
-        console.print(f"frames: {socket_path}", highlight=False)
+                      highlight=False, soft_wrap=True)
+        console.print(f"frames: {socket_path}", highlight=False, soft_wrap=True)
         console.print(f"seed {run_seed}; watchdog {emu.mcu_config.watchdog_default_ms} ms; "
                       "Ctrl-C stops", highlight=False)
         deadline = None if duration_s is None else time.monotonic() + duration_s
@@ -75,6 +69,26 @@ def emulator(
         emu.stop()
         if link is not None and link.is_symlink():
             link.unlink()
+
+
+def _link_port(link: Path, port: str) -> Path:
+    """Make ``link`` point at the emulator's ``port``; only an old emulator's link is replaced."""
+    if link.is_symlink():
+        if not os.readlink(link).startswith("/dev/pts/"):
+            raise InputError(f"[serial] port {link} is a link to {os.readlink(link)}, not to "
+                             "an emulator's pseudo-terminal: the emulator will not replace it")
+    elif link.exists():
+        raise InputError(f"[serial] port {link} exists and is not a link: "
+                         "the emulator will not replace it")
+    try:
+        link.parent.mkdir(parents=True, exist_ok=True)
+        with contextlib.suppress(FileNotFoundError):
+            link.unlink()
+        os.symlink(port, link)
+    except OSError as exc:
+        raise InputError(f"[serial] port {link}: cannot link it to the emulator's "
+                         f"pseudo-terminal: {exc.strerror or exc}") from None
+    return link
 
 
 @app.command("check-rig")

@@ -19,9 +19,11 @@ what the twin backend would.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import os
 import socket
+import stat
 import threading
 import tty
 from collections.abc import Callable
@@ -30,6 +32,7 @@ from pathlib import Path
 
 from relaxgrip.backend import Command, Frame
 from relaxgrip.clock import Clock, VirtualClock
+from relaxgrip.errors import InputError
 from relaxgrip.hardware.cameras import EmulatorChannel, EmulatorFrameSource
 from relaxgrip.hardware.frame_channel import (
     KIND_IR,
@@ -53,6 +56,70 @@ __all__ = [
     "twin_config_for_rig",
 ]
 
+#: Messages that may wait for a slow wall-clock host (a third of a second of RGB
+#: frames and ticks; at most about 15 MB of frames).
+_HOST_QUEUE = 16
+#: Longest Unix socket path Linux takes (``sun_path`` is 108 bytes with its NUL).
+_MAX_SOCKET_PATH = 107
+
+
+class _QueuedSender:
+    """Sends whole messages to one host from a thread of its own.
+
+    :meth:`put` never waits: when ``depth`` messages are already queued the
+    new one is dropped whole (a camera that the host does not read drops
+    frames), so the byte stream stays framed.  A send that fails or times
+    out marks the sender dead and closes the socket.
+    """
+
+    def __init__(self, client: socket.socket, depth: int) -> None:
+        self.client = client
+        self.depth = depth
+        self.dead = False
+        self._queue: collections.deque[bytes] = collections.deque()
+        self._ready = threading.Condition()
+        self._closing = False
+        self._thread = threading.Thread(target=self._run, name="frame-channel-send",
+                                        daemon=True)
+        self._thread.start()
+
+    def put(self, data: bytes) -> bool:
+        """Queue ``data``; False if it was dropped (queue full, or the host is gone)."""
+        with self._ready:
+            if self.dead or self._closing or len(self._queue) >= self.depth:
+                return False
+            self._queue.append(data)
+            self._ready.notify()
+            return True
+
+    def _run(self) -> None:
+        while True:
+            with self._ready:
+                while not self._queue and not self._closing:
+                    self._ready.wait()
+                if self._closing:
+                    return
+                data = self._queue.popleft()
+            try:
+                self.client.sendall(data)
+            except OSError:
+                with self._ready:
+                    self.dead = True
+                    self._queue.clear()
+                self.client.close()
+                return
+
+    def close(self) -> None:
+        """Stop sending and close the socket (what is queued is dropped)."""
+        with self._ready:
+            self._closing = True
+            self._queue.clear()
+            self._ready.notify()
+        with contextlib.suppress(OSError):
+            self.client.shutdown(socket.SHUT_RDWR)
+        self._thread.join(timeout=2.0)
+        self.client.close()
+
 
 class FramePublisher:
     """Server end of the frame channel: sends messages to the connected host, if any.
@@ -60,38 +127,66 @@ class FramePublisher:
     A send that fails drops the host (it may reconnect); the MCU side never
     waits for a host that is not there.  ``muted`` streams are not sent (a
     stalled camera, for tests).
+
+    In lockstep the messages go out on the MCU's thread, before its answer,
+    so the host finds a step's frames when it reads the answer.  A host
+    attached with a ``queue`` (the wall-clock emulator's) is sent to from a
+    thread of its own instead: a host that stops reading then loses frames,
+    as from a real camera, and never delays the MCU (its 200 ms watchdog
+    among it).
     """
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._client: socket.socket | None = None
+        self._sender: _QueuedSender | None = None
         self.muted: set[int] = set()
         self.messages_sent = 0
+        self.messages_dropped = 0
 
-    def attach(self, client: socket.socket, send_timeout_s: float = 5.0) -> None:
+    def attach(self, client: socket.socket, send_timeout_s: float = 5.0,
+               queue: int | None = None) -> None:
         """Send to ``client`` from now on (replacing any previous host).
 
         A host that reads nothing for ``send_timeout_s`` is dropped, so that
-        the MCU loop never hangs on the frame channel.
+        the MCU loop never hangs on the frame channel.  With ``queue``, at
+        most that many messages wait for a slow host, sent from a thread of
+        their own; more are dropped.
         """
         client.settimeout(send_timeout_s)
+        sender = None if queue is None else _QueuedSender(client, queue)
         with self._lock:
-            old, self._client = self._client, client
-        if old is not None:
-            old.close()
+            old = self._client, self._sender
+            self._client, self._sender = client, sender
+        self._release(*old)
+
+    @staticmethod
+    def _release(client: socket.socket | None, sender: _QueuedSender | None) -> None:
+        if sender is not None:
+            sender.close()
+        elif client is not None:
+            with contextlib.suppress(OSError):
+                client.shutdown(socket.SHUT_RDWR)
+            client.close()
 
     @property
     def connected(self) -> bool:
         """Whether a host is attached."""
-        return self._client is not None
+        return self._client is not None and not (self._sender is not None and self._sender.dead)
 
     def send(self, kind: int, data: bytes) -> None:
         """Send one message of ``kind`` (skipped if muted or nobody listens)."""
         if kind in self.muted:
             return
         with self._lock:
-            client = self._client
+            client, sender = self._client, self._sender
             if client is None:
+                return
+            if sender is not None:
+                if sender.put(data):
+                    self.messages_sent += 1
+                else:
+                    self.messages_dropped += 1
                 return
             try:
                 client.sendall(data)
@@ -103,11 +198,9 @@ class FramePublisher:
     def close(self) -> None:
         """Drop the host."""
         with self._lock:
-            client, self._client = self._client, None
-        if client is not None:
-            with contextlib.suppress(OSError):
-                client.shutdown(socket.SHUT_RDWR)
-            client.close()
+            old = self._client, self._sender
+            self._client, self._sender = None, None
+        self._release(*old)
 
 
 class TwinPlant:
@@ -225,6 +318,7 @@ class McuEmulator:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._server: socket.socket | None = None
+        self._socket_path: Path | None = None
         self._accept_thread: threading.Thread | None = None
         self.error: BaseException | None = None
 
@@ -264,16 +358,36 @@ class McuEmulator:
         return theirs
 
     def listen(self, path: str) -> None:
-        """Serve the frame channel on a Unix socket at ``path`` (one host at a time)."""
+        """Serve the frame channel on a Unix socket at ``path`` (one host at a time).
+
+        An old socket at ``path`` (a previous emulator's) is replaced; any
+        other file there is left alone.
+
+        Raises
+        ------
+        InputError
+            If ``path`` is taken by something other than a socket, is too long
+            for a Unix socket, or cannot be created.
+        """
         p = Path(path)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        with contextlib.suppress(FileNotFoundError):
-            p.unlink()
+        if len(os.fsencode(p)) > _MAX_SOCKET_PATH:
+            raise InputError(f"frame channel socket {p}: longer than the {_MAX_SOCKET_PATH} "
+                             "bytes a Unix socket path may have")
+        if p.is_symlink() or (p.exists() and not stat.S_ISSOCK(p.stat().st_mode)):
+            raise InputError(f"frame channel socket {p}: a file that is not a socket is "
+                             "there; the emulator will not replace it")
         server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        server.bind(str(p))
+        try:
+            p.parent.mkdir(parents=True, exist_ok=True)
+            with contextlib.suppress(FileNotFoundError):
+                p.unlink()
+            server.bind(str(p))
+        except OSError as exc:
+            server.close()
+            raise InputError(f"frame channel socket {p}: {exc.strerror or exc}") from None
         server.listen(1)
         server.settimeout(0.2)
-        self._server = server
+        self._server, self._socket_path = server, p
 
         def accept() -> None:
             while not self._stop.is_set():
@@ -283,7 +397,7 @@ class McuEmulator:
                     continue
                 except OSError:
                     return
-                self.publisher.attach(client)
+                self.publisher.attach(client, queue=_HOST_QUEUE)
 
         self._accept_thread = threading.Thread(target=accept, name="frame-channel-accept",
                                                daemon=True)
@@ -307,9 +421,16 @@ class McuEmulator:
             self._server.close()
             if self._accept_thread is not None:
                 self._accept_thread.join(timeout=2.0)
+            self._server = None
+        if self._socket_path is not None:
+            with contextlib.suppress(OSError):
+                self._socket_path.unlink()
+            self._socket_path = None
         self.transport.close_fd()
-        with contextlib.suppress(OSError):
-            os.close(self._pty.slave)
+        if self._pty.slave >= 0:  # once: a second stop must not close a reused descriptor
+            with contextlib.suppress(OSError):
+                os.close(self._pty.slave)
+            self._pty.slave = -1
 
 
 def twin_config_for_rig(rig: RigFile, base: TwinConfig | None = None) -> TwinConfig:
