@@ -198,3 +198,36 @@ def test_frame_channel_messages_round_trip() -> None:
     assert truth_from_dict(m3.tick["truth"]) == truth
     with pytest.raises(InputError, match="cannot send"):
         encode_frame_message(KIND_RGB, Frame(0.0, 0, np.zeros((2, 2), np.int64)))
+
+
+@pytest.mark.parametrize(("body", "problem"), [
+    (b"[1, 2]", "a tick is not a JSON object"),
+    (b'{"truth": {"bogus": 1}}', "truth does not have the Truth fields"),
+    (b'{"truth": null, "force": {"t_s": 1}}', "force readings are not two number lists"),
+    (b'{"truth": null, "force": {"t_s": [1, 2], "force_n": ["a", 2]}}', "not two number lists"),
+])
+def test_a_malformed_tick_is_reported_as_the_channel_s_fault(body: bytes, problem: str) -> None:
+    """The reader thread reports it; the host does not see a stalled camera instead."""
+    import socket
+
+    from relaxgrip.clock import WallClock
+    from relaxgrip.hardware.cameras import EmulatorChannel, EmulatorFrameSource
+    from relaxgrip.hardware.frame_channel import _HEADER, CHANNEL_VERSION, KIND_TICK, MAGIC
+
+    mine, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+    clock = WallClock()
+    channel = EmulatorChannel(theirs, clock)
+    rgb = EmulatorFrameSource(channel, "rgb", 0.2)
+    rgb.start()
+    try:
+        mine.sendall(_HEADER.pack(MAGIC, CHANNEL_VERSION, KIND_TICK, 0, 0, 0, 0.0, 0, 0,
+                                  len(body)) + body)
+        deadline = time.monotonic() + 5.0
+        while channel._thread is not None and channel._thread.is_alive() \
+                and time.monotonic() < deadline:
+            time.sleep(0.01)
+        with pytest.raises(CameraError, match=f"frame channel broke: .*{problem}"):
+            rgb.read(clock.now())
+    finally:
+        channel.close()
+        mine.close()

@@ -350,6 +350,10 @@ class EmulatorChannel:
             with self._cond:
                 if not self._closed:
                     self._error = f"frame channel broke: {exc}"
+        except Exception as exc:  # the reader must not die unreported: the host would
+            with self._cond:      # see a stalled camera, not the cause
+                if not self._closed:
+                    self._error = f"frame channel broke: {type(exc).__name__}: {exc}"
         with self._cond:
             if not self._closed and self._error is None:
                 self._error = "the emulator closed the frame channel"

@@ -37,7 +37,7 @@ import math
 import socket
 import struct
 import threading
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -124,6 +124,32 @@ def truth_from_dict(d: dict[str, Any]) -> Truth:
     return Truth(**{k: tup(v) for k, v in d.items()})
 
 
+_TRUTH_FIELDS = frozenset(f.name for f in fields(Truth))
+
+
+def _checked_tick(body: Any) -> dict[str, Any]:
+    """A tick's JSON body, checked to be what :func:`encode_tick` writes.
+
+    Raises
+    ------
+    InputError
+        Naming what is wrong: not an object, a truth with other fields, force
+        readings that are not two number lists of one length.
+    """
+    if not isinstance(body, dict):
+        raise InputError(f"frame channel: a tick is not a JSON object: {type(body).__name__}")
+    truth, force = body.get("truth"), body.get("force")
+    if truth is not None and (not isinstance(truth, dict) or set(truth) != _TRUTH_FIELDS):
+        raise InputError("frame channel: a tick's truth does not have the Truth fields")
+    if force is not None:
+        t, f = (force.get("t_s"), force.get("force_n")) if isinstance(force, dict) else (0, 0)
+        if not (isinstance(t, list) and isinstance(f, list) and len(t) == len(f)
+                and all(isinstance(v, int | float) for v in (*t, *f))):
+            raise InputError("frame channel: a tick's force readings are not two number "
+                             "lists of one length")
+    return body
+
+
 class MessageReader:
     """Blocking reader of channel messages from a connected socket.
 
@@ -172,7 +198,7 @@ class MessageReader:
         if payload is None:
             return None
         if kind == KIND_TICK:
-            return ChannelMessage(kind, seq, t_s, tick=json.loads(payload.decode()))
+            return ChannelMessage(kind, seq, t_s, tick=_checked_tick(json.loads(payload.decode())))
         if kind not in (KIND_RGB, KIND_IR) or code not in _DTYPES or channels not in (1, 3):
             raise InputError(f"frame channel: unknown message kind {kind} / dtype {code}")
         dtype = _DTYPES[code]
