@@ -66,3 +66,22 @@ def test_scenario_hold_is_run_hold_with_the_profiles() -> None:
     p = SCENARIOS["push"].profiles(6.0)
     b = run_hold("relax", duration_s=6.0, seed=1, disturbance=p["disturbance"])
     np.testing.assert_array_equal(a.truth_n, b.truth_n)
+
+
+def test_a_refused_scenario_closes_the_emulator_it_opened() -> None:
+    """The push needs the twin: refused after the emulator is up, which is closed again."""
+    import os
+    import threading
+
+    from relaxgrip.experiments.controlled_hold import run_hold
+    from relaxgrip.experiments.profiles import parse_disturbance
+
+    def open_fds() -> int:
+        return len(os.listdir("/proc/self/fd"))
+
+    threads, fds = {t.name for t in threading.enumerate()}, open_fds()
+    with pytest.raises(InputError, match="a disturbance needs the twin backend"):
+        run_hold("relax", duration_s=10.0, backend="emulator",
+                 disturbance=parse_disturbance("push:1:5"))
+    assert {t.name for t in threading.enumerate()} == threads
+    assert open_fds() == fds

@@ -495,8 +495,12 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
 
         rig = load_rig(backend.removeprefix("serial:"))
         gripper = open_rig_gripper(rig, clock)
-        gripper.reset()
-        controller = GraspController(rig.geometry, bundle_estimator(kind, bundle))
+        try:
+            gripper.reset()
+            controller = GraspController(rig.geometry, bundle_estimator(kind, bundle))
+        except BaseException:  # the port and the camera threads are not left open
+            gripper.close()
+            raise
         return LiveSession(gripper, controller, clock, record_dir=record_dir,
                            rearm=gripper.reset)
     cfg = TwinConfig(object_name=object_name)

@@ -333,15 +333,15 @@ def run_hold(
     cfg = replace(base, initial_temp_c=temp_c)
     clock = VirtualClock()
     twin = _make_backend(backend, cfg, seed, clock)
-    controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
-                                 heat=cfg.heat)
-    plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False)
-    on_step = _scenario(twin, temp_profile, target_profile, disturbance, temp_c, target_n)
-    frozen: list[GripperTwin] = []
-    if budget:
-        assert isinstance(twin, GripperTwin)
-        on_step = _copy_at_onset(twin, frozen, on_step)
-    try:
+    try:  # closed however it ends: the emulator's thread and pty with it
+        controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
+                                     heat=cfg.heat)
+        plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False)
+        on_step = _scenario(twin, temp_profile, target_profile, disturbance, temp_c, target_n)
+        frozen: list[GripperTwin] = []
+        if budget:
+            assert isinstance(twin, GripperTwin)
+            on_step = _copy_at_onset(twin, frozen, on_step)
         loop = run_loop(twin, controller, clock, plan, duration_s + SETUP_ALLOWANCE_S,
                         recorder=recorder, on_step=on_step)
     finally:
