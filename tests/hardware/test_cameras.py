@@ -231,3 +231,62 @@ def test_a_malformed_tick_is_reported_as_the_channel_s_fault(body: bytes, proble
     finally:
         channel.close()
         mine.close()
+
+
+def test_an_emulator_frame_of_another_size_than_the_rig_file_s_is_refused() -> None:
+    import socket
+
+    from relaxgrip.clock import WallClock
+    from relaxgrip.hardware.cameras import EmulatorChannel, EmulatorFrameSource
+
+    mine, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+    clock = WallClock()
+    channel = EmulatorChannel(theirs, clock)
+    rgb = EmulatorFrameSource(channel, "rgb", 5.0, shape=(240, 320))
+    rgb.start()
+    try:
+        mine.sendall(encode_frame_message(KIND_RGB, Frame(0.0, 1, np.zeros((480, 640, 3),
+                                                                            np.uint8))))
+        deadline = time.monotonic() + 5.0
+        while channel.latest(KIND_RGB)[0] is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        with pytest.raises(CameraError, match="frame is 640x480, the rig file says 320x240"):
+            rgb.read(clock.now())
+    finally:
+        channel.close()
+        mine.close()
+
+
+def test_a_camera_stuck_in_read_is_released_after_the_read_not_beside_it() -> None:
+    import threading
+
+    class StuckCapture(FakeCapture):
+        def __init__(self) -> None:
+            super().__init__([])
+            self.in_read = threading.Event()
+            self.unblock = threading.Event()
+            self.released_in_read = False
+
+        def read(self) -> tuple[bool, np.ndarray[Any, Any] | None]:
+            self.in_read.set()
+            self.unblock.wait(10.0)
+            self.in_read.clear()
+            return False, None
+
+        def release(self) -> None:
+            self.released_in_read = self.in_read.is_set()
+            super().release()
+
+    cap = StuckCapture()
+    source = OpenCvRgbSource(load_rig(DOCS / "rig-example.toml").rgb, VirtualClock(),
+                             capture_factory=lambda dev: cap)
+    source.start()
+    assert cap.in_read.wait(5.0)
+    source.close()  # gives up waiting for the stuck thread
+    assert not cap.released
+    cap.unblock.set()
+    deadline = time.monotonic() + 5.0
+    while not cap.released and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert cap.released
+    assert not cap.released_in_read

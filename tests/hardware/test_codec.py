@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import struct
+from pathlib import Path
 
 import pytest
 from hypothesis import given
@@ -166,6 +168,18 @@ def test_wrong_version_keeps_header_fields() -> None:
         9,
     )
     assert c.decode_frame(frame, expected_version=9) == c.Packet(77, c.Hello(), 9)
+
+
+def test_an_undecodable_value_is_the_error_s_detail() -> None:
+    """docs/protocol.md §4: VALUE_OUT_OF_RANGE carries the offending value."""
+    vectors = json.loads((Path(__file__).resolve().parents[2] / "docs" / "protocol-vectors.json")
+                         .read_text(encoding="utf-8"))
+    (vector,) = [v for v in vectors["invalid"] if v["name"] == "value out of range (SetEnable 2)"]
+    with pytest.raises(FrameDecodeError) as info:
+        c.decode_frame(bytes.fromhex(vector["frame"])[:-1])
+    err = info.value.error
+    assert (err.code, err.msg_type, err.seq, err.detail) == (
+        c.ErrorCode.VALUE_OUT_OF_RANGE, 0x04, 7, 2)
 
 
 def test_leading_delimiter() -> None:

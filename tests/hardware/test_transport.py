@@ -109,6 +109,8 @@ def test_serial_transport_on_a_pty_reads_with_timeout(pty_pair: tuple[int, str])
 def test_serial_transport_bad_port_is_one_line() -> None:
     with pytest.raises(LinkError, match="cannot open serial port /nonexistent/tty"):
         SerialTransport("/nonexistent/tty")
+    with pytest.raises(LinkError, match="embedded null byte"):
+        SerialTransport("/dev/tty\x00S0")
 
 
 def test_core_imports_without_pyserial_and_says_how_to_install() -> None:

@@ -140,22 +140,25 @@ class _CaptureSource:
 
     def _run(self) -> None:
         cap = self._cap
-        while not self._stop.is_set():
-            ok, raw = cap.read()
-            if not ok or raw is None:
-                time.sleep(0.005)  # no frame now; the stall check notices a dead camera
-                continue
-            t = self.clock.now()
-            try:
-                image = self._convert(np.asarray(raw))
-            except CameraError as exc:
+        try:
+            while not self._stop.is_set():
+                ok, raw = cap.read()
+                if not ok or raw is None:
+                    time.sleep(0.005)  # no frame now; the stall check notices a dead camera
+                    continue
+                t = self.clock.now()
+                try:
+                    image = self._convert(np.asarray(raw))
+                except CameraError as exc:
+                    with self._lock:
+                        self._error = str(exc)
+                    continue
                 with self._lock:
-                    self._error = str(exc)
-                continue
-            with self._lock:
-                self._latest = Frame(t, self._seq, image)
-                self._seq += 1
-                self._last_s = t
+                    self._latest = Frame(t, self._seq, image)
+                    self._seq += 1
+                    self._last_s = t
+        finally:  # here, never beside a read() that still runs (a camera stuck in it)
+            cap.release()
 
     def read(self, now_s: float) -> Frame | None:
         """The newest frame; raises :class:`CameraStalledError` if the camera stalled."""
@@ -167,14 +170,17 @@ class _CaptureSource:
         return latest
 
     def close(self) -> None:
-        """Stop the thread and release the device."""
+        """Stop the thread, which releases the device.
+
+        A thread stuck in the driver's ``read()`` (an unplugged camera) is
+        left to release it when that returns: releasing beside a running
+        read is undefined in the drivers.
+        """
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
-        if self._cap is not None:
-            self._cap.release()
-            self._cap = None
+        self._cap = None
 
 
 class OpenCvRgbSource(_CaptureSource):
@@ -412,15 +418,20 @@ class EmulatorFrameSource:
         Which stream.
     stall_s : float
         Stall limit (s).
+    shape : (int, int), optional
+        The frame size (rows, columns) the host's rig file expects; a frame of
+        another size is a :class:`CameraError`, as from a real camera.
     """
 
-    def __init__(self, channel: EmulatorChannel, kind: str, stall_s: float) -> None:
+    def __init__(self, channel: EmulatorChannel, kind: str, stall_s: float,
+                 shape: tuple[int, int] | None = None) -> None:
         if kind not in ("rgb", "ir"):
             raise InputError(f"emulator stream must be rgb or ir, got {kind!r}")
         self.channel = channel
         self.kind = KIND_RGB if kind == "rgb" else KIND_IR
         self.name = "RGB" if kind == "rgb" else "thermal"
         self.stall_s = stall_s
+        self.shape = shape
 
     def start(self) -> None:
         """Start the channel (once for both streams)."""
@@ -433,6 +444,10 @@ class EmulatorFrameSource:
         if error is not None:
             raise CameraError(f"{self.name} camera (emulator): {error}")
         _stalled(self.name, now_s, last, self.stall_s, frame is not None)
+        if frame is not None and self.shape is not None and frame.image.shape[:2] != self.shape:
+            h, w = frame.image.shape[:2]
+            raise CameraError(f"{self.name} camera (emulator): frame is {w}x{h}, the rig file "
+                              f"says {self.shape[1]}x{self.shape[0]}")
         return frame
 
     def close(self) -> None:
@@ -469,12 +484,13 @@ def open_frame_sources(rig: RigFile, clock: Clock, *,
     ir: FrameSource
     if rig.rgb.source == "emulator":
         assert channel is not None
-        rgb = EmulatorFrameSource(channel, "rgb", rig.rgb.stall_s)
+        rgb = EmulatorFrameSource(channel, "rgb", rig.rgb.stall_s,
+                                  rig.rgb.mount.intrinsics.shape)
     else:
         rgb = OpenCvRgbSource(rig.rgb, clock, capture_factory)
     if rig.ir.source == "emulator":
         assert channel is not None
-        ir = EmulatorFrameSource(channel, "ir", rig.ir.stall_s)
+        ir = EmulatorFrameSource(channel, "ir", rig.ir.stall_s, rig.ir.mount.intrinsics.shape)
     else:
         ir = UvcThermalSource(rig.ir, clock, capture_factory)
     return rgb, ir

@@ -39,6 +39,7 @@ __all__ = [
     "ErrorCode",
     "ErrorReply",
     "FaultFlag",
+    "FieldValueError",
     "FrameDecoder",
     "FrameError",
     "GetStatus",
@@ -254,6 +255,15 @@ def cobs_decode(data: bytes) -> bytes:
 # --------------------------------------------------------------------------- messages
 
 
+class FieldValueError(InputError):
+    """A payload field that does not decode: the MCU answers ``VALUE_OUT_OF_RANGE``
+    with ``value`` as the Error's detail (docs/protocol.md §4)."""
+
+    def __init__(self, message: str, value: int = 0) -> None:
+        super().__init__(message)
+        self.value = value
+
+
 def _check_int(value: int, name: str, bounds: tuple[int, int]) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
         raise InputError(f"{name} must be an integer, got {value!r}")
@@ -430,7 +440,7 @@ class SetEnable:
     def from_payload(cls, payload: bytes) -> SetEnable:
         """Decode a payload of :attr:`PAYLOAD_BYTES` bytes."""
         if payload[0] > 1:
-            raise InputError(f"SetEnable value {payload[0]} is neither 0 nor 1")
+            raise FieldValueError(f"SetEnable value {payload[0]} is neither 0 nor 1", payload[0])
         return cls(payload[0] == 1)
 
 
@@ -939,7 +949,8 @@ def _decode(encoded: bytes, expected_version: int) -> DecodeResult:
     try:
         message = cls.from_payload(payload)
     except InputError as exc:
-        return err(ErrorCode.VALUE_OUT_OF_RANGE, str(exc))
+        return err(ErrorCode.VALUE_OUT_OF_RANGE, str(exc),
+                   exc.value if isinstance(exc, FieldValueError) else 0)
     return Packet(seq, message, version)
 
 

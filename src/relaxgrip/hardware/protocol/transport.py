@@ -264,6 +264,8 @@ class SerialTransport:
             )
         except serial_mod.SerialException as exc:
             raise LinkError(f"cannot open serial port {port}: {exc}") from exc
+        except (OSError, ValueError) as exc:  # e.g. a NUL byte in the path
+            raise LinkError(f"cannot open serial port {port!r}: {exc}") from exc
         self._timeout: float | None = 0.0
         self.port = port
 
