@@ -18,13 +18,15 @@ import io
 import json
 import os
 import secrets
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 __all__ = [
+    "atomic_file",
     "file_entry",
     "npz_bytes",
     "one_line",
@@ -61,9 +63,7 @@ def write_files_atomically(directory: Path, files: Sequence[tuple[str, bytes]]) 
     temporaries: list[tuple[Path, Path]] = []
     try:
         for name, data in files:
-            # Not mkstemp: its files are private (0600); these get the umask's mode.
-            tmp = directory / f".{name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
-            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            tmp, fd = _temporary(directory, name)
             temporaries.append((tmp, directory / name))
             with os.fdopen(fd, "wb") as fh:
                 fh.write(data)
@@ -74,7 +74,49 @@ def write_files_atomically(directory: Path, files: Sequence[tuple[str, bytes]]) 
     finally:
         for tmp, _ in temporaries:
             tmp.unlink(missing_ok=True)
-    try:  # make the renames durable; not every platform can open a directory
+    _sync_directory(directory)
+
+
+def _temporary(directory: Path, name: str) -> tuple[Path, int]:
+    """A new temporary file beside ``directory / name``, open for writing."""
+    # Not mkstemp: its files are private (0600); these get the umask's mode.
+    tmp = directory / f".{name}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    try:
+        return tmp, os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    except OSError as exc:  # named by the file the caller asked for, not the temporary
+        raise OSError(exc.errno, exc.strerror, str(directory / name)) from None
+
+
+@contextmanager
+def atomic_file(path: Path) -> Iterator[io.BufferedWriter]:
+    """A binary file to write ``path`` through: it appears there, whole, only on success.
+
+    For outputs too large to hold in memory (a recovered recording).  The
+    file is a temporary beside ``path``, flushed to disk and renamed into
+    place when the block ends; an exception in the block removes it and
+    leaves whatever was at ``path`` before.
+
+    Raises
+    ------
+    OSError
+        From the file system (no such directory, no space, read-only).
+    """
+    path = Path(path)
+    tmp, fd = _temporary(path.parent, path.name)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    _sync_directory(path.parent)
+
+
+def _sync_directory(directory: Path) -> None:
+    """Make the renames in ``directory`` durable."""
+    try:  # not every platform can open a directory
         dir_fd = os.open(directory, os.O_RDONLY)
     except OSError:
         return

@@ -39,7 +39,8 @@ def test_table_names_every_load(
 
 @pytest.mark.parametrize(
     ("suffix", "expected"),
-    [("deform.txt", "unsupported plot format"), ("no/dir.png", "does not exist")],
+    [("deform.txt", "unsupported plot format"), ("no/dir.png", "does not exist"),
+     ("a-dir.png", "is a directory; name the figure file to write")],
 )
 def test_bad_plot_path(
     tmp_path: Path,
@@ -48,6 +49,7 @@ def test_bad_plot_path(
     suffix: str,
     expected: str,
 ) -> None:
+    (tmp_path / "a-dir.png").mkdir()
     code, out, err = run_main(["characterize", "--plot", tmp_path / suffix], monkeypatch, capsys)
     assert_one_error_line(code, out, err, expected)
-    assert not (tmp_path / suffix).exists()
+    assert not (tmp_path / suffix).is_file()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
 
@@ -111,3 +112,59 @@ def test_recover_cli(relax_hold: tuple[Path, HoldResult], tmp_path: Path,
     assert code == 0, err
     code, out, err = run_main(["recover", tmp_path / "none.mcap", out_path], monkeypatch, capsys)
     assert_one_error_line(code, out, err, "no such recording")
+
+
+def _summary(path: Path):  # type: ignore[no-untyped-def]
+    with open(path, "rb") as f:
+        return make_reader(f).get_summary()
+
+
+def test_recover_a_damaged_chunk_costs_its_own_messages(
+        relax_hold: tuple[Path, HoldResult], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """A complete file with one chunk damaged: that chunk is skipped, the rest kept,
+    the loss stated; no channel is written twice from the summary."""
+    good, _ = relax_hold
+    whole = _summary(good)
+    assert whole is not None
+    assert whole.statistics is not None
+    copy = tmp_path / "copy.mcap"
+    code, out, err = run_main(["recover", good, copy], monkeypatch, capsys)
+    assert code == 0, err
+    assert f"was complete: {whole.statistics.message_count} messages on " \
+           f"{len(whole.channels)} channels" in out
+    copied = _summary(copy)
+    assert copied is not None
+    assert len(copied.channels) == len(whole.channels)
+    assert len(copied.schemas) == len(whole.schemas)
+
+    chunks = sorted(whole.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    middle = chunks[len(chunks) // 2]
+    data = bytearray(good.read_bytes())
+    data[middle.chunk_start_offset + middle.chunk_length - 100] ^= 0xFF  # in its records
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data))
+    out_path = tmp_path / "recovered.mcap"
+    code, out, err = run_main(["recover", damaged, out_path, "--json"], monkeypatch, capsys)
+    assert code == 0, err
+    report = json.loads(out)
+    assert report["damaged_chunks"] == 1
+    assert report["expected_messages"] == whole.statistics.message_count
+    assert 0 < report["lost_messages"] < whole.statistics.message_count // 4
+    assert report["messages"] + report["lost_messages"] == whole.statistics.message_count
+    recovered = _summary(out_path)
+    assert recovered is not None
+    assert recovered.statistics is not None
+    assert recovered.statistics.message_count == report["messages"]
+    assert recovered.statistics.message_end_time == whole.statistics.message_end_time
+
+
+def test_recover_refuses_outputs_it_cannot_write(
+        relax_hold: tuple[Path, HoldResult], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    good, _ = relax_hold
+    code, out, err = run_main(["recover", good, tmp_path], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "is a directory; name the MCAP file to write")
+    code, out, err = run_main(["recover", good, tmp_path / "no" / "x.mcap"], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "cannot write (No such file or directory)")
+    assert list(tmp_path.iterdir()) == []  # no temporary left behind

@@ -68,6 +68,15 @@ def test_replay_cli_json_and_plot(relax_hold: tuple[Path, HoldResult], tmp_path:
     assert data["estimator"] == "relax"
     assert data["estimate_max_abs_diff_n"] < 0.15
     assert figure.stat().st_size > 1000
+    inode = figure.stat().st_ino
+    code, out, err = run_main(["replay", path, "--plot", figure], monkeypatch, capsys)
+    assert code == 0, err
+    assert figure.stat().st_ino != inode  # replaced whole, never rewritten in place
+    (tmp_path / "dir.png").mkdir()
+    code, out, err = run_main(["replay", path, "--plot", tmp_path / "dir.png"], monkeypatch,
+                              capsys)
+    assert code == 2
+    assert "is a directory" in err
 
 
 def test_replay_tells_the_estimator_of_contact_onset_and_release(

@@ -64,13 +64,12 @@ def replay_cmd(
 
 def _plot_replay(result: ReplayResult, path: Path) -> None:
     """Recorded and replayed estimate (and the truth) over time."""
-    import matplotlib
     import numpy as np
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from relaxgrip.plots.common import new_figure, save_figure
 
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig = new_figure(8, 4)
+    ax = fig.add_subplot()
     ax.plot(result.t_s, result.recorded_n, label="recorded estimate", lw=1.5)
     ax.plot(result.t_s, result.replayed_n, "--", label="replayed estimate", lw=1.0)
     if result.truth_n.size and bool(np.isfinite(result.truth_n).any()):
@@ -79,9 +78,7 @@ def _plot_replay(result: ReplayResult, path: Path) -> None:
     ax.set_ylabel("force (N)")
     ax.set_title(f"replay of {Path(result.path).name} ({result.estimator})")
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 @app.command("recover")
@@ -99,11 +96,25 @@ def recover_cmd(
     if json_out:
         emit_json({"recording": str(recording), "out": str(out),
                    "was_complete": report.complete, "messages": report.messages,
-                   "channels": report.channels, "end_s": report.end_s})
+                   "channels": report.channels, "end_s": report.end_s,
+                   "damaged_chunks": report.damaged_chunks,
+                   "expected_messages": report.expected_messages,
+                   "lost_messages": report.lost_messages,
+                   "stopped_early": report.stopped_early})
         return
     state = "was complete" if report.complete else "was truncated"
+    damage = []
+    if report.damaged_chunks:
+        damage.append(f"{report.damaged_chunks} damaged chunk(s) skipped")
+    if report.complete and report.stopped_early:
+        damage.append("its records break off before the end")
+    if report.lost_messages:
+        damage.append(f"{report.lost_messages} of its {report.expected_messages} "
+                      "messages lost")
+    if damage:
+        state = f"{state} but damaged ({'; '.join(damage)})"
     console.print(f"{recording} {state}: {report.messages} messages on {report.channels} "
-                  f"channels up to {report.end_s:.2f} s written to {out}")
+                  f"channels up to {report.end_s:.2f} s written to {out}", soft_wrap=True)
 
 
 @dataset_app.command("from-recordings")

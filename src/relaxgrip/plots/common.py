@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -33,8 +34,9 @@ def check_plot_path(path: str | Path) -> Path:
     Raises
     ------
     relaxgrip.errors.InputError
-        If the extension is not one of :data:`PLOT_FORMATS` or the parent
-        directory does not exist (it is not created).
+        If the extension is not one of :data:`PLOT_FORMATS`, the parent
+        directory does not exist (it is not created) or cannot be written,
+        or ``path`` is a directory.
     """
     path = Path(path)
     if path.suffix.lower() not in PLOT_FORMATS:
@@ -44,6 +46,11 @@ def check_plot_path(path: str | Path) -> Path:
         )
     if not path.parent.is_dir():
         raise InputError(f"{path}: directory {path.parent} does not exist")
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory; name the figure file to write")
+    if not os.access(path.parent, os.W_OK):
+        raise InputError(f"{path}: cannot write in {path.parent} (permission denied or "
+                         "read-only)")
     return path
 
 

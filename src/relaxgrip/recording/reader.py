@@ -28,6 +28,7 @@ import numpy as np
 
 from relaxgrip.backend import Frame
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import atomic_file
 from relaxgrip.recording.recorder import require_mcap
 from relaxgrip.recording.schemas import RECORDING_FORMAT, RECORDING_VERSION
 from relaxgrip.rig import RigGeometry
@@ -310,55 +311,117 @@ class RecoverReport:
         Channels written.
     end_s : float
         Log time of the last message (s); nan if none.
+    damaged_chunks : int
+        Chunks whose data did not check (CRC, decompression): skipped.
+    expected_messages : int or None
+        The message count the source's summary states (a complete file), else None.
+    stopped_early : bool
+        The file's record structure broke before its end (a killed recorder,
+        or damage outside a chunk's data): nothing after that point is read.
     """
 
     complete: bool
     messages: int
     channels: int
     end_s: float
+    damaged_chunks: int = 0
+    expected_messages: int | None = None
+    stopped_early: bool = False
+
+    @property
+    def lost_messages(self) -> int | None:
+        """Messages the summary counts that could not be recovered (None: unknown)."""
+        return None if self.expected_messages is None else self.expected_messages - self.messages
 
 
 def recover(src: Path, dst: Path) -> RecoverReport:
-    """Rewrite the readable part of a (killed) recording as a complete MCAP file.
+    """Rewrite the readable part of a killed or damaged recording as a complete MCAP file.
+
+    Reads the file's records in order; a chunk whose data does not check
+    (CRC, decompression) is skipped and counted, and the next one read, so
+    one damaged chunk costs its own messages (about 0.2 s), not the rest of
+    the file.  Where the record structure itself breaks (the end of a
+    killed file) reading stops.  The summary of a complete file is not
+    copied (the writer makes a new one) but its message count is reported
+    beside what was recovered.  The output appears whole or not at all.
 
     Raises
     ------
     InputError
-        Missing or foreign source, nothing readable, or ``dst`` the same file.
+        Missing or foreign source, nothing readable, ``dst`` the same file or
+        a directory, or ``dst`` not writable.
     """
     require_mcap()
-    from mcap.records import Channel, Message, Schema
+    from mcap.records import Channel, Chunk, DataEnd, Message, Schema, Statistics
+    from mcap.stream_reader import StreamReader, breakup_chunk
     from mcap.writer import Writer
 
     src, dst = Path(src), Path(dst)
     complete = _check_file(src, tolerant=True)
     if dst.exists() and os.path.samefile(src, dst):
         raise InputError(f"{dst}: the output must be another file than the input")
+    if dst.is_dir():
+        raise InputError(f"{dst}: is a directory; name the MCAP file to write")
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
-    count = 0
+    count = damaged = 0
     end_ns = -1
-    tmp = dst.with_name(f".{dst.name}.partial")
-    with open(tmp, "wb") as out:
-        writer = Writer(out)
-        writer.start(profile="", library="relaxgrip recover")
-        for record in iter_records(src, tolerant=True):
-            if isinstance(record, Schema):
-                schemas[record.id] = writer.register_schema(record.name, record.encoding,
-                                                            record.data)
-            elif isinstance(record, Channel):
-                channels[record.id] = writer.register_channel(
-                    record.topic, record.message_encoding, schemas.get(record.schema_id, 0),
-                    dict(record.metadata))
-            elif isinstance(record, Message) and record.channel_id in channels:
-                writer.add_message(channels[record.channel_id], record.log_time, record.data,
-                                   record.publish_time, record.sequence)
-                count += 1
-                end_ns = max(end_ns, record.log_time)
-        writer.finish()  # type: ignore[no-untyped-call]
-    if count == 0:
-        tmp.unlink(missing_ok=True)
-        raise InputError(f"{src}: no complete message to recover")
-    os.replace(tmp, dst)
-    return RecoverReport(complete, count, len(channels), end_ns * 1e-9 if end_ns >= 0
-                         else float("nan"))
+    expected: int | None = None
+    stopped_early = False
+
+    def copy(record: Any, writer: Writer) -> None:
+        nonlocal count, end_ns
+        if isinstance(record, Schema) and record.id not in schemas:
+            schemas[record.id] = writer.register_schema(record.name, record.encoding,
+                                                        record.data)
+        elif isinstance(record, Channel) and record.id not in channels:
+            channels[record.id] = writer.register_channel(
+                record.topic, record.message_encoding, schemas.get(record.schema_id, 0),
+                dict(record.metadata))
+        elif isinstance(record, Message) and record.channel_id in channels:
+            writer.add_message(channels[record.channel_id], record.log_time, record.data,
+                               record.publish_time, record.sequence)
+            count += 1
+            end_ns = max(end_ns, record.log_time)
+
+    try:
+        with atomic_file(dst) as out, open(src, "rb") as f:
+            writer = Writer(out)
+            writer.start(profile="", library="relaxgrip recover")
+            # CRCs are checked per chunk (below), not over the data section: a
+            # damaged chunk is skipped, not the end of the reading.
+            records = StreamReader(f, emit_chunks=True, validate_crcs=False).records
+            in_summary = False
+            while True:
+                try:
+                    record = next(records)
+                except StopIteration:
+                    break
+                except Exception:  # the killed record, or damage to the structure
+                    stopped_early = not in_summary
+                    break
+                if isinstance(record, DataEnd):
+                    in_summary = True  # its schemas and channels repeat the data's
+                elif isinstance(record, Statistics):
+                    expected = int(record.message_count)
+                elif in_summary:
+                    continue
+                elif isinstance(record, Chunk):
+                    try:
+                        inner = breakup_chunk(record, validate_crc=True)
+                    except Exception:  # CRC, decompression: this chunk only
+                        damaged += 1
+                        continue
+                    for item in inner:
+                        copy(item, writer)
+                else:
+                    copy(record, writer)
+            if count == 0:
+                raise InputError(f"{src}: no complete message to recover")
+            writer.finish()  # type: ignore[no-untyped-call]
+    except OSError as exc:
+        raise InputError(f"{dst}: cannot write ({exc.strerror or exc})") from None
+    return RecoverReport(complete, count, len(channels),
+                         end_ns * 1e-9 if end_ns >= 0 else float("nan"),
+                         damaged_chunks=damaged, expected_messages=expected,
+                         stopped_early=stopped_early)
