@@ -168,3 +168,60 @@ def test_recover_refuses_outputs_it_cannot_write(
     code, out, err = run_main(["recover", good, tmp_path / "no" / "x.mcap"], monkeypatch, capsys)
     assert_one_error_line(code, out, err, "cannot write (No such file or directory)")
     assert list(tmp_path.iterdir()) == []  # no temporary left behind
+
+
+def _rewritten(src: Path, dst: Path, change) -> None:  # type: ignore[no-untyped-def]
+    """Copy a recording with ``change(topic, message)`` applied to its first message per topic."""
+    changed: set[str] = set()
+    with open(src, "rb") as f, open(dst, "wb") as out:
+        reader = make_reader(f)
+        writer = Writer(out)
+        writer.start()
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            if channel.id not in channels:
+                assert schema is not None
+                schemas.setdefault(schema.id, writer.register_schema(
+                    schema.name, schema.encoding, schema.data))
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id])
+            data = message.data
+            if channel.topic not in changed:
+                new = change(channel.topic, json.loads(data))
+                if new is not None:
+                    changed.add(channel.topic)
+                    data = json.dumps(new).encode()
+            writer.add_message(channels[channel.id], message.log_time, data,
+                               message.publish_time)
+        writer.finish()  # type: ignore[no-untyped-call]
+
+
+def _drop(key: str):  # type: ignore[no-untyped-def]
+    return lambda m: {k: v for k, v in m.items() if k != key}
+
+
+@pytest.mark.parametrize(("topic", "change", "words"), [
+    ("/relaxgrip/session", lambda m: {**m, "format_version": "two"},
+     "format_version is not an integer"),
+    ("/relaxgrip/session", lambda m: {**m, "rig": "x"}, "the session's rig is not an object"),
+    ("/relaxgrip/observation", _drop("motor_position_mm"),
+     "a message lacks the field 'motor_position_mm'"),
+    ("/relaxgrip/observation", lambda m: {**m, "rgb_seq": None, "t_s": "soon"},
+     "a message has a malformed field"),
+    ("/rgb", lambda m: {**m, "data": "abc"}, "a message has a malformed field"),
+    ("/relaxgrip/estimate", lambda m: 3.5, "a message on /relaxgrip/estimate is not a JSON "
+                                           "object"),
+])
+@pytest.mark.parametrize("command", ["replay", "from-recordings"])
+def test_a_malformed_message_is_one_line(command: str, topic: str, change, words: str,  # type: ignore[no-untyped-def]
+                                         relax_hold: tuple[Path, HoldResult], tmp_path: Path,
+                                         monkeypatch: pytest.MonkeyPatch,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.mcap"
+    _rewritten(relax_hold[0], bad, lambda t, m: change(m) if t == topic else None)
+    args: list[str | Path] = (["replay", bad] if command == "replay" else
+                              ["dataset", "from-recordings", bad, "--out", tmp_path / "d"])
+    code, out, err = run_main(args, monkeypatch, capsys)
+    assert_one_error_line(code, out, err, words)
+    assert not (tmp_path / "d").exists()

@@ -54,3 +54,46 @@ def test_from_recordings_then_train(fixed_holds: list[Path], tmp_path: Path,
     assert np.isfinite(pred).all()
     assert float(np.mean(np.abs(pred - y))) < float(np.mean(np.abs(y - y.mean())))
     assert np.isfinite(bundle.rcfn.predict(r)).all()
+
+
+def test_from_recordings_splits_the_hold_recordings_apart(
+        relax_hold: tuple[Path, object], fixed_holds: list[Path], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """A regulated hold gives ICFN rows only; the two fixed-aperture holds go one to train,
+    one to val, so `relaxgrip train` finds RCFN rows in both (the same file named twice
+    counts once)."""
+    out = tmp_path / "data"
+    code, stdout, err = run_main(["dataset", "from-recordings", relax_hold[0], *fixed_holds[:2],
+                                  fixed_holds[0], "--out", out, "--json"], monkeypatch, capsys)
+    assert code == 0, err
+    manifest = json.loads(stdout)
+    assert len(manifest["spec"]["recordings"]) == 3
+    splits = manifest["counts"]["splits"]
+    assert splits["rcfn_sequences train"] == splits["rcfn_sequences val"] == 1
+    assert manifest["warnings"] == []
+    code, stdout, err = run_main(["dataset", "from-recordings", fixed_holds[0], "--out",
+                                  tmp_path / "one"], monkeypatch, capsys)
+    assert code == 0, err
+    assert "warning: no rcfn_sequences val rows" in err
+
+
+def test_from_recordings_never_writes_over_its_recordings(
+        fixed_holds: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    folder = fixed_holds[0].parent
+    before = sorted(p.name for p in folder.iterdir())
+    code, _, err = run_main(["dataset", "from-recordings", folder, "--out", folder],
+                            monkeypatch, capsys)
+    assert code == 2
+    assert "holds the recording" in err
+    assert sorted(p.name for p in folder.iterdir()) == before
+    dataset = tmp_path / "data"
+    code, _, err = run_main(["dataset", "from-recordings", fixed_holds[0], "--out", dataset],
+                            monkeypatch, capsys)
+    assert code == 0, err
+    (dataset / "notes.txt").write_text("mine", encoding="utf-8")
+    code, _, err = run_main(["dataset", "from-recordings", fixed_holds[0], "--out", dataset],
+                            monkeypatch, capsys)
+    assert code == 2
+    assert "holds files that are not the dataset's (notes.txt)" in err
+    assert (dataset / "notes.txt").read_text(encoding="utf-8") == "mine"

@@ -109,3 +109,70 @@ def test_replay_tells_the_estimator_of_contact_onset_and_release(
     r = replay(path, models)
     assert calls["replay"] == calls["live"]
     assert r.metrics()["estimate_valid_agreement"] == 1.0
+
+
+def _dashboard_like(tmp_path: Path) -> tuple[Path, Path]:
+    """A dashboard session stepped in virtual time: one PNG recording from before the
+    grasp (operator's Start and Release between periods), one started during the hold."""
+    pytest.importorskip("fastapi")
+    from relaxgrip.dashboard.session import open_session
+
+    clock = VirtualClock()
+    session = open_session("twin", clock=clock, seed=0, record_dir=tmp_path)
+    session._check_running = lambda: None  # type: ignore[method-assign]  # stepped here
+
+    def run(seconds: float) -> None:
+        for _ in range(round(seconds * 30)):
+            clock.sleep_until(clock.now() + 1 / 30)
+            session._period()
+
+    def record(path: Path) -> McapRecorder:
+        rec = McapRecorder(path, rgb_format="png")
+        rec.start(session.backend.info, session.controller, session._now())
+        return rec
+
+    whole, late = tmp_path / "whole.mcap", tmp_path / "late.mcap"
+    run(0.2)
+    session._recorder = record(whole)
+    session.close_grasp()
+    while not session.controller.estimate.hold_s >= 2.0:
+        run(1 / 30)
+    both = (session._recorder, record(late))
+
+    class Tee:
+        def step(self, *args: object) -> None:
+            for rec in both:
+                rec.step(*args)  # type: ignore[arg-type]
+
+        def close(self) -> None:
+            for rec in both:
+                rec.close()
+
+    session._recorder = Tee()  # type: ignore[assignment]
+    run(2.0)
+    session.release()  # between periods: the estimator's hold ends before the next one
+    run(1.0)
+    session.close()
+    return whole, late
+
+
+def test_a_dashboard_recording_replays_exactly_and_one_begun_mid_grasp_is_refused(
+        tmp_path: Path, models: ModelBundle, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    whole, late = _dashboard_like(tmp_path)
+    m = replay(whole, models).metrics()
+    assert m["estimate_compared"] > 100
+    assert m["estimate_max_abs_diff_n"] == 0.0
+    assert m["icfn_max_abs_diff_n"] == 0.0
+    code, _, err = run_main(["replay", late], monkeypatch, capsys)
+    assert code == 2
+    assert "began during a grasp (phase hold)" in err
+    code, _, err = run_main(["dataset", "from-recordings", late, "--out", tmp_path / "d"],
+                            monkeypatch, capsys)
+    assert code == 2
+    assert "began during a grasp" in err
+    assert not (tmp_path / "d").exists()
+    # The late recording holds no event from before it began.
+    times = [m["t_s"] for t, _, m in iter_messages(late) if t == "/relaxgrip/events"]
+    first = next(m["t_s"] for t, _, m in iter_messages(late) if t == "/relaxgrip/observation")
+    assert min(times) >= first - 1 / 30

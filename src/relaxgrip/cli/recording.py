@@ -141,6 +141,8 @@ def dataset_from_recordings_cmd(
     counts = manifest["counts"]
     for path, note in manifest["notes"].items():
         err_console.print(f"{path}: {note}", markup=False, highlight=False, soft_wrap=True)
+    for warning in manifest["warnings"]:
+        err_console.print(f"warning: {warning}", markup=False, highlight=False, soft_wrap=True)
     console.print(f"{out}: {counts['icfn_samples']} ICFN samples, {counts['rcfn_sequences']} "
                   f"RCFN sequences from {len(manifest['notes'])} recordings; README.md "
                   "describes every column")

@@ -164,8 +164,16 @@ def write_dataset(out_dir: Path, tables: dict[str, pd.DataFrame], manifest: dict
     if out.exists() and (not out.is_dir() or (any(out.iterdir())
                                                and not (out / "manifest.json").is_file())):
         raise InputError(f"{out} exists and is not a relaxgrip dataset: choose another --out")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    own = {f"{name}.parquet" for name in TABLES} | {"manifest.json", "README.md"}
+    foreign = sorted(p.name for p in out.iterdir() if p.name not in own) if out.is_dir() else []
+    if foreign:  # replacing the dataset would delete them
+        raise InputError(f"{out} holds files that are not the dataset's ({', '.join(foreign[:3])}"
+                         f"{', ...' if len(foreign) > 3 else ''}): choose another --out")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    except OSError as exc:
+        raise InputError(f"{out}: cannot write ({exc.strerror or exc})") from None
     try:
         for name in TABLES:
             tables[name].to_parquet(tmp / f"{name}.parquet", index=False)

@@ -58,7 +58,7 @@ from relaxgrip.perception.features import (
     marker_pose,
 )
 from relaxgrip.physics.fitting import fit_reduced
-from relaxgrip.recording.reader import read_session
+from relaxgrip.recording.reader import malformed_fields, read_session
 from relaxgrip.recording.replay import replay_periods
 
 __all__ = ["FIXED_APERTURE_TOL_MM", "MIN_HOLD_S", "dataset_from_recordings"]
@@ -272,42 +272,64 @@ def dataset_from_recordings(
         or no ICFN sample at all.
     """
     files: list[Path] = []
+    seen: set[Path] = set()
     for p in map(Path, paths):
-        if p.is_dir():
-            found = sorted(p.glob("*.mcap"))
-            if not found:
-                raise InputError(f"{p}: no .mcap recordings in this directory")
-            files.extend(found)
-        else:
-            files.append(p)
+        found = sorted(p.glob("*.mcap")) if p.is_dir() else [p]
+        if p.is_dir() and not found:
+            raise InputError(f"{p}: no .mcap recordings in this directory")
+        for f in found:  # one recording named twice would sit in two splits
+            if f.resolve() not in seen:
+                seen.add(f.resolve())
+                files.append(f)
     if not files:
         raise InputError("no recordings given")
+    out = Path(out_dir).resolve()
+    for f in files:
+        if f.resolve() == out or out in f.resolve().parents:
+            raise InputError(f"--out {out_dir} holds the recording {f}: writing the dataset "
+                             "there would replace it; choose another --out")
     if not (icfn_every_s > 0 and curve_rate_hz > 0 and feature_rate_hz > 0):
         raise InputError("sampling intervals and rates must be > 0")
     if abs(sum(split) - 1.0) > 1e-9 or min(split) < 0:
         raise InputError(f"split shares must be >= 0 and sum to 1, got {split}")
-    for f in files:
-        read_session(f)  # every file checked before any work
+    for f in files:  # every file checked before any work
+        if read_session(f).get("grasp_in_progress"):
+            raise InputError(f"{f}: the recording began during a grasp: its marker zero is not "
+                             "in it, so its samples would be wrong; record from before the "
+                             "grasp starts")
     start = time.perf_counter()
-    splits = _splits(len(files), seed, split)
     icfn: list[dict[str, list[Any]]] = []
     seqs: list[dict[str, Any]] = []
     feats: list[dict[str, list[Any]]] = []
     curves: list[dict[str, list[Any]]] = []
-    notes: dict[str, str] = {}
+    found_notes: list[str] = []
     versions: set[str] = set()
     for i, f in enumerate(files):
-        rows, seq, feat, curve, note = _one(i, f, splits[i], models, icfn_every_s,
-                                            curve_rate_hz, feature_rate_hz)
+        with malformed_fields(f):
+            rows, seq, feat, curve, note = _one(i, f, "", models, icfn_every_s,
+                                                curve_rate_hz, feature_rate_hz)
         versions.add(str(read_session(f)["backend"].get("version")))
         icfn.append(rows)
         if seq is not None:
             seqs.append(seq)
             feats.append(feat)
             curves.append(curve)
-        notes[str(f)] = f"{splits[i]}: {note}"
+        found_notes.append(note)
         if progress is not None:
             progress(i + 1, len(files))
+    # Split by recording, those that give an RCFN sequence apart from the others, so
+    # that train and val each get some of both whenever there are enough.
+    splits = [""] * len(files)
+    with_sequence = {int(seq["sequence"]) for seq in seqs}
+    for group in (sorted(with_sequence),
+                  [i for i in range(len(files)) if i not in with_sequence]):
+        for i, label in zip(group, _splits(len(group), seed, split), strict=True):
+            splits[i] = label
+    for rows in icfn:
+        rows["split"] = [splits[e] for e in rows["episode"]]
+    for seq in seqs:
+        seq["split"] = splits[seq["sequence"]]
+    notes = {str(f): f"{splits[i]}: {found_notes[i]}" for i, f in enumerate(files)}
     tables = {
         "icfn": _frame(icfn, _ICFN_COLUMNS),
         "rcfn_sequences": _frame([{k: [v] for k, v in s.items()} for s in seqs], _SEQ_COLUMNS),
@@ -322,6 +344,11 @@ def dataset_from_recordings(
         if len(table):
             for s, n in table.groupby("split")[key].nunique().items():
                 counts_split[f"{name} {s}"] = int(n)
+    needs = {"icfn": "recordings with frames and a force truth in both",
+             "rcfn_sequences": f"fixed-aperture holds of {MIN_HOLD_S:g} s or more in both"}
+    warnings = [f"no {name} {part} rows: `relaxgrip train` needs {need}"
+                for name, need in needs.items() for part in ("train", "val")
+                if not counts_split.get(f"{name} {part}")]
     manifest = {
         "format": DATASET_FORMAT,
         "format_version": DATASET_VERSION,
@@ -337,6 +364,7 @@ def dataset_from_recordings(
                    len(files) - len(seqs), "splits": counts_split},
         "noise": {"source": "the backends that recorded them (see each recording's session)"},
         "notes": notes,
+        "warnings": warnings,
         "build": {"seconds": time.perf_counter() - start},
     }
     write_dataset(out_dir, tables, manifest)

@@ -19,6 +19,7 @@ import os
 import struct
 import typing
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any
@@ -28,13 +29,13 @@ import numpy as np
 
 from relaxgrip.backend import Frame
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import atomic_file
+from relaxgrip.fileio import atomic_file, one_line
 from relaxgrip.recording.recorder import require_mcap
 from relaxgrip.recording.schemas import RECORDING_FORMAT, RECORDING_VERSION
 from relaxgrip.rig import RigGeometry
 
-__all__ = ["Period", "RecoverReport", "iter_messages", "iter_periods", "read_session",
-           "recover", "rig_from_dict"]
+__all__ = ["Period", "RecoverReport", "iter_messages", "iter_periods", "malformed_fields",
+           "read_session", "recover", "rig_from_dict"]
 
 _MAGIC = b"\x89MCAP0\r\n"
 _FOOTER_OPCODE = 0x02
@@ -126,9 +127,12 @@ def iter_messages(path: Path, tolerant: bool = False) -> Iterator[tuple[str, int
             if topic is None:
                 raise InputError(f"{path}: a message on unknown channel {record.channel_id}")
             try:
-                yield topic, record.log_time, json.loads(record.data)
+                message = json.loads(record.data)
             except (UnicodeDecodeError, json.JSONDecodeError):
                 raise InputError(f"{path}: a message on {topic} is not JSON") from None
+            if not isinstance(message, dict):
+                raise InputError(f"{path}: a message on {topic} is not a JSON object")
+            yield topic, record.log_time, message
 
 
 def read_session(path: Path, tolerant: bool = False) -> dict[str, Any]:
@@ -149,10 +153,35 @@ def read_session(path: Path, tolerant: bool = False) -> dict[str, Any]:
 def _check_session(path: Path, session: dict[str, Any]) -> dict[str, Any]:
     if session.get("format") != RECORDING_FORMAT:
         raise InputError(f"{path}: not a relaxgrip recording")
-    if int(session.get("format_version", 0)) > RECORDING_VERSION:
-        raise InputError(f"{path}: recording format {session.get('format_version')} is newer "
+    version = session.get("format_version")
+    if isinstance(version, bool) or not isinstance(version, int):
+        raise InputError(f"{path}: the session's format_version is not an integer: {version!r}")
+    if version > RECORDING_VERSION:
+        raise InputError(f"{path}: recording format {version} is newer "
                          f"than this relaxgrip reads ({RECORDING_VERSION})")
+    for key, required in (("rig", True), ("backend", True), ("plan", False)):
+        value = session.get(key)
+        if not isinstance(value, dict) and (required or value is not None):
+            raise InputError(f"{path}: the session's {key} is not an object: {value!r}")
     return session
+
+
+@contextmanager
+def malformed_fields(path: Path) -> Iterator[None]:
+    """Turn a recording message's missing or mistyped field into one :class:`InputError` line.
+
+    Wraps the reading of a recording's messages (``message["t_s"]``,
+    ``float(...)``, base64), so that a file another program wrote, or an
+    edited one, is refused by name rather than with a traceback.
+    """
+    try:
+        yield
+    except InputError:
+        raise
+    except KeyError as exc:
+        raise InputError(f"{path}: a message lacks the field {exc.args[0]!r}") from None
+    except (TypeError, ValueError, AttributeError) as exc:  # binascii.Error is a ValueError
+        raise InputError(f"{path}: a message has a malformed field ({one_line(exc)})") from None
 
 
 def rig_from_dict(data: dict[str, Any]) -> RigGeometry:
@@ -163,6 +192,8 @@ def rig_from_dict(data: dict[str, Any]) -> RigGeometry:
     InputError
         If the stored rig does not describe one.
     """
+    if not isinstance(data, dict):
+        raise InputError(f"the recording's rig is not an object: {data!r}")
     try:
         rig = _build(RigGeometry, data)
     except (TypeError, ValueError, KeyError) as exc:
@@ -244,8 +275,14 @@ def iter_periods(path: Path, tolerant: bool = False) -> Iterator[Period]:
     Raises
     ------
     InputError
-        As :func:`iter_messages`; a file that is not a relaxgrip recording.
+        As :func:`iter_messages`; a file that is not a relaxgrip recording; a
+        message that lacks a field or has a malformed one.
     """
+    with malformed_fields(path):
+        yield from _periods(path, tolerant)
+
+
+def _periods(path: Path, tolerant: bool) -> Iterator[Period]:
     rgb: Frame | None = None
     ir: Frame | None = None
     pending_rgb: dict[str, Any] | None = None

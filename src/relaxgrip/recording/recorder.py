@@ -33,6 +33,7 @@ import numpy as np
 
 from relaxgrip import __version__
 from relaxgrip.backend import BackendInfo, Command, Frame, Observation
+from relaxgrip.control.phases import GraspPhase, PhaseLog
 from relaxgrip.errors import InputError
 from relaxgrip.perception.features import marker_pose
 from relaxgrip.perception.marker import TrackStatus
@@ -142,6 +143,7 @@ class McapRecorder:
         self._last_flush_s = -math.inf
         self._rgb_seq: int | None = None
         self._ir_seq: int | None = None
+        self._log: PhaseLog | None = None
         self._n_transitions = 0
         self._n_events = 0
         self._zeroed = False
@@ -150,7 +152,18 @@ class McapRecorder:
     # -- LoopRecorder ----------------------------------------------------------------------
 
     def start(self, info: BackendInfo, controller: GraspController, t_s: float) -> None:
-        """Write the session message (backend, estimator, plan, rig)."""
+        """Write the session message (backend, estimator, plan, rig).
+
+        A recording started during a grasp (the dashboard's Record button)
+        says so (``grasp_in_progress``): the marker's zero and the
+        estimator's state from before it are not in it, so it cannot be
+        replayed or made a dataset of.  The controller's log entries from
+        before ``t_s`` are not written.
+        """
+        phase = controller.phase
+        zeroed = controller.perception.tracker.zero_pose is not None
+        in_progress = phase not in (GraspPhase.DONE, GraspPhase.STOPPED) and not (
+            phase is GraspPhase.OPEN and not zeroed)
         self._write("/relaxgrip/session", t_s, {
             "format": RECORDING_FORMAT, "format_version": RECORDING_VERSION,
             "relaxgrip_version": __version__,
@@ -159,11 +172,15 @@ class McapRecorder:
             "plan": {k: (v.value if hasattr(v, "value") else v)
                      for k, v in asdict(controller.plan).items()},
             "rig": asdict(controller.rig), "t0_s": t_s, "rgb_format": self.rgb_format,
-            "ir_encoding": IR_ENCODING,
+            "ir_encoding": IR_ENCODING, "started_in_phase": phase.value,
+            "grasp_in_progress": in_progress,
         })
         self._last_flush_s = t_s
-        self._n_transitions = self._n_events = 0
-        self._zeroed = False
+        log = controller.log
+        self._log = log
+        self._n_transitions = sum(1 for t, _ in log.transitions if t < t_s)
+        self._n_events = sum(1 for e in log.events if e.t_s < t_s)
+        self._zeroed = zeroed
 
     def step(self, obs: Observation, controller: GraspController, command: Command) -> None:
         """Write one period: frames that are new, then the controller's view, then the truth."""
@@ -270,6 +287,8 @@ class McapRecorder:
 
     def _write_events(self, t: float, c: GraspController) -> None:
         log = c.log
+        if log is not self._log:  # a new grasp started: its log is new
+            self._log, self._n_transitions, self._n_events = log, 0, 0
         for t_s, phase in log.transitions[self._n_transitions:]:
             self._write("/relaxgrip/events", t, {"t_s": t_s, "kind": "phase",
                                                  "detail": phase.value})

@@ -25,11 +25,22 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from relaxgrip.control.estimators import EstimatorKind, ForceEstimate, bundle_estimator
+from relaxgrip.control.estimators import (
+    EstimatorKind,
+    ForceEstimate,
+    ForceEstimator,
+    bundle_estimator,
+)
 from relaxgrip.errors import InputError
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.perception.pipeline import Percept, Perception
-from relaxgrip.recording.reader import Period, iter_periods, read_session, rig_from_dict
+from relaxgrip.recording.reader import (
+    Period,
+    iter_periods,
+    malformed_fields,
+    read_session,
+    rig_from_dict,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -58,6 +69,11 @@ def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
         Not a readable relaxgrip recording, no frames, an unknown estimator.
     """
     session = read_session(path, tolerant)
+    if session.get("grasp_in_progress"):
+        raise InputError(
+            f"{path}: the recording began during a grasp (phase "
+            f"{session.get('started_in_phase')}): the marker's zero and the estimator's state "
+            "from before it are not in it; record from before the grasp starts")
     name = estimator or str(session.get("estimator"))
     if name not in {k.value for k in EstimatorKind}:
         raise InputError(f"{path}: cannot replay estimator {name!r} (fixed, icfn or relax)")
@@ -65,9 +81,41 @@ def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
     est = bundle_estimator(name, models)
     perception.reset()
     est.reset()
+    with malformed_fields(path):
+        yield from _replayed(path, tolerant, perception, est)
+
+
+def _replayed(path: Path, tolerant: bool, perception: Perception, est: ForceEstimator
+              ) -> Iterator[tuple[Period, Percept, ForceEstimate]]:
     frames = 0
     holding = False
+    motor_mm = math.nan
+
+    def apply(event: dict[str, Any]) -> None:
+        nonlocal holding
+        kind, t = event["kind"], float(event["t_s"])
+        if kind == "phase" and event["detail"] == "open":  # a new grasp: GraspController.start
+            perception.reset()
+            est.reset()
+            holding = False
+        elif kind == "contact":
+            est.contact(t)
+        elif kind == "hold_onset":
+            est.start_hold(t, motor_mm)
+            holding = True
+        elif kind == "phase" and event["detail"] == "release" and holding:
+            est.end_hold(t)
+            holding = False
+        elif kind == "marker_rezero":
+            perception.tracker.reset()
+
     for period in iter_periods(path, tolerant):
+        # An operator's action between periods (the dashboard's Start, Release, Stop) is
+        # written with the next period but came before its step, as does a grasp's start.
+        before = [_before_step(e, period.t_s) for e in period.events]
+        for event, first in zip(period.events, before, strict=True):
+            if first:
+                apply(event)
         obs = period.messages["/relaxgrip/observation"]
         motor_mm = float(obs["motor_position_mm"])
         if period.rgb is not None:
@@ -75,19 +123,17 @@ def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
         percept = perception.update(period.rgb, period.ir, motor_mm)
         estimate = est.update(percept, motor_mm)
         yield period, percept, estimate
-        for event in period.events:
-            if event["kind"] == "contact":
-                est.contact(float(event["t_s"]))
-            elif event["kind"] == "hold_onset":
-                est.start_hold(float(event["t_s"]), motor_mm)
-                holding = True
-            elif event["kind"] == "phase" and event["detail"] == "release" and holding:
-                est.end_hold(float(event["t_s"]))
-                holding = False
-            elif event["kind"] == "marker_rezero":
-                perception.tracker.reset()
+        for event, first in zip(period.events, before, strict=True):
+            if not first:
+                apply(event)
     if frames == 0:
         raise InputError(f"{path}: the recording has no RGB frames to replay")
+
+
+def _before_step(event: dict[str, Any], period_t_s: float) -> bool:
+    """Whether ``event`` took effect before its period's perception and estimate."""
+    starts_grasp = event["kind"] == "phase" and event["detail"] == "open"
+    return starts_grasp or float(event["t_s"]) < period_t_s
 
 
 @dataclass(frozen=True)
@@ -159,16 +205,16 @@ def replay(path: Path, models: ModelBundle, tolerant: bool = False) -> ReplayRes
     rows: list[tuple[float, float, float, float, float, float]] = []
     rec_status: list[str] = []
     rep_status: list[str] = []
-    name = ""
-    for period, percept, estimate in replay_periods(path, models, tolerant):
-        rec = period.messages["/relaxgrip/estimate"]
-        truth = period.get("/relaxgrip/truth")
-        perception = period.get("/relaxgrip/perception")
-        rows.append((period.t_s, _f(rec.get("force_n")), estimate.force_n,
-                     _f(rec.get("f_icfn_n")), estimate.f_icfn_n,
-                     math.nan if truth is None else float(truth["contact_force_n"])))
-        rec_status.append("" if perception is None else str(perception["marker_status"]))
-        rep_status.append(percept.marker.status.value)
+    with malformed_fields(path):
+        for period, percept, estimate in replay_periods(path, models, tolerant):
+            rec = period.messages["/relaxgrip/estimate"]
+            truth = period.get("/relaxgrip/truth")
+            perception = period.get("/relaxgrip/perception")
+            rows.append((period.t_s, _f(rec.get("force_n")), estimate.force_n,
+                         _f(rec.get("f_icfn_n")), estimate.f_icfn_n,
+                         math.nan if truth is None else float(truth["contact_force_n"])))
+            rec_status.append("" if perception is None else str(perception["marker_status"]))
+            rep_status.append(percept.marker.status.value)
     name = str(read_session(path, tolerant).get("estimator"))
     cols = np.array(rows, dtype=np.float64).reshape(-1, 6)
     return ReplayResult(str(path), name, cols[:, 0], cols[:, 1], cols[:, 2], cols[:, 3],
