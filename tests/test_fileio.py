@@ -2,10 +2,20 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from relaxgrip.fileio import file_entry, npz_bytes, write_files_atomically, write_text_atomically
+from relaxgrip.fileio import (
+    atomic_file,
+    check_output_dir,
+    check_writable,
+    file_entry,
+    npz_bytes,
+    write_files_atomically,
+    write_text_atomically,
+)
 
 
 def test_files_land_together_and_no_temporary_is_left(tmp_path) -> None:
@@ -38,3 +48,50 @@ def test_written_files_get_the_umasks_mode_not_a_private_one(tmp_path) -> None:
     finally:
         os.umask(old)
     assert (tmp_path / "report.md").stat().st_mode & 0o777 == 0o644
+
+
+def test_atomic_file_appears_whole_or_not_at_all(tmp_path) -> None:
+    target = tmp_path / "big.bin"
+    target.write_bytes(b"old")
+
+    def killed_mid_write() -> None:
+        with atomic_file(target) as fh:
+            fh.write(b"half")
+            raise RuntimeError("killed")
+
+    with pytest.raises(RuntimeError):
+        killed_mid_write()
+    assert target.read_bytes() == b"old"
+    with atomic_file(target) as fh:
+        fh.write(b"new")
+    assert target.read_bytes() == b"new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["big.bin"]
+
+
+def test_check_writable_probes_the_place_and_leaves_nothing(tmp_path) -> None:
+    check_writable(tmp_path / "not" / "yet" / "there.png", ValueError)
+    assert list(tmp_path.iterdir()) == []
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(ValueError, match="is not a directory"):
+        check_writable(tmp_path / "file" / "out.png", ValueError)
+    with pytest.raises(ValueError, match=r"/proc/x\.png: cannot write in /proc"):
+        check_writable(Path("/proc/x.png"), ValueError)
+
+
+def test_check_output_dir_replaces_only_its_own_outputs(tmp_path) -> None:
+    own = ("a.npz", "manifest.json")
+    out = tmp_path / "models"
+    assert check_output_dir(out, "fmt", own, ValueError) == out  # absent
+    out.mkdir()
+    check_output_dir(out, "fmt", own, ValueError)  # empty
+    (out / "manifest.json").write_text('{"format": "other"}')
+    with pytest.raises(ValueError, match="holds no fmt output"):
+        check_output_dir(out, "fmt", own, ValueError)
+    (out / "manifest.json").write_text('{"format": "fmt"}')
+    (out / "a.npz").write_bytes(b"")
+    check_output_dir(out, "fmt", own, ValueError)  # an earlier output: replaced
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(ValueError, match=r"holds files that are not the fmt output's \(notes"):
+        check_output_dir(out, "fmt", own, ValueError)
+    with pytest.raises(ValueError, match="exists and is not a directory"):
+        check_output_dir(out / "notes.txt", "fmt", own, ValueError)

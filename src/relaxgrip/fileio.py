@@ -18,7 +18,7 @@ import io
 import json
 import os
 import secrets
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -27,6 +27,8 @@ import numpy as np
 
 __all__ = [
     "atomic_file",
+    "check_output_dir",
+    "check_writable",
     "file_entry",
     "npz_bytes",
     "one_line",
@@ -126,6 +128,70 @@ def _sync_directory(directory: Path) -> None:
         pass
     finally:
         os.close(dir_fd)
+
+
+def check_writable(path: Path, error: type[Exception]) -> None:
+    """Check, by writing a probe file, that ``path`` can be created where it is to go.
+
+    The probe goes into ``path``'s nearest existing ancestor directory (the
+    one a write would create the rest under) and is removed at once.  Run it
+    before a long computation whose result goes to ``path``.
+
+    Raises
+    ------
+    error
+        Naming ``path`` and the system's reason (read-only, permission, no
+        such directory, a file where a directory should be).
+    """
+    path = Path(path)
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise error(f"{path}: {folder} is not a directory")
+    try:
+        tmp, fd = _temporary(folder, f"{path.name}.probe")
+        os.close(fd)
+        tmp.unlink()
+    except OSError as exc:
+        raise error(f"{path}: cannot write in {folder} ({exc.strerror or exc})") from None
+
+
+def check_output_dir(directory: Path, format_name: str, own: Collection[str],
+                     error: type[Exception]) -> Path:
+    """Check that a directory output can be written at ``directory`` and lose nothing.
+
+    It may be absent, empty, or an earlier output of the same format
+    (``manifest.json`` naming ``format_name``) that holds only ``own``
+    files, which the new output replaces; and its place must be writable.
+
+    Raises
+    ------
+    error
+        A file there, a directory of something else, foreign files in an
+        earlier output, or no permission to write.
+    """
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        raise error(f"{directory} exists and is not a directory: choose another --out")
+    if directory.is_dir():
+        names = {p.name for p in directory.iterdir()
+                 if not (p.name.startswith(".") and p.name.endswith(".tmp"))}
+        if names:
+            try:
+                found = json.loads((directory / "manifest.json").read_text("utf-8")).get("format")
+            except (OSError, ValueError, AttributeError):
+                found = None
+            if found != format_name:
+                raise error(f"{directory} is not empty and holds no {format_name} output: "
+                            "choose another --out")
+            foreign = sorted(names - set(own) - {"manifest.json"})
+            if foreign:
+                raise error(f"{directory} holds files that are not the {format_name} output's "
+                            f"({', '.join(foreign[:3])}{', ...' if len(foreign) > 3 else ''}): "
+                            "choose another --out")
+    check_writable(directory / "manifest.json" if directory.is_dir() else directory, error)
+    return directory
 
 
 def write_text_atomically(path: Path, text: str) -> None:

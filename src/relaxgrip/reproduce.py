@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import write_text_atomically
+from relaxgrip.fileio import check_writable, write_text_atomically
 from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION
 from relaxgrip.validate import check_jobs
@@ -429,7 +429,8 @@ def check_request(out_dir: Path, jobs: int, only: Sequence[str] | None) -> list[
     Raises
     ------
     InputError
-        ``jobs`` < 1, an unknown section, or an output directory whose parent is missing.
+        ``jobs`` < 1, an unknown section, or an output directory whose parent is
+        missing, that is a file, or that cannot be written.
     """
     check_jobs(jobs)
     keys = list(SECTIONS) if only is None else list(only)
@@ -440,6 +441,9 @@ def check_request(out_dir: Path, jobs: int, only: Sequence[str] | None) -> list[
     out_dir = Path(out_dir)
     if not out_dir.parent.is_dir():
         raise InputError(f"{out_dir}: directory {out_dir.parent} does not exist")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError(f"{out_dir} exists and is not a directory: choose another --out")
+    check_writable(out_dir / "report.md" if out_dir.is_dir() else out_dir, InputError)
     return keys
 
 

@@ -108,7 +108,7 @@ def test_bad_inputs_and_damaged_datasets(small: Path, tmp_path: Path) -> None:
     foreign = tmp_path / "foreign"
     foreign.mkdir()
     (foreign / "notes.txt").write_text("mine\n")
-    with pytest.raises(InputError, match="not a relaxgrip dataset"):
+    with pytest.raises(InputError, match="holds no relaxgrip-dataset output"):
         build_dataset(foreign, SMALL, jobs=1)
     assert (foreign / "notes.txt").read_text() == "mine\n"  # nothing lost
     with pytest.raises(InputError, match=r"no manifest\.json"):

@@ -95,5 +95,5 @@ def test_from_recordings_never_writes_over_its_recordings(
     code, _, err = run_main(["dataset", "from-recordings", fixed_holds[0], "--out", dataset],
                             monkeypatch, capsys)
     assert code == 2
-    assert "holds files that are not the dataset's (notes.txt)" in err
+    assert "holds files that are not the relaxgrip-dataset output's (notes.txt)" in err
     assert (dataset / "notes.txt").read_text(encoding="utf-8") == "mine"

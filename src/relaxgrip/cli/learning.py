@@ -39,11 +39,13 @@ def dataset_build(
     """Generate ICFN and RCFN datasets on the twin, through the real perception pipeline."""
     from relaxgrip.learning.build import BACKENDS, build_dataset
     from relaxgrip.learning.datasets import DatasetSpec
+    from relaxgrip.learning.datastore import check_dataset_out
     from relaxgrip.validate import check_jobs
 
     if backend not in BACKENDS:
         raise InputError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
     check_jobs(jobs)
+    check_dataset_out(out)
     spec = DatasetSpec(rcfn_sequences=rcfn_sequences, seed=seed, hold_s=hold_s)
     if icfn_samples is not None:
         spec = replace(spec, icfn_samples=icfn_samples)
@@ -82,10 +84,14 @@ def train(
     """Train the ICFN and the RCFN, selecting each on the validation split."""
     from relaxgrip.learning.datastore import load_dataset
     from relaxgrip.learning.observer import load_default_observer, load_observer
+    from relaxgrip.learning.store import check_models_out
     from relaxgrip.learning.training import train_models
 
     if observer is not None and not unrelaxed:
         raise InputError("--observer gives the unrelaxed ICFN's shares: drop --no-unrelaxed")
+    if not 0 <= seed < 2**31:  # the ensemble's members take the seeds after it
+        raise InputError(f"--seed must be in 0 .. 2**31 - 1, got {seed}")
+    check_models_out(out)  # before training, not after
     dataset = load_dataset(data)
     history = None
     if unrelaxed:

@@ -22,7 +22,12 @@ import pandas as pd
 from relaxgrip import __version__
 from relaxgrip.errors import InputError
 from relaxgrip.learning.datasets import DatasetSpec, UnitResult, iter_units, run_unit
-from relaxgrip.learning.datastore import DATASET_FORMAT, DATASET_VERSION, write_dataset
+from relaxgrip.learning.datastore import (
+    DATASET_FORMAT,
+    DATASET_VERSION,
+    check_dataset_out,
+    write_dataset,
+)
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 from relaxgrip.twin import TWIN_VERSION, TwinConfig
 from relaxgrip.validate import check_jobs
@@ -158,6 +163,7 @@ def build_dataset(
     check_jobs(jobs)
     if backend not in BACKENDS:
         raise InputError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+    check_dataset_out(out_dir)  # before minutes of building, not after
     units = list(iter_units(spec))
     start = time.perf_counter()
     results: list[UnitResult] = []

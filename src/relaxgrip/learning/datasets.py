@@ -150,8 +150,8 @@ class DatasetSpec:
             raise InputError("sample and sequence counts must be >= 0")
         if self.seed < 0:
             raise InputError(f"seed must be >= 0, got {self.seed}")
-        if not self.hold_s >= 10.0:
-            raise InputError(f"hold must last at least 10 s, got {self.hold_s}")
+        if not (math.isfinite(self.hold_s) and self.hold_s >= 10.0):
+            raise InputError(f"hold must last at least 10 s (and be finite), got {self.hold_s}")
         if not (self.curve_rate_hz >= 10.0 and self.feature_rate_hz > 0):
             raise InputError("the curve needs >= 10 Hz and the features a positive rate")
         if self.samples_per_episode < 4:

@@ -29,13 +29,13 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import read_manifest
+from relaxgrip.fileio import check_output_dir, read_manifest
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA, FeatureSchema
 from relaxgrip.physics.fitting import osculating_reduced
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["DATASET_FORMAT", "Dataset", "load_dataset", "write_dataset"]
+__all__ = ["DATASET_FORMAT", "Dataset", "check_dataset_out", "load_dataset", "write_dataset"]
 
 DATASET_FORMAT = "relaxgrip-dataset"
 DATASET_VERSION = 1
@@ -152,23 +152,28 @@ def _readme(tables: dict[str, pd.DataFrame], manifest: dict[str, Any]) -> str:
     return "\n".join(parts) + "\n"
 
 
+def check_dataset_out(out_dir: Path) -> Path:
+    """Check that a dataset can be written at ``out_dir`` (before building it).
+
+    Raises
+    ------
+    InputError
+        If ``out_dir`` is a file, a directory of something else, an earlier
+        dataset with files that are not its own, or not writable.
+    """
+    own = {f"{name}.parquet" for name in TABLES} | {"manifest.json", "README.md"}
+    return check_output_dir(Path(out_dir), DATASET_FORMAT, own, InputError)
+
+
 def write_dataset(out_dir: Path, tables: dict[str, pd.DataFrame], manifest: dict[str, Any]) -> Path:
     """Write a dataset atomically (a previous relaxgrip dataset there is replaced).
 
     Raises
     ------
     InputError
-        If ``out_dir`` exists, is not empty and is not a relaxgrip dataset.
+        As :func:`check_dataset_out`.
     """
-    out = Path(out_dir)
-    if out.exists() and (not out.is_dir() or (any(out.iterdir())
-                                               and not (out / "manifest.json").is_file())):
-        raise InputError(f"{out} exists and is not a relaxgrip dataset: choose another --out")
-    own = {f"{name}.parquet" for name in TABLES} | {"manifest.json", "README.md"}
-    foreign = sorted(p.name for p in out.iterdir() if p.name not in own) if out.is_dir() else []
-    if foreign:  # replacing the dataset would delete them
-        raise InputError(f"{out} holds files that are not the dataset's ({', '.join(foreign[:3])}"
-                         f"{', ...' if len(foreign) > 3 else ''}): choose another --out")
+    out = check_dataset_out(out_dir)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))

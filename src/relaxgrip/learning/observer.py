@@ -59,6 +59,7 @@ from numpy.typing import NDArray
 import relaxgrip
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import (
+    check_output_dir,
     file_entry,
     npz_bytes,
     one_line,
@@ -499,6 +500,19 @@ class ObserverFileError(InputError):
     """An observer directory that cannot be loaded (one line: the file and the problem)."""
 
 
+def check_observer_out(directory: Path) -> Path:
+    """Check that an observer can be written at ``directory`` (before fitting it).
+
+    Raises
+    ------
+    InputError
+        A file there, a directory of something else, one of an earlier
+        observer with files that are not its own, or not writable.
+    """
+    return check_output_dir(Path(directory), OBSERVER_FORMAT, (OBSERVER_FILE, MANIFEST_NAME),
+                            InputError)
+
+
 def save_observer(directory: Path, model: ObserverModel, training: Mapping[str, Any]) -> Path:
     """Write ``observer.npz`` and ``manifest.json`` (format, version, sha256, training record).
 
@@ -507,7 +521,7 @@ def save_observer(directory: Path, model: ObserverModel, training: Mapping[str, 
     Path
         The manifest's path.
     """
-    directory = Path(directory)
+    directory = check_observer_out(directory)
     data = npz_bytes(dict(model.to_arrays()))
     manifest = {
         "format": OBSERVER_FORMAT, "format_version": OBSERVER_VERSION,
@@ -625,6 +639,7 @@ def fit_observer(data_dir: Path, out_dir: Path, icfn: ICFN | None = None) -> Obs
     from relaxgrip.learning.datastore import load_dataset
     from relaxgrip.learning.training import load_default_models
 
+    check_observer_out(out_dir)
     data = load_dataset(Path(data_dir))
     net = icfn if icfn is not None else load_default_models().icfn
     model = ObserverModel().fit(data, net)

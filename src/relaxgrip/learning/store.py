@@ -31,6 +31,7 @@ import sklearn  # type: ignore[import-untyped]
 import relaxgrip
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import (
+    check_output_dir,
     file_entry,
     npz_bytes,
     one_line,
@@ -112,6 +113,19 @@ def _json_default(value: object) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
 
 
+def check_models_out(directory: Path) -> Path:
+    """Check that models can be written at ``directory`` (before training them).
+
+    Raises
+    ------
+    InputError
+        A file there, a directory of something else (a dataset), one of
+        earlier models with files that are not theirs, or not writable.
+    """
+    own = (ICFN_FILE, RCFN_FILE, UNRELAXED_FILE, HISTORY_FILE, MANIFEST_NAME)
+    return check_output_dir(Path(directory), FORMAT_NAME, own, InputError)
+
+
 def save_models(
     directory: Path,
     icfn: ICFN,
@@ -160,7 +174,7 @@ def save_models(
         Feature counts that do not match the estimators, or a ``training``
         record that is not JSON-serialisable.
     """
-    directory = Path(directory)
+    directory = check_models_out(directory)
     icfn_arrays = icfn.to_arrays()
     rcfn_arrays = rcfn.to_arrays()
     if len(icfn_feature_schema) != icfn.n_features_in_:

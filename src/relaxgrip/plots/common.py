@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import io
-import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import write_files_atomically
+from relaxgrip.fileio import check_writable, write_files_atomically
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -48,9 +47,7 @@ def check_plot_path(path: str | Path) -> Path:
         raise InputError(f"{path}: directory {path.parent} does not exist")
     if path.is_dir():
         raise InputError(f"{path}: is a directory; name the figure file to write")
-    if not os.access(path.parent, os.W_OK):
-        raise InputError(f"{path}: cannot write in {path.parent} (permission denied or "
-                         "read-only)")
+    check_writable(path, InputError)
     return path
 
 

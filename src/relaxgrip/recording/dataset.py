@@ -48,7 +48,12 @@ import pandas as pd
 from relaxgrip import __version__
 from relaxgrip.errors import InputError
 from relaxgrip.learning.datasets import _ICFN_COLUMNS
-from relaxgrip.learning.datastore import DATASET_FORMAT, DATASET_VERSION, write_dataset
+from relaxgrip.learning.datastore import (
+    DATASET_FORMAT,
+    DATASET_VERSION,
+    check_dataset_out,
+    write_dataset,
+)
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.perception.features import (
     ICFN_SCHEMA,
@@ -292,6 +297,7 @@ def dataset_from_recordings(
         raise InputError("sampling intervals and rates must be > 0")
     if abs(sum(split) - 1.0) > 1e-9 or min(split) < 0:
         raise InputError(f"split shares must be >= 0 and sum to 1, got {split}")
+    check_dataset_out(out_dir)
     for f in files:  # every file checked before any work
         if read_session(f).get("grasp_in_progress"):
             raise InputError(f"{f}: the recording began during a grasp: its marker zero is not "
