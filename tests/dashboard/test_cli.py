@@ -28,3 +28,28 @@ def test_missing_web_stack_is_a_helpful_error(monkeypatch) -> None:
     monkeypatch.setitem(sys.modules, "fastapi", None)
     with pytest.raises(InputError, match=r"pip install 'relaxgrip\[dashboard\]'"):
         require_web_stack()
+
+
+def test_a_port_in_use_is_refused_before_the_session_opens(monkeypatch) -> None:
+    import socket
+
+    import relaxgrip.dashboard.session as session_module
+
+    def never(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the session opened")
+
+    monkeypatch.setattr(session_module, "open_session", never)
+    busy = socket.socket()
+    busy.bind(("127.0.0.1", 0))
+    busy.listen(1)
+    try:
+        port = busy.getsockname()[1]
+        result = CliRunner().invoke(app, ["dashboard", "--port", str(port)])
+    finally:
+        busy.close()
+    assert isinstance(result.exception, InputError)
+    assert f"cannot serve on 127.0.0.1:{port}: Address already in use" in str(result.exception)
+    result = CliRunner().invoke(app, ["dashboard", "--host", "nosuchhost.invalid",
+                                      "--allow-remote"])
+    assert isinstance(result.exception, InputError)
+    assert "--host nosuchhost.invalid" in str(result.exception)

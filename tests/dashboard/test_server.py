@@ -276,3 +276,29 @@ def test_rearm_runs_in_the_loop_before_the_first_period(make_session) -> None:
     finally:
         session.close()
     assert calls == [("relaxgrip-loop", 0)]
+
+
+def test_malformed_controls_get_a_reply_and_keep_the_viewer(served) -> None:
+    client, session, _ = served
+
+    def reply(ws: Any) -> Any:
+        for _ in range(200):
+            msg = ws.receive_json()
+            if msg["type"] == "reply":
+                return msg
+        raise AssertionError("no reply")
+
+    with client.websocket_connect("/ws") as ws:
+        ws.send_text('{"id": 1, "op": "target", "value": 1' + "0" * 400 + "}")
+        assert "target needs a number" in reply(ws)["error"]
+        ws.send_text('{"id": 2, "op": "target", "value": 1' + "0" * 5000 + "}")
+        assert reply(ws)["error"] == "a control is a JSON object {id, op, value}"
+        ws.send_text("[" * 100_000)
+        assert reply(ws)["error"] == "a control is a JSON object {id, op, value}"
+        ws.send_bytes(b'{"id": 3, "op": "stop"}')
+        assert reply(ws)["error"] == "a control is JSON text, not a binary frame"
+        for value in ("false", 0, None):
+            assert "record needs true or false" in _control(ws, "record", value, 4)["error"]
+        assert _state(ws)["recording"] is None
+        assert _control(ws, "target", 4, 5)["ok"]  # the same viewer, still served
+    assert session.alive

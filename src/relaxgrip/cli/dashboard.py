@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ipaddress
 import secrets
+import socket
 from pathlib import Path
 from typing import Annotated
 
@@ -34,7 +35,7 @@ def dashboard(
         "--allow-remote", help="Allow a non-loopback --host; the page then needs the printed "
                                "access token.")] = False,
     estimator: Annotated[str, typer.Option(
-        "--estimator", help="fixed, icfn or relax.")] = "relax",
+        "--estimator", help="fixed, icfn, relax or observer.")] = "relax",
     seed: Annotated[int, typer.Option("--seed", help="Twin seed.")] = 0,
     record_dir: Annotated[Path, typer.Option(
         "--record-dir", help="Where MCAP recordings go.")] = Path("."),
@@ -55,8 +56,13 @@ def dashboard(
     from relaxgrip.dashboard.app import create_app
     from relaxgrip.dashboard.session import open_session
 
-    session = open_session(backend, clock=WallClock(), seed=seed, estimator=estimator,
-                           record_dir=record_dir)
+    listener = _bind(host, port)  # a port in use is known before anything starts
+    try:
+        session = open_session(backend, clock=WallClock(), seed=seed, estimator=estimator,
+                               record_dir=record_dir)
+    except BaseException:
+        listener.close()
+        raise
     token = secrets.token_urlsafe(24) if remote else None
     application = create_app(session, token=token)
     shown = f"[{host}]" if ":" in host else host
@@ -66,6 +72,25 @@ def dashboard(
     if token:
         console.print(f"access token: {token}", markup=False, highlight=False)
     try:
-        uvicorn.run(application, host=host, port=port, log_level="warning")
+        server = uvicorn.Server(uvicorn.Config(application, log_level="warning"))
+        server.run(sockets=[listener])
     finally:
         session.close()
+        listener.close()
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    """A TCP socket bound to ``host:port`` (not yet listening)."""
+    try:
+        family, kind, proto, _, address = socket.getaddrinfo(
+            host, port, type=socket.SOCK_STREAM)[0]
+    except socket.gaierror as exc:
+        raise InputError(f"--host {host}: {exc.strerror}") from None
+    sock = socket.socket(family, kind, proto)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(address)
+    except OSError as exc:
+        sock.close()
+        raise InputError(f"cannot serve on {host}:{port}: {exc.strerror}") from None
+    return sock

@@ -22,6 +22,7 @@ import asyncio
 import base64
 import contextlib
 import json
+import logging
 import math
 import secrets
 from collections.abc import AsyncIterator, Callable
@@ -42,6 +43,7 @@ from relaxgrip.serialize import json_safe
 __all__ = ["TOKEN_HEADER", "create_app"]
 
 TOKEN_HEADER = "x-relaxgrip-token"
+_log = logging.getLogger(__name__)
 
 
 def _b64(data: bytes) -> str:
@@ -80,11 +82,16 @@ def _control(session: LiveSession, op: str, value: Any) -> dict[str, Any]:
     def number() -> float:
         try:
             out = float(value)
-        except (TypeError, ValueError):
-            raise InputError(f"{op} needs a number, got {value!r}") from None
+        except (TypeError, ValueError, OverflowError):
+            raise InputError(f"{op} needs a number, got {str(value)[:40]!r}") from None
         if not math.isfinite(out):
             raise InputError(f"{op} needs a finite number, got {value!r}")
         return out
+
+    def flag() -> bool:
+        if not isinstance(value, bool):
+            raise InputError(f"{op} needs true or false, got {str(value)[:40]!r}")
+        return value
 
     actions: dict[str, Callable[[], Any]] = {
         "target": lambda: session.set_target(number()),
@@ -96,7 +103,7 @@ def _control(session: LiveSession, op: str, value: Any) -> dict[str, Any]:
         "lift": session.lift,
         "release": session.release,
         "stop": session.stop,
-        "record": lambda: session.set_recording(bool(value)),
+        "record": lambda: session.set_recording(flag()),
     }
     if op not in actions:
         raise InputError(f"unknown control {op!r}; known: {', '.join(actions)}")
@@ -195,7 +202,12 @@ def create_app(session: LiveSession, *, token: str | None = None,
             while True:
                 ident: Any = None
                 try:
-                    request = json.loads(await websocket.receive_text())
+                    message = await websocket.receive()
+                    if message["type"] == "websocket.disconnect":
+                        raise WebSocketDisconnect(message.get("code", 1000))
+                    if message.get("text") is None:
+                        raise InputError("a control is JSON text, not a binary frame")
+                    request = json.loads(message["text"])
                     if not isinstance(request, dict):
                         raise InputError("a control is a JSON object {id, op, value}")
                     ident = request.get("id")
@@ -206,9 +218,15 @@ def create_app(session: LiveSession, *, token: str | None = None,
                 except InputError as exc:
                     reply = {"type": "reply", "id": ident, "ok": False,
                              "error": str(exc).splitlines()[0]}
-                except json.JSONDecodeError:
+                except (ValueError, RecursionError):  # not JSON, or nested past decoding
                     reply = {"type": "reply", "id": None, "ok": False,
                              "error": "a control is a JSON object {id, op, value}"}
+                except WebSocketDisconnect:
+                    raise
+                except Exception as exc:  # a fault of ours: said, logged, the viewer kept
+                    _log.exception("control %r failed", ident)
+                    reply = {"type": "reply", "id": ident, "ok": False,
+                             "error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
                 await send(json.dumps(json_safe(reply), allow_nan=False))
         except WebSocketDisconnect:
             pass
