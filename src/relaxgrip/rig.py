@@ -37,6 +37,7 @@ FloatArray = NDArray[np.float64]
 
 __all__ = [
     "ARUCO_DICTIONARIES",
+    "MAX_FOCAL_PX",
     "CameraIntrinsics",
     "FingerGeometry",
     "IrCameraMount",
@@ -50,6 +51,9 @@ __all__ = [
     "transform_from",
     "transform_points",
 ]
+
+#: Largest focal length accepted (pixels): a field of view of 0.04° across 640 pixels.
+MAX_FOCAL_PX = 1e6
 
 #: Dictionary names accepted for markers (OpenCV's ``DICT_*`` constants, without the prefix).
 ARUCO_DICTIONARIES: tuple[str, ...] = tuple(
@@ -126,8 +130,9 @@ class CameraIntrinsics:
             raise InputError(f"image size must be positive, got {self.width_px}x{self.height_px}")
         for name in ("fx_px", "fy_px"):
             value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise InputError(f"{name} must be a positive number of pixels, got {value}")
+            if not (math.isfinite(value) and 0 < value <= MAX_FOCAL_PX):
+                raise InputError(f"{name} must be a positive number of pixels up to "
+                                 f"{MAX_FOCAL_PX:.0e}, got {value}")
         for name in ("cx_px", "cy_px"):
             if not math.isfinite(getattr(self, name)):
                 raise InputError(f"{name} must be finite, got {getattr(self, name)}")

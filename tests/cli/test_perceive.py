@@ -69,6 +69,7 @@ def test_table_output(
         (["{png}", "--dist", "1,x"], "--dist must be numbers"),
         (["{png}", "--dist", "1,2,3"], "distortion needs 4, 5, 8"),
         (["{png}", "--fx", "-3"], "fx_px must be a positive number"),
+        (["{png}", "--fx", "1e300"], "fx_px must be a positive number of pixels up to 1e+06"),
         (["{png}", "--marker-mm", "0"], "--marker-mm must be > 0"),
     ],
 )

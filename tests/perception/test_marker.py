@@ -229,3 +229,19 @@ def test_edge_fit_and_pose_with_lens_distortion() -> None:
     solved = PoseSolver(RIG.marker.size_m, lens).solve(refined)
     assert np.abs(solved.tvec_m - pose[:3, 3]).max() < 2e-5
     assert math.degrees(rotation_angle(solved.rotation @ pose[:3, :3].T)) < 0.1
+
+
+def test_a_pose_ippe_cannot_give_falls_back_or_is_non_finite() -> None:
+    """At a focal length of 10^6 px IPPE returns no solution; Levenberg-Marquardt does."""
+    import dataclasses
+
+    from relaxgrip.perception.marker import PoseSolver
+    from relaxgrip.rig import RigGeometry
+
+    rig = RigGeometry()
+    intr = rig.rgb.intrinsics
+    corners = np.array([[300.0, 200.0], [340.0, 200.0], [340.0, 240.0], [300.0, 240.0]])
+    far = dataclasses.replace(intr, fx_px=1e6, fy_px=1e6)
+    pose = PoseSolver(rig.marker.size_m, far).solve(corners)
+    assert np.isfinite(pose.tvec_m).all()
+    assert pose.tvec_m[2] > 100.0  # 12 mm over 40 px at 10^6 px: 300 m away

@@ -367,12 +367,18 @@ class PoseSolver:
         image = corners[::-1].reshape(4, 1, 2)
         _, rvecs, tvecs, errors = cv2.solvePnPGeneric(
             self._object, image, self._matrix, self._dist, flags=cv2.SOLVEPNP_IPPE_SQUARE)
-        if not all(np.isfinite(v).all() for v in (*rvecs, *tvecs)):
+        if not rvecs or not all(np.isfinite(v).all() for v in (*rvecs, *tvecs)):
             # IPPE's homography decomposition occasionally fails on a near-frontal
             # square and returns nan for both solutions (one frame of about 1.4e5 in
-            # a dataset's RCFN sequences, OpenCV 5.0); Levenberg-Marquardt does not.
-            _, rvecs, tvecs, errors = cv2.solvePnPGeneric(
-                self._object, image, self._matrix, self._dist, flags=cv2.SOLVEPNP_ITERATIVE)
+            # a dataset's RCFN sequences, OpenCV 5.0), or none at all (a focal length
+            # of 10^6 px); Levenberg-Marquardt does not.
+            try:
+                _, rvecs, tvecs, errors = cv2.solvePnPGeneric(
+                    self._object, image, self._matrix, self._dist, flags=cv2.SOLVEPNP_ITERATIVE)
+            except cv2.error:  # degenerate intrinsics (a focal length of 10^300 px)
+                rvecs = ()
+        if not rvecs:  # no pose: a non-finite one, which the tracker rejects
+            return MarkerPose(np.full((3, 3), np.nan), np.full(3, np.nan), corners, math.inf)
         best = 0
         rotation = cv2.Rodrigues(rvecs[0])[0] @ _HALF_TURN_X
         if previous is not None and len(rvecs) > 1:
