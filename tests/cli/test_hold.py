@@ -136,3 +136,23 @@ def test_budget_survey_refuses_bad_input(monkeypatch, capsys, args, message):
     assert message in err
     assert err.count("\n") == 1
     assert out == ""
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["hold", "--target-n", "abc"], "Invalid value for '--target-n'"),
+    (["hold", "--bogus"], "No such option: --bogus"),
+    (["bogus"], "No such command 'bogus'"),
+    (["recover"], "Missing argument 'recording'"),
+])
+def test_flags_typer_cannot_parse_are_one_line_too(monkeypatch, capsys, args, message):
+    from tests.clitools import assert_one_error_line
+
+    code, out, err = run_main(args, monkeypatch, capsys)
+    assert_one_error_line(code, out, err, message)
+    assert "--help)" in err
+
+
+def test_bare_command_shows_its_help(monkeypatch, capsys):
+    code, out, _ = run_main([], monkeypatch, capsys)
+    assert code == 2
+    assert out.count("Usage: ") == 1
