@@ -78,3 +78,26 @@ def test_emulator_leaves_files_it_did_not_make_alone(tmp_path: Path) -> None:
     assert out.returncode == 2
     assert "107 bytes a Unix socket path may have" in out.stderr
     assert not (tmp_path / "tty2").exists()
+
+
+def test_a_second_emulator_does_not_take_the_first_one_s_socket(tmp_path: Path) -> None:
+    import time
+
+    sock = tmp_path / "frames.sock"
+    first = subprocess.Popen([sys.executable, "-m", "relaxgrip", "emulator", "--rig",
+                              str(_emulator_rig(tmp_path, tmp_path / "tty", sock)),
+                              "--duration-s", "30"], stdout=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30.0
+        while not sock.exists() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert sock.exists()
+        out = _run("emulator", "--rig", str(_emulator_rig(tmp_path, tmp_path / "tty2", sock)),
+                   "--duration-s", "1")
+        assert out.returncode == 2
+        assert "another emulator is serving it" in out.stderr
+        assert sock.exists()  # the first one's, untouched
+        assert first.poll() is None
+    finally:
+        first.terminate()
+        first.wait(10)

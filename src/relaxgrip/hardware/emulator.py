@@ -59,6 +59,8 @@ __all__ = [
 #: Messages that may wait for a slow wall-clock host (a third of a second of RGB
 #: frames and ticks; at most about 15 MB of frames).
 _HOST_QUEUE = 16
+#: The ``/proc/net/unix`` flag of a listening socket.
+_SO_ACCEPTCON = 0x10000
 #: Longest Unix socket path Linux takes (``sun_path`` is 108 bytes with its NUL).
 _MAX_SOCKET_PATH = 107
 
@@ -376,6 +378,9 @@ class McuEmulator:
         if p.is_symlink() or (p.exists() and not stat.S_ISSOCK(p.stat().st_mode)):
             raise InputError(f"frame channel socket {p}: a file that is not a socket is "
                              "there; the emulator will not replace it")
+        if p.exists() and _answers(p):
+            raise InputError(f"frame channel socket {p}: another emulator is serving it; "
+                             "stop it or give this one another [emulator] socket")
         server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
             p.parent.mkdir(parents=True, exist_ok=True)
@@ -431,6 +436,25 @@ class McuEmulator:
             with contextlib.suppress(OSError):
                 os.close(self._pty.slave)
             self._pty.slave = -1
+
+
+def _answers(path: Path) -> bool:
+    """Whether a process listens on the Unix socket at ``path`` (Linux: ``/proc/net/unix``).
+
+    Read from the kernel's table rather than by connecting: a connection
+    would take the running emulator's frame channel from its host.
+    """
+    try:
+        table = Path("/proc/net/unix").read_text(encoding="utf-8").splitlines()[1:]
+    except OSError:  # not Linux: nothing to tell by
+        return False
+    target = str(path.resolve())
+    for line in table:
+        parts = line.split()
+        if len(parts) >= 8 and int(parts[3], 16) & _SO_ACCEPTCON and \
+                " ".join(parts[7:]) in (target, str(path)):
+            return True
+    return False
 
 
 def twin_config_for_rig(rig: RigFile, base: TwinConfig | None = None) -> TwinConfig:
