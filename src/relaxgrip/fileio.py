@@ -3,7 +3,10 @@
 Every file relaxgrip writes for a user (models, reports, figures) goes
 through :func:`write_files_atomically`: each file is written to a temporary
 name beside its destination, flushed to disk, and renamed into place; a
-failure removes the temporaries and leaves whatever was there before.
+failure while writing removes the temporaries and leaves whatever was there
+before.  The renames of several files are not one step: a failure between
+them (the machine dies) can leave new files beside an old manifest, which is
+renamed last and records every file's SHA-256, so loading detects it.
 
 Model directories (a ``manifest.json`` naming its format and version, and
 ``.npz`` arrays recorded by :func:`file_entry`) are read back through
