@@ -173,6 +173,34 @@ def test_stale_infrared_turns_the_heaters_off(models):
     assert np.all(res["duty_1"][late] == 0.0)
     early = (res["t_s"] > 5.0) & (res["t_s"] < 19.0)
     assert np.all(res["duty_0"][early] > 0.0)
+    # The force cannot be read on a temperature the fingers left: the motor holds.
+    lost = res.log.first(EventKind.ESTIMATE_LOST)
+    assert lost is not None
+    assert "no infrared frame for" in lost.detail
+    assert np.all(res["velocity_cmd_mm_s"][res["t_s"] > lost.t_s] == 0.0)
+
+
+def test_the_force_loop_waits_for_the_infrared_and_resumes(models):
+    frozen: dict[str, Frame] = {}
+
+    def stall(obs: Observation) -> Observation:
+        if obs.ir is not None and 20.0 <= obs.t_s < 26.0:
+            return replace(obs, ir=frozen.setdefault("ir", obs.ir))
+        return obs
+
+    res, _ = grasp(models, "icfn", change=stall, seed=6,
+                   plan=GraspPlan(target_n=3.0, temp_c=40.0, hold_s=20.0))
+    lost = res.log.first(EventKind.ESTIMATE_LOST)
+    back = res.log.first(EventKind.ESTIMATE_BACK)
+    assert lost is not None
+    assert back is not None
+    assert 23.0 <= lost.t_s <= 24.1
+    assert 26.0 <= back.t_s < 27.1
+    gone = (res["t_s"] > lost.t_s) & (res["t_s"] < back.t_s)
+    assert np.all(res["velocity_cmd_mm_s"][gone] == 0.0)
+    after = (res["t_s"] > back.t_s + 5.0) & during(res, GraspPhase.HOLD)
+    assert after.sum() > 30
+    assert np.abs(res["estimate_n"][after] - 3.0).max() < 0.3  # regulating again
 
 
 def test_lift_and_sustain_carry_the_object(models):
@@ -223,3 +251,77 @@ def test_set_target_checks_its_range(models):
     with pytest.raises(InputError, match="outside"):
         controller.set_target(11.0)
     assert controller.plan.target_n == 2.0
+
+
+def test_a_second_start_during_a_grasp_is_refused_and_changes_nothing(models):
+    cfg = TwinConfig(initial_temp_c=40.0)
+    clock = VirtualClock()
+    twin = GripperTwin(cfg, seed=1, clock=clock)
+    ctl = GraspController(cfg.rig, make_estimator("icfn", models.icfn, models.rcfn),
+                          heat=cfg.heat)
+    plan = GraspPlan(target_n=3.0, temp_c=40.0, hold_s=math.inf)
+    ctl.start(plan, clock.now())
+    while ctl.phase is not GraspPhase.HOLD and clock.now() < 40.0:
+        twin.act(ctl.step(twin.observe()))
+        clock.sleep_until(clock.now() + 1 / 30)
+    assert ctl.phase is GraspPhase.HOLD
+    zero = ctl.perception.tracker.zero_pose
+    events = len(ctl.log.events)
+    with pytest.raises(InputError, match="a grasp is under way \\(phase hold\\)"):
+        ctl.start(plan, clock.now())
+    assert ctl.phase is GraspPhase.HOLD
+    assert ctl.perception.tracker.zero_pose is zero
+    assert len(ctl.log.events) == events
+    ctl.stop(clock.now())
+    with pytest.raises(InputError, match="outside the safe range"):
+        ctl.start(replace(plan, temp_c=80.0), clock.now())
+    assert ctl.plan.temp_c == 40.0
+    ctl.start(plan, clock.now())  # stopped: a new grasp may start
+    assert ctl.phase is GraspPhase.OPEN
+
+
+def test_the_per_frame_icfn_is_a_second_force_limit(models):
+    """Eq. 10 can read far under the truth when the temperature changes; the per-frame
+    ICFN, over the limit by more than its margin, backs the motor off as well."""
+    from relaxgrip.control.estimators import ForceEstimate
+
+    ctl = GraspController(TwinConfig().rig, make_estimator("relax", models.icfn, models.rcfn))
+    ctl.phase = GraspPhase.HOLD
+    cfg = ctl.config
+    percept = type("P", (), {})()  # only what _motor reads before the limit
+    from relaxgrip.perception.marker import MarkerState, TrackStatus
+
+    percept.marker = MarkerState(0.0, TrackStatus.TRACKING)
+    percept.ir_age_s = 0.5
+    for icfn_n, backs in ((cfg.max_force_n + cfg.icfn_margin_n - 0.1, False),
+                          (cfg.max_force_n + cfg.icfn_margin_n + 0.1, True)):
+        ctl.estimate = ForceEstimate(5.0, icfn_n)
+        ctl._hold_started = True
+        velocity, _ = ctl._motor(10.0, 1 / 30, 100.0, 0.0, percept)
+        assert (velocity == -cfg.approach_mm_s) is backs
+    event = ctl.log.first(EventKind.FORCE_LIMIT)
+    assert event is not None
+    assert event.detail.startswith("per-frame ICFN 13.1")
+
+
+def test_a_heater_fault_stops_the_grasp_with_the_heaters_off(models):
+    """A thermal camera whose image froze (its frames still stamped fresh): the loop drives
+    the heaters hard, sees no warming, latches the fault and stops; it never overheats."""
+    first: dict[str, Frame] = {}
+
+    def frozen(obs: Observation) -> Observation:
+        if obs.ir is None:
+            return obs
+        image = first.setdefault("ir", obs.ir).image
+        return replace(obs, ir=Frame(obs.ir.t_s, obs.ir.seq, image))
+
+    res, backend = grasp(models, "icfn", change=frozen, seed=2, temp_c=25.0, max_s=120.0,
+                         plan=GraspPlan(target_n=3.0, temp_c=58.0, hold_s=10.0))
+    fault = res.log.first(EventKind.HEATER_FAULT)
+    assert fault is not None
+    assert 55.0 <= fault.t_s <= 70.0
+    assert res.log.first(EventKind.STOP) is not None
+    assert res.log.transitions[-1][1] is GraspPhase.STOPPED
+    after = res["t_s"] > fault.t_s
+    assert np.all(res["duty_0"][after] == 0.0)
+    assert backend.twin.observe().truth.finger_temps_c[0][2] < 70.0

@@ -174,3 +174,70 @@ def test_an_object_covering_the_tip_does_not_make_the_loop_overheat():
     assert loop.readings_c(latest)[0] == pytest.approx(55.0, abs=0.3)
     # The face's mean reads the ball: regulating it would overheat the finger.
     assert latest.fingers[0].mean_c < 50.0
+
+
+def test_adhesive_pads_under_an_object_are_read_as_before_the_grasp():
+    """An object over the tips (in part: not yet 'covered') while grasping: the pads read as
+    before the fingers closed, moved with the proximal beams; the loop does not overheat."""
+    loop = TemperatureLoop(HEAT)
+    loop.set_mode(StiffnessMode.ADHESIVE)
+    temps = np.full((2, HEAT.n_nodes), 58.0)
+    for k in range(6000):
+        t = k / 10
+        if k == 1500:
+            loop.set_grasping(True)
+        if k % 10 == 0:
+            seen = temps.copy()
+            if k >= 1500:  # a room-temperature ball half over the tips
+                seen[:, -2:] = 0.6 * seen[:, -2:] + 0.4 * 26.0
+            latest = features(t, seen)
+        duty = loop.update(latest, t)
+        temps = np.vstack([heat_step(temps[j], duty[j], 0.1, HEAT, AMBIENT_C) for j in range(2)])
+    assert temps[:, -2:].mean(axis=1) == pytest.approx([58.0, 58.0], abs=0.5)
+    assert latest.fingers[0].beam_temps_c[-1] < 50.0  # what the camera sees of the pads
+    loop.set_grasping(False)
+    assert loop.readings_c(latest)[0] < 50.0  # open again: read as they are
+
+
+def test_a_heater_that_does_not_warm_its_finger_latches_a_fault():
+    """A frozen thermal image (fresh stamps, the same temperatures): after the fault
+    window at full duty every heater stays off until a setpoint is given again."""
+    loop = TemperatureLoop(HEAT)
+    loop.set_temperature(58.0)
+    frozen = np.full((2, HEAT.n_nodes), 26.0)
+    duties = [loop.update(features(float(t), frozen), float(t)) for t in range(0, 75)]
+    assert min(duties[30]) > 0.8
+    assert loop.status is TemperatureStatus.HEATER_FAULT
+    assert loop.fault is not None
+    assert "heater 0 drove" in loop.fault
+    assert duties[-1] == (0.0, 0.0)
+    loop.set_temperature(58.0)  # the operator's call
+    assert loop.fault is None
+    assert min(loop.update(features(80.0, frozen), 80.0)) > 0.8
+
+
+def test_a_heater_that_warms_its_finger_is_no_fault():
+    loop = TemperatureLoop(HEAT)
+    loop.set_mode(StiffnessMode.COMPLIANT)
+    temps, _ = simulate(loop, 400.0)
+    assert temps.mean(axis=1) == pytest.approx([58.0, 58.0], abs=0.3)
+    assert loop.status is TemperatureStatus.REGULATING
+    assert loop.fault is None
+
+
+@pytest.mark.parametrize("stamp", [float("nan"), float("inf"), 10.0])
+def test_an_infrared_frame_stamped_never_or_in_the_future_counts_as_none(stamp):
+    loop = TemperatureLoop(HEAT)
+    loop.set_temperature(50.0)
+    frame = features(stamp, np.full((2, HEAT.n_nodes), 30.0))
+    assert loop.update(frame, 1.0) == (0.0, 0.0)
+    assert loop.status is TemperatureStatus.STALE
+
+
+def test_a_mode_outside_the_lab_s_setpoint_range_is_refused():
+    loop = TemperatureLoop(HEAT, ThermalLimits(max_setpoint_c=50.0, max_temp_c=55.0))
+    with pytest.raises(InputError, match="outside the safe range 20-50"):
+        loop.set_mode(StiffnessMode.COMPLIANT)
+    assert loop.setpoint_c is None
+    loop.set_mode(StiffnessMode.MEDIUM)
+    assert loop.setpoint_c == 40.0

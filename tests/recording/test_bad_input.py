@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -18,8 +19,8 @@ from relaxgrip.recording import McapRecorder
 from tests.clitools import assert_one_error_line, run_main
 
 
-def _without(src: Path, dst: Path, topics: set[str]) -> None:
-    """Copy a recording leaving out some topics."""
+def _copy(src: Path, dst: Path, change: Callable[[str, bytes], bytes | None]) -> None:
+    """Copy a recording, each message's data through ``change`` (None: left out)."""
     with open(src, "rb") as f, open(dst, "wb") as out:
         reader = make_reader(f)
         writer = Writer(out)
@@ -27,7 +28,8 @@ def _without(src: Path, dst: Path, topics: set[str]) -> None:
         schemas: dict[int, int] = {}
         channels: dict[int, int] = {}
         for schema, channel, message in reader.iter_messages(log_time_order=False):
-            if channel.topic in topics:
+            data = change(channel.topic, message.data)
+            if data is None:
                 continue
             if channel.id not in channels:
                 assert schema is not None
@@ -35,9 +37,14 @@ def _without(src: Path, dst: Path, topics: set[str]) -> None:
                     schema.name, schema.encoding, schema.data))
                 channels[channel.id] = writer.register_channel(
                     channel.topic, channel.message_encoding, schemas[schema.id])
-            writer.add_message(channels[channel.id], message.log_time, message.data,
+            writer.add_message(channels[channel.id], message.log_time, data,
                                message.publish_time)
         writer.finish()  # type: ignore[no-untyped-call]
+
+
+def _without(src: Path, dst: Path, topics: set[str]) -> None:
+    """Copy a recording leaving out some topics."""
+    _copy(src, dst, lambda topic, data: None if topic in topics else data)
 
 
 @pytest.mark.parametrize("command", ["replay", "from-recordings"])
@@ -173,28 +180,17 @@ def test_recover_refuses_outputs_it_cannot_write(
 def _rewritten(src: Path, dst: Path, change) -> None:  # type: ignore[no-untyped-def]
     """Copy a recording with ``change(topic, message)`` applied to its first message per topic."""
     changed: set[str] = set()
-    with open(src, "rb") as f, open(dst, "wb") as out:
-        reader = make_reader(f)
-        writer = Writer(out)
-        writer.start()
-        schemas: dict[int, int] = {}
-        channels: dict[int, int] = {}
-        for schema, channel, message in reader.iter_messages(log_time_order=False):
-            if channel.id not in channels:
-                assert schema is not None
-                schemas.setdefault(schema.id, writer.register_schema(
-                    schema.name, schema.encoding, schema.data))
-                channels[channel.id] = writer.register_channel(
-                    channel.topic, channel.message_encoding, schemas[schema.id])
-            data = message.data
-            if channel.topic not in changed:
-                new = change(channel.topic, json.loads(data))
-                if new is not None:
-                    changed.add(channel.topic)
-                    data = json.dumps(new).encode()
-            writer.add_message(channels[channel.id], message.log_time, data,
-                               message.publish_time)
-        writer.finish()  # type: ignore[no-untyped-call]
+
+    def first(topic: str, data: bytes) -> bytes:
+        if topic in changed:
+            return data
+        new = change(topic, json.loads(data))
+        if new is None:
+            return data
+        changed.add(topic)
+        return json.dumps(new).encode()
+
+    _copy(src, dst, first)
 
 
 def _drop(key: str):  # type: ignore[no-untyped-def]

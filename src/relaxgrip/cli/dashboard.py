@@ -35,7 +35,9 @@ def dashboard(
         "--allow-remote", help="Allow a non-loopback --host; the page then needs the printed "
                                "access token.")] = False,
     estimator: Annotated[str, typer.Option(
-        "--estimator", help="fixed, icfn, relax or observer.")] = "relax",
+        "--estimator", help="fixed, icfn, relax or observer (the default: it follows a "
+                            "mode switch while holding, which relax's Eq. 10 does not).")
+    ] = "observer",
     seed: Annotated[int, typer.Option("--seed", help="Twin seed.")] = 0,
     record_dir: Annotated[Path, typer.Option(
         "--record-dir", help="Where MCAP recordings go.")] = Path("."),

@@ -74,7 +74,9 @@ class GraspPlan:
     sustain_s : float
         Time in Sustain (s); ``inf`` sustains until told.
     release : bool
-        Open the fingers at the end (else stay in the last phase).
+        Open the fingers at the end; else the grasp ends (Done) with the
+        motor stopped where it is: the aperture is held, the force no longer
+        regulated.
     """
 
     target_n: float = 5.0
@@ -121,6 +123,11 @@ class ForceControlConfig:
         Arm speed while lifting (mm/s).
     max_force_n : float
         Force limit: an estimate above it backs the motor off (N).
+    icfn_margin_n : float
+        The per-frame ICFN is checked against ``max_force_n`` plus this too
+        (N): a second reading, independent of Eq. 10, which a temperature
+        change can throw far off; the margin leaves room for the ICFN's own
+        over-reading as the finger relaxes (about 16 % after 280 s).
     contact_deflection_m : float
         Marker deflection that means contact (m).
     contact_frames : int
@@ -149,6 +156,7 @@ class ForceControlConfig:
     release_mm_s: float = 10.0
     lift_mm_s: float = 20.0
     max_force_n: float = 12.0
+    icfn_margin_n: float = 1.0
     contact_deflection_m: float = 3e-5
     contact_frames: int = 2
     hold_tolerance_rel: float = 0.005
@@ -158,6 +166,11 @@ class ForceControlConfig:
     slip_drop_rel: float = 0.3
     slip_window_s: float = 0.5
     stroke_mm: float = 148.0
+
+
+#: Phases in which an object may stand between the infrared camera and the fingertips.
+_GRASPING = frozenset({GraspPhase.CLOSE, GraspPhase.HOLD, GraspPhase.LIFT, GraspPhase.SUSTAIN,
+                       GraspPhase.RELEASE})
 
 
 class GraspController:
@@ -199,7 +212,7 @@ class GraspController:
         self._t_prev: float | None = None
         self._contact_count = 0
         self._in_contact = False
-        self._marker_lost = False
+        self._lost: EventKind | None = None  # MARKER_LOST or ESTIMATE_LOST while it lasts
         self._temp_ok_since: float | None = None
         self._rezeroed = False
         self._hold_started = False
@@ -210,7 +223,21 @@ class GraspController:
     # -- operator requests ---------------------------------------------------------------
 
     def start(self, plan: GraspPlan, t_s: float = 0.0) -> None:
-        """Begin a grasp from the open gripper."""
+        """Begin a grasp from the open gripper.
+
+        Raises
+        ------
+        InputError
+            While a grasp is under way (release or stop it first), or a plan
+            whose temperature the loop does not accept; nothing is changed.
+        """
+        if self.phase not in (GraspPhase.DONE, GraspPhase.STOPPED, GraspPhase.OPEN):
+            raise InputError(f"a grasp is under way (phase {self.phase.value}): release or "
+                             "stop it first")
+        if plan.mode is not None:
+            self.temperature.check_mode(plan.mode)
+        elif plan.temp_c is not None:
+            self.temperature.limits.check_setpoint(plan.temp_c)
         self.plan = plan
         self.log = PhaseLog()
         self.perception.reset()
@@ -303,6 +330,10 @@ class GraspController:
                 self.log.event(t, EventKind.IR_STALE,
                                f"no infrared frame for {percept.ir_age_s:.1f} s: heaters off")
             self._temp_status = status
+            if status is TemperatureStatus.HEATER_FAULT:
+                self.log.event(t, EventKind.HEATER_FAULT, str(self.temperature.fault))
+                self.stop(t, "heater fault")
+                return (0.0, 0.0)
         return duty
 
     def _enter(self, t: float, phase: GraspPhase) -> None:
@@ -313,6 +344,26 @@ class GraspController:
         self.phase = phase
         self._phase_t = t
         self.log.enter(t, phase)
+        self.temperature.set_grasping(phase in _GRASPING)
+
+    def _sensing_lost(self, percept: Percept, est: ForceEstimate
+                      ) -> tuple[EventKind, str] | None:
+        """Why the force cannot be read now (an event to log), or None if it can.
+
+        The marker must be tracked and the estimate valid; and the infrared
+        fresh, for every estimate reads the finger's temperature: a stalled
+        thermal camera would leave them on a temperature the fingers left
+        (cooling fingers stiffen, and the force held would climb unseen).
+        """
+        if percept.marker.status is not TrackStatus.TRACKING:
+            return EventKind.MARKER_LOST, percept.marker.message or percept.marker.status.value
+        limit = self.temperature.limits.stale_after_s
+        if not percept.ir_age_s <= limit:
+            return EventKind.ESTIMATE_LOST, (f"no infrared frame for {percept.ir_age_s:.1f} s "
+                                             f"(limit {limit:g} s)")
+        if not est.valid:
+            return EventKind.ESTIMATE_LOST, "no valid estimate"
+        return None
 
     def _contact(self, t: float, percept: Percept) -> None:
         pose = marker_pose(percept.marker)
@@ -361,19 +412,24 @@ class GraspController:
                 return 0.0, 0.0
             return -cfg.release_mm_s, 0.0
         est = self.estimate
-        tracking = percept.marker.status is TrackStatus.TRACKING
-        if not tracking or not est.valid:
-            if not self._marker_lost:
-                self._marker_lost = True
-                self.log.event(t, EventKind.MARKER_LOST,
-                               percept.marker.message or percept.marker.status.value)
-            return 0.0, 0.0  # hold position until the marker is back
-        if self._marker_lost:
-            self._marker_lost = False
+        lost = self._sensing_lost(percept, est)
+        if lost is not None:
+            kind, detail = lost
+            if self._lost is None:
+                self._lost = kind
+                self.log.event(t, kind, detail)
+            return 0.0, 0.0  # hold position until the force can be read again
+        if self._lost is not None:
+            back = (EventKind.MARKER_BACK if self._lost is EventKind.MARKER_LOST
+                    else EventKind.ESTIMATE_BACK)
+            self._lost = None
             self.pid.reset(0.0)
-            self.log.event(t, EventKind.MARKER_BACK)
-        if est.force_n > cfg.max_force_n:
-            self.log.event(t, EventKind.FORCE_LIMIT, f"estimate {est.force_n:.2f} N")
+            self.log.event(t, back)
+        over = [f"{name} {f:.2f} N" for name, f, limit in (
+            ("estimate", est.force_n, cfg.max_force_n),
+            ("per-frame ICFN", est.f_icfn_n, cfg.max_force_n + cfg.icfn_margin_n)) if f > limit]
+        if over:
+            self.log.event(t, EventKind.FORCE_LIMIT, "; ".join(over))
             self.pid.reset(0.0)
             return -cfg.approach_mm_s, 0.0
         self._contact(t, percept)

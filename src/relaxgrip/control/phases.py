@@ -42,10 +42,13 @@ class EventKind(enum.StrEnum):
     SLIP = "slip"
     MARKER_LOST = "marker_lost"
     MARKER_BACK = "marker_back"
+    ESTIMATE_LOST = "estimate_lost"
+    ESTIMATE_BACK = "estimate_back"
     FORCE_LIMIT = "force_limit"
     OVER_TEMPERATURE = "over_temperature"
     IR_STALE = "ir_stale"
     STROKE_END = "stroke_end"
+    HEATER_FAULT = "heater_fault"
     STOP = "stop"
 
 

@@ -10,7 +10,15 @@ named setpoints.  Two guards come before any control:
   :attr:`ThermalLimits.hysteresis_k` below the limit;
 * **stale infrared**: with no infrared frame for more than
   :attr:`ThermalLimits.stale_after_s`, every heater is off (a loop that cannot
-  see the temperature must not heat).
+  see the temperature must not heat); a frame stamped in the future or not
+  at all counts as none;
+* **heater fault** (thermal runaway protection, as 3D printers have it): a
+  heater driven at :attr:`ThermalLimits.fault_duty` or more for
+  :attr:`ThermalLimits.fault_window_s` whose finger's reading has not risen
+  :attr:`ThermalLimits.fault_min_rise_k` is taken as a broken heater, a
+  frozen camera or a camera that sees something else, and every heater
+  stays off until a setpoint is given again.  At full duty a finger warms
+  about 20 K in that time (below).
 
 The PID runs when a new infrared frame arrives (1 Hz) and its duty is held
 between frames.
@@ -77,6 +85,8 @@ class TemperatureStatus(enum.StrEnum):
     """At least one finger is cut off above the limit."""
     STALE = "stale"
     """No recent infrared frame: all heaters off."""
+    HEATER_FAULT = "heater_fault"
+    """A heater drove hard and its finger did not warm: all heaters off until a new setpoint."""
 
 
 @dataclass(frozen=True)
@@ -93,6 +103,11 @@ class ThermalLimits:
         Infrared age beyond which every heater is off (s).
     min_setpoint_c, max_setpoint_c : float
         Setpoints accepted (°C).
+    fault_duty, fault_window_s, fault_min_rise_k : float
+        Heater fault: a duty at or above ``fault_duty`` held for
+        ``fault_window_s`` with the finger's reading risen less than
+        ``fault_min_rise_k`` (defaults: 0.8, 60 s, 2 K; the default heat model
+        warms a finger at ambient by about 25 K in 60 s at duty 1).
     """
 
     max_temp_c: float = 70.0
@@ -100,6 +115,9 @@ class ThermalLimits:
     stale_after_s: float = 3.0
     min_setpoint_c: float = 20.0
     max_setpoint_c: float = 65.0
+    fault_duty: float = 0.8
+    fault_window_s: float = 60.0
+    fault_min_rise_k: float = 2.0
 
     def __post_init__(self) -> None:
         if not self.min_setpoint_c < self.max_setpoint_c < self.max_temp_c:
@@ -108,6 +126,10 @@ class ThermalLimits:
                              f"{self.max_temp_c}")
         if not (self.hysteresis_k >= 0 and self.stale_after_s > 0):
             raise InputError("hysteresis must be >= 0 K and the stale age > 0 s")
+        if not (0 < self.fault_duty <= 1 and self.fault_window_s > 0
+                and self.fault_min_rise_k > 0):
+            raise InputError("the heater fault needs a duty in (0, 1], a window > 0 s and a "
+                             "rise > 0 K")
 
     def check_setpoint(self, temp_c: float) -> float:
         """Return ``temp_c`` if it is a setpoint the loop accepts."""
@@ -116,6 +138,10 @@ class ThermalLimits:
                              f"{self.min_setpoint_c:g}-{self.max_setpoint_c:g} °C")
         return float(temp_c)
 
+
+#: How far ahead of the loop's clock an infrared frame's stamp may be (s): more is a
+#: clock fault, and the frame counts as none.
+_FUTURE_S = 0.5
 
 #: Default gains: duty per kelvin, per kelvin-second.  A finger heats with a time
 #: constant of about 2.5 min and about 80 K per unit duty (the default heat
@@ -147,20 +173,35 @@ class TemperatureLoop:
         self.setpoint_c: float | None = None
         self.status = TemperatureStatus.OFF
         self._cut = [False, False]
+        self.fault: str | None = None
+        """Why the heaters are latched off (a heater fault), or None."""
+        # Per finger: since when its heater drives hard, and its reading then.
+        self._driving: list[tuple[float, float] | None] = [None, None]
         self._duty = (0.0, 0.0)
         self._last_ir_t: float | None = None
         self._seen_t: float | None = None
         # Per finger, the latest frame with no beam covered: its mean and its beams.
         self._clear: list[tuple[float, tuple[float, ...]] | None] = [None, None]
+        # Per finger, its beams in the last frame before the fingers closed on an object.
+        self._open_beams: list[tuple[float, ...] | None] = [None, None]
+        self._grasping = False
 
-    def set_mode(self, mode: StiffnessMode | str) -> None:
-        """Switch to a stiffness mode's setpoint."""
+    def check_mode(self, mode: StiffnessMode | str) -> tuple[StiffnessMode, float | None]:
+        """The mode named and its setpoint, if the limits' setpoint range takes it."""
         try:
-            self.mode = StiffnessMode(mode)
+            chosen = StiffnessMode(mode)
         except ValueError:
             known = ", ".join(m.value for m in StiffnessMode)
             raise InputError(f"unknown stiffness mode {mode!r}; known: {known}") from None
-        self._set(MODE_SETPOINTS_C[self.mode])
+        setpoint = MODE_SETPOINTS_C[chosen]
+        if setpoint is not None:
+            self.limits.check_setpoint(setpoint)
+        return chosen, setpoint
+
+    def set_mode(self, mode: StiffnessMode | str) -> None:
+        """Switch to a stiffness mode's setpoint (within the limits' setpoint range)."""
+        self.mode, setpoint = self.check_mode(mode)
+        self._set(setpoint)
 
     def set_temperature(self, temp_c: float | None) -> None:
         """Hold the fingers at ``temp_c`` (°C); ``None`` switches the heaters off."""
@@ -170,50 +211,89 @@ class TemperatureLoop:
         self._set(temp_c)
 
     def _set(self, temp_c: float | None) -> None:
+        self.fault = None  # a setpoint given (again) after a fault is the operator's call
+        self._driving = [None, None]
         if temp_c != self.setpoint_c:
             self.setpoint_c = temp_c
             self._last_ir_t = None  # re-seed the integrators on the next frame
 
     def reading_c(self, finger: FingerThermal) -> float:
         """A finger seen whole: the pads (tip beams) if adhesive, else the mean (°C)."""
+        return self._of(finger.beam_temps_c, finger.mean_c)
+
+    def _of(self, beams: tuple[float, ...], mean_c: float) -> float:
+        """What the loop regulates of a finger with these beams and this mean (°C)."""
         if self.mode is StiffnessMode.ADHESIVE:
-            tip = [b for b in finger.beam_temps_c[-2:] if math.isfinite(b)]
+            tip = [b for b in beams[-2:] if math.isfinite(b)]
             if tip:
                 return sum(tip) / len(tip)
-        return finger.mean_c
+        return mean_c
+
+    def set_grasping(self, grasping: bool) -> None:
+        """Whether the fingers are closing on or holding an object (the controller's phases).
+
+        The adhesive pads are the tip beams, the first an object covers, and
+        covers in part before :func:`covered_beams` tells it (a ball at the
+        tips read 46-49 °C there against 57 °C before it, with the finger's
+        warmest beam at 60 °C).  While grasping, they are read as they were
+        before the fingers closed, moved by the median change of the
+        proximal beams since.
+        """
+        self._grasping = grasping
 
     def readings_c(self, thermal: ThermalFeatures) -> tuple[float, ...]:
         """What the loop regulates of each finger, covered beams made up for (°C).
 
         Where an object covers beams of a finger (module notes), its reading is
-        the mean of the latest frame with nothing covered, moved by the median
-        change of the beams visible in both; before any such frame, the mean
-        of the visible beams.  The adhesive pads are read as they are.
+        that of the latest frame with nothing covered (the mean, or the tip
+        beams for the adhesive pads, which a grasped object covers first),
+        moved by the median change of the beams visible in both; before any
+        such frame, the mean of the visible beams (their tip ones if adhesive).
         """
         out = []
         for j, finger in enumerate(thermal.fingers):
+            pads = self._pads_while_grasping(j, finger.beam_temps_c)
+            if pads is not None:
+                out.append(pads)
+                continue
             covered = covered_beams(finger.beam_temps_c, thermal.background_c)
-            if self.mode is StiffnessMode.ADHESIVE or not any(covered):
+            if not any(covered):
                 out.append(self.reading_c(finger))
                 continue
             clear = self._clear[j] if j < len(self._clear) else None
             now = finger.beam_temps_c
             if clear is None:
-                seen = [b for b, c in zip(now, covered, strict=True) if not c and math.isfinite(b)]
-                out.append(sum(seen) / len(seen))
+                seen = tuple(b if not c else math.nan for b, c in zip(now, covered, strict=True))
+                visible = [b for b in seen if math.isfinite(b)]
+                out.append(self._of(seen, sum(visible) / len(visible)))
                 continue
             mean_c, then = clear
             # The median change: a beam the object half covers drops with it, not the finger.
             moved = [b - a for b, a, c in zip(now, then, covered, strict=True)
                      if not c and math.isfinite(b) and math.isfinite(a)]
-            out.append(mean_c + statistics.median(moved) if moved else mean_c)
+            out.append(self._of(then, mean_c) + (statistics.median(moved) if moved else 0.0))
         return tuple(out)
+
+    def _pads_while_grasping(self, j: int, beams: tuple[float, ...]) -> float | None:
+        """The adhesive pads' reading while grasping (:meth:`set_grasping`), else None."""
+        before = self._open_beams[j] if j < len(self._open_beams) else None
+        if self.mode is not StiffnessMode.ADHESIVE or not self._grasping or before is None:
+            return None
+        tip = [b for b in before[-2:] if math.isfinite(b)]
+        if not tip:
+            return None
+        moved = [b - a for b, a in zip(beams[:-2], before[:-2], strict=True)
+                 if math.isfinite(b) and math.isfinite(a)]
+        return sum(tip) / len(tip) + (statistics.median(moved) if moved else 0.0)
 
     def _remember_clear(self, thermal: ThermalFeatures) -> None:
         """Keep each finger's latest uncovered frame (once per infrared frame)."""
         if thermal.t_s == self._seen_t:
             return
         self._seen_t = thermal.t_s
+        if not self._grasping:
+            for j, finger in enumerate(thermal.fingers[: len(self._open_beams)]):
+                self._open_beams[j] = tuple(finger.beam_temps_c)
         for j, finger in enumerate(thermal.fingers[: len(self._clear)]):
             if math.isfinite(finger.mean_c) and not any(
                     covered_beams(finger.beam_temps_c, thermal.background_c)):
@@ -234,11 +314,14 @@ class TemperatureLoop:
         tuple of float
             Duty of each finger's heater, in [0, 1].
         """
-        if thermal is None or t_s - thermal.t_s > self.limits.stale_after_s:
+        fresh = thermal is not None and math.isfinite(thermal.t_s) and (
+            -_FUTURE_S <= t_s - thermal.t_s <= self.limits.stale_after_s)
+        if thermal is None or not fresh:
             self.status = TemperatureStatus.STALE if self.setpoint_c is not None else \
                 TemperatureStatus.OFF
             self._duty = (0.0, 0.0)
             self._last_ir_t = None
+            self._driving = [None, None]
             return self._duty
         self._remember_clear(thermal)
         for j, finger in enumerate(thermal.fingers):
@@ -252,12 +335,38 @@ class TemperatureLoop:
             self.status = TemperatureStatus.OFF
             self._duty = (0.0, 0.0)
             return self._duty
+        if self.fault is not None:
+            self.status = TemperatureStatus.HEATER_FAULT
+            return 0.0, 0.0
         if thermal.t_s != self._last_ir_t:
             self._duty = self._regulate(thermal, self.setpoint_c)
         duties = tuple(0.0 if cut else d for cut, d in zip(self._cut, self._duty, strict=True))
+        fault = self._watch(thermal, duties)
+        if fault is not None:
+            self.fault, self.status = fault, TemperatureStatus.HEATER_FAULT
+            self._duty = (0.0, 0.0)
+            return self._duty
         self.status = (TemperatureStatus.OVER_TEMPERATURE if any(self._cut)
                        else TemperatureStatus.REGULATING)
         return duties[0], duties[1]
+
+    def _watch(self, thermal: ThermalFeatures, duties: tuple[float, ...]) -> str | None:
+        """A heater fault to latch: a finger driven hard that does not warm (module notes)."""
+        lim = self.limits
+        for j, (duty, reading) in enumerate(zip(duties, self.readings_c(thermal), strict=False)):
+            if duty < lim.fault_duty or not math.isfinite(reading):
+                self._driving[j] = None
+                continue
+            since = self._driving[j]
+            if since is None:
+                self._driving[j] = (thermal.t_s, reading)
+            elif thermal.t_s - since[0] >= lim.fault_window_s:
+                if reading - since[1] < lim.fault_min_rise_k:
+                    return (f"heater {j} drove {duty:.2f} duty for {thermal.t_s - since[0]:.0f} "
+                            f"s and its finger read {reading - since[1]:+.1f} K: a broken "
+                            "heater or a camera that does not see the finger")
+                self._driving[j] = (thermal.t_s, reading)  # warming: watch the next window
+        return None
 
     def _regulate(self, thermal: ThermalFeatures, setpoint_c: float) -> tuple[float, float]:
         ambient = thermal.background_c if math.isfinite(thermal.background_c) else 25.0

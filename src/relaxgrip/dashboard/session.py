@@ -443,7 +443,7 @@ class LiveSession:
 
 
 def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
-                 estimator: str = "relax", object_name: str = "force_ball",
+                 estimator: str = "observer", object_name: str = "force_ball",
                  record_dir: Path = Path("."), models_dir: Path | None = None) -> LiveSession:
     """A session on the twin, the MCU emulator (twin behind a pty) or a rig file's gripper.
 
@@ -456,7 +456,9 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
     seed : int
         Twin seed.
     estimator : str
-        ``fixed``, ``icfn`` or ``relax``.
+        ``fixed``, ``icfn``, ``relax`` or ``observer`` (the default: the
+        dashboard changes the temperature while holding, which Eq. 10 of
+        ``relax`` does not follow).
     object_name : str
         Twin object between the fingers at the start.
     record_dir : Path
