@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 from relaxgrip.errors import InputError
 from relaxgrip.physics.fitting import (
+    find_hold,
     find_hold_start,
     fit_prony,
     fit_reduced,
@@ -370,3 +371,49 @@ def test_osculating_reduced_is_undefined_where_the_force_rises() -> None:
     assert np.isnan(tau).all()
     with pytest.raises(ValueError, match="> 0"):
         osculating_reduced(t, 5.0 + 0 * t, 0.0, [5.0])
+
+
+def _step_and_hold(seconds: float = 600.0) -> tuple[np.ndarray, np.ndarray]:
+    """A 1 s ramp to 2 mm at 10 Hz, then the hold."""
+    t = np.arange(0.0, seconds, 0.1)
+    return t, np.minimum(2.0 * t, 2.0)
+
+
+def test_a_displacement_logged_in_counts_holds_from_the_step() -> None:
+    """Rounded to 0.01 mm with one-count flickers on the plateau: the noise estimate of
+    the differences is zero, and the resolution takes its place."""
+    t, x = _step_and_hold()
+    rng = np.random.default_rng(2)
+    x = x + 0.004 * rng.standard_normal(t.size) * (t > 1.0)
+    counts = np.round(x / 0.01) * 0.01
+    assert np.median(np.abs(np.diff(counts[t > 1.0]))) == 0.0
+    start, stop = find_hold(t, counts)
+    assert t[start] == pytest.approx(1.0, abs=0.15)
+    assert stop == t.size
+
+
+def test_one_glitching_sample_does_not_move_the_hold() -> None:
+    t, x = _step_and_hold()
+    clean = find_hold(t, x)
+    x[3000] += 0.2  # one sample 10 % of the step off, at 300 s
+    assert find_hold(t, x) == clean
+
+
+def test_an_unloading_at_the_end_is_cut() -> None:
+    t, x = _step_and_hold()
+    x[t >= 590.0] = np.maximum(2.0 - 2.0 * (t[t >= 590.0] - 590.0), 0.0)  # back to 0 in 1 s
+    start, stop = find_hold(t, x)
+    assert t[start] == pytest.approx(1.0, abs=0.15)
+    assert t[stop - 1] == pytest.approx(590.0, abs=0.15)
+
+
+def test_a_prony_series_with_more_terms_than_the_hold_shows_is_refused() -> None:
+    """The first second of a VHB-like hold (modes of 5.5, 55 and 540 s) with 1 mN of
+    noise: the best three-term fits merge two relaxation times into a pair of amplitudes
+    of hundreds of newtons that cancel (as on stretch_2.0.csv with --window-s 1)."""
+    t = np.arange(0.0, 1.0, 0.02)
+    f = prony_force(t, 0.5, (0.6, 0.35, 0.22), (5.5, 55.0, 540.0))
+    f = f + 1e-3 * np.random.default_rng(0).standard_normal(t.size)
+    assert len(fit_prony(t, f, n_terms=1).tau_s) == 1
+    with pytest.raises(InputError, match="Prony series is not identifiable on this hold"):
+        fit_prony(t, f, n_terms=3)

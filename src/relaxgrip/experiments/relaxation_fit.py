@@ -26,7 +26,7 @@ from relaxgrip.physics.fitting import (
     WEIGHTINGS,
     PronyFit,
     ReducedFit,
-    find_hold_start,
+    find_hold,
     fit_prony,
     fit_reduced,
 )
@@ -44,7 +44,7 @@ __all__ = [
 ]
 
 COLUMNS: tuple[str, ...] = ("time_s", "displacement_mm", "force_n")
-# A hold needs at least 10 samples (find_hold_start), plus the ramp before it.
+# A hold needs at least 10 samples (find_hold), plus the ramp before it.
 MIN_ROWS = 12
 # Fewest hold samples a fit window may hold, whatever the number of parameters.
 MIN_FIT_SAMPLES = 10
@@ -293,12 +293,12 @@ def fit_relaxation(
 
     source = record.source
     try:
-        start = find_hold_start(record.time_s, record.displacement_mm)
+        start, stop = find_hold(record.time_s, record.displacement_mm)
     except InputError as exc:
         raise InputError(f"{source}: {exc}") from None
     hold_start_s = float(record.time_s[start])
-    time_s = record.time_s[start:] - hold_start_s
-    force_n = record.force_n[start:]
+    time_s = record.time_s[start:stop] - hold_start_s
+    force_n = record.force_n[start:stop]
     hold_s = float(time_s[-1])
     window = hold_s if window_s is None else min(float(window_s), hold_s)
 

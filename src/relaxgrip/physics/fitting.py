@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal, get_args
+from typing import Any, Literal, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -56,6 +56,7 @@ __all__ = [
     "PronyFit",
     "ReducedFit",
     "Weighting",
+    "find_hold",
     "find_hold_start",
     "fit_prony",
     "fit_reduced",
@@ -75,6 +76,12 @@ _BEAM_WIDTH = 3
 # Seeds whose new tau lies within this factor of an existing one are skipped: the two
 # basis columns would be nearly collinear and the start carries no new information.
 _MIN_SEED_RATIO = 1.5
+#: A Prony fit's relaxation times must lie this factor apart, and its amplitudes
+#: within this many force ranges of the hold: else two terms have merged.
+_MIN_TERM_RATIO = 1.05
+_MAX_AMPLITUDE_RANGES = 10.0
+#: Samples within this share of the step of the plateau show its recording resolution.
+_NEAR_PLATEAU = 0.01
 _LSQ_TOL = 1e-12
 _MAX_NFEV = 400
 
@@ -200,7 +207,7 @@ def quadrature_weights(t_s: ArrayLike, weighting: str = "time") -> FloatArray:
     return w
 
 
-def find_hold_start(
+def find_hold(
     t_s: ArrayLike,
     displacement: ArrayLike,
     *,
@@ -208,17 +215,21 @@ def find_hold_start(
     noise_factor: float = 5.0,
     min_samples: int = 10,
     min_duration_s: float = 1.0,
-) -> int:
-    """Index of the first sample of the hold phase of a step-and-hold record.
+) -> tuple[int, int]:
+    """The hold phase of a step-and-hold record: ``(start, stop)`` sample indices.
 
-    The plateau is the median of the last quarter of the samples.  The hold
-    starts at the first sample after the *last* sample that lies outside the
-    band ``|x - plateau| <= rel_tol |step| + noise_factor sigma``, where
-    ``step`` is the plateau minus the initial displacement and ``sigma`` a
-    robust noise estimate (scaled median absolute deviation of the first
-    differences on the plateau).  Taking the last excursion, not the first
-    entry into the band, puts the start after a ramp overshoot and its
-    settling.
+    The plateau is the median of the last quarter of the samples.  A sample
+    is *in band* when the running median of the displacement (five samples:
+    one glitching sample is not a change of displacement) lies within
+    ``rel_tol |step| + noise_factor sigma`` of it, where ``step`` is the
+    plateau minus the initial displacement and ``sigma`` a robust noise
+    estimate: the scaled median absolute deviation of the first differences
+    on the plateau, and at least the recording's resolution (the smallest
+    non-zero difference there; a displacement logged in encoder counts
+    differs by whole counts).  The hold is the longest run of in-band
+    samples: it starts after a ramp's overshoot has settled, and it ends
+    where the record leaves the plateau again (a test machine unloading at
+    the end), which is cut.
 
     Parameters
     ----------
@@ -237,8 +248,8 @@ def find_hold_start(
 
     Returns
     -------
-    int
-        Index into ``t_s`` of the first sample of the hold.
+    (int, int)
+        Index of the first sample of the hold, and one past its last.
 
     Raises
     ------
@@ -267,6 +278,14 @@ def find_hold_start(
     # MAD of first differences: insensitive to a slow drift, sqrt(2) undoes the differencing.
     sigma = 1.4826 * float(np.median(np.abs(d_tail - np.median(d_tail)))) / math.sqrt(2.0)
     step = plateau - float(x[0])
+    # A displacement logged in counts mostly does not change from one sample to the
+    # next on the plateau, and when it does, by a count: the resolution, below which
+    # the noise estimate cannot go (a ramp changes at every sample, and is no plateau).
+    near = np.abs(tail - plateau) <= _NEAR_PLATEAU * abs(step)
+    changes = np.abs(np.diff(tail)[near[1:] & near[:-1]])
+    counts = changes[changes > 0.0]
+    if counts.size and counts.size <= 0.5 * changes.size:
+        sigma = max(sigma, float(np.min(counts)))
     noise_band = noise_factor * sigma
     # Below this the step is lost in rounding of the recorded values.
     resolution = 64.0 * np.finfo(np.float64).eps * max(float(np.max(np.abs(x))), 1e-300)
@@ -276,22 +295,47 @@ def find_hold_start(
             f"({x[0]:.6g}); there is no step to hold"
         )
     band = rel_tol * abs(step) + noise_band
-    outside = np.flatnonzero(np.abs(x - plateau) > band)
-    start = int(outside[-1]) + 1 if outside.size else 0
-    n_hold = n - start
-    if n_hold == 0:
+    inside = np.abs(_running_median(x, 5) - plateau) <= band
+    if not inside.any():
         raise InputError(
             f"no hold phase: the displacement never settles (last sample {x[-1]:.6g}, "
             f"plateau {plateau:.6g} ± {band:.3g})"
         )
-    hold_s = float(t[-1] - t[start])
+    # Runs of in-band samples: the longest is the hold.
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], inside.view(np.int8), [0]))))
+    starts, stops = edges[0::2], edges[1::2]
+    longest = int(np.argmax(stops - starts))
+    start, stop = int(starts[longest]), int(stops[longest])
+    n_hold = stop - start
+    hold_s = float(t[stop - 1] - t[start])
     if n_hold < min_samples or hold_s < min_duration_s:
+        need = f"need at least {min_samples} samples and {min_duration_s:g} s"
+        if not inside[-1]:
+            raise InputError(
+                f"no hold phase: the displacement never settles (last sample {x[-1]:.6g}, "
+                f"plateau {plateau:.6g} ± {band:.3g}; in band for at most {n_hold} samples "
+                f"at a time, {need})"
+            )
         raise InputError(
             f"no hold phase: the displacement settles at {plateau:.6g} only for the last "
-            f"{n_hold} samples ({hold_s:.3g} s); need at least {min_samples} samples "
-            f"and {min_duration_s:g} s"
+            f"{n_hold} samples ({hold_s:.3g} s); {need}"
         )
-    return start
+    return start, stop
+
+
+def find_hold_start(t_s: ArrayLike, displacement: ArrayLike, **kwargs: Any) -> int:
+    """Index of the first sample of the hold phase (:func:`find_hold`'s start)."""
+    return find_hold(t_s, displacement, **kwargs)[0]
+
+
+def _running_median(x: FloatArray, width: int) -> FloatArray:
+    """Centred running median of odd ``width`` (the ends use the samples there are)."""
+    if x.size < width:
+        return x.copy()
+    from scipy.ndimage import median_filter
+
+    out: FloatArray = median_filter(x, size=width, mode="nearest")
+    return out
 
 
 def fit_reduced(
@@ -477,8 +521,10 @@ def fit_prony(
     Raises
     ------
     relaxgrip.errors.InputError
-        If there are fewer samples than the ``2 n_terms + 1`` parameters or
-        the force is constant.
+        If there are fewer samples than the ``2 n_terms + 1`` parameters, the
+        force is constant, or the hold does not hold ``n_terms`` distinct
+        terms: every fit merges two relaxation times (within a factor 1.05,
+        or with amplitudes over ten times the force's range, which cancel).
     ValueError
         If ``n_terms < 1``, the arrays are malformed or ``weighting`` is unknown.
     """
@@ -541,6 +587,7 @@ class _Problem:
     log_tau_lo: float
     log_tau_hi: float
     anchored: bool = False
+    f_range: float = math.inf
 
     @classmethod
     def build(
@@ -571,6 +618,7 @@ class _Problem:
             log_tau_lo=math.log(float(np.min(np.diff(t)))),
             log_tau_hi=math.log(_TAU_HI_FACTOR * float(t[-1] - t[0])),
             anchored=anchor is not None,
+            f_range=float(np.ptp(f)),
         )
 
     def log_grid(self, per_decade: int) -> FloatArray:
@@ -673,8 +721,27 @@ class _Problem:
                     for g in seeds
                     if np.min(np.abs(sol.log_tau - g)) > math.log(_MIN_SEED_RATIO)
                 )
-            beam = _distinct_best([self.refine(s) for s in starts], _BEAM_WIDTH)
+            refined = [self.refine(s) for s in starts]
+            admissible = [sol for sol in refined if self.admissible(sol)]
+            if not admissible:
+                worst = min(refined, key=lambda sol: sol.objective)
+                order = np.argsort(worst.log_tau)
+                taus = ", ".join(f"{math.exp(v):.4g}" for v in worst.log_tau[order])
+                amps = ", ".join(f"{k:+.4g}" for k in worst.coef[-level:][order])
+                raise InputError(
+                    f"a {level}-term Prony series is not identifiable on this hold: its best "
+                    f"fits put relaxation times together (tau {taus} s) with amplitudes that "
+                    f"cancel ({amps} N); fit fewer terms")
+            beam = _distinct_best(admissible, _BEAM_WIDTH)
         return beam[0]
+
+    def admissible(self, sol: _Solution) -> bool:
+        """Whether a solution's terms are distinct: relaxation times a factor apart and
+        amplitudes within reason (coinciding times take huge cancelling amplitudes)."""
+        log_tau = np.sort(sol.log_tau)
+        amps = np.abs(sol.coef[-log_tau.size:])
+        return bool(np.all(np.diff(log_tau) >= math.log(_MIN_TERM_RATIO))
+                    and np.all(amps <= _MAX_AMPLITUDE_RANGES * self.f_range))
 
 
 def _distinct_best(solutions: list[_Solution], keep: int) -> list[_Solution]:
