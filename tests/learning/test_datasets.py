@@ -150,3 +150,26 @@ def test_rcfn_labels_touch_each_hold_where_its_frame_is(small: Path) -> None:
     assert np.abs(touched - truth).max() < 0.05
     for _, idx in rows.groupby("sequence").indices.items():  # one label per frame, not per hold
         assert np.ptp(y[idx, 1]) > 0.5
+
+
+def test_a_dataset_without_holds_reads_as_one_with_no_rcfn_rows(small: Path, tmp_path: Path,
+                                                                  monkeypatch, capsys) -> None:
+    """An ICFN-only build writes its RCFN tables without columns: loading gives them the
+    columns they are read by, and train and evaluate say what is missing in one line."""
+    import shutil
+
+    from tests.clitools import assert_one_error_line, run_main
+
+    icfn_only = tmp_path / "icfn-only"
+    shutil.copytree(small, icfn_only)
+    for name in ("rcfn_sequences", "rcfn_features", "rcfn_curves"):
+        pd.DataFrame().to_parquet(icfn_only / f"{name}.parquet")
+    data = load_dataset(icfn_only)
+    x, y = data.rcfn_xy("train")
+    assert x.shape == (0, len(RCFN_SCHEMA.names))
+    assert y.shape == (0, 2)
+    code, out, err = run_main(["train", "--data", icfn_only, "--out", tmp_path / "m"],
+                              monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "the dataset has no ")
+    code, out, err = run_main(["evaluate", "--data", icfn_only], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "no RCFN sequences in split 'test'")

@@ -255,6 +255,16 @@ class Dataset:
             [kappa, np.log(tau)])
 
 
+#: Columns every table is read by: an empty table is given them, so that an ICFN-only or
+#: RCFN-only dataset comes to "no ... rows", not to a missing column.
+_KEY_COLUMNS: dict[str, list[str]] = {
+    "icfn": ["episode", "split", "force_n", *ICFN_SCHEMA.names],
+    "rcfn_sequences": ["sequence", "split", "f0_n", "kappa", "tau_s"],
+    "rcfn_features": ["sequence", "t_s", *RCFN_SCHEMA.names],
+    "rcfn_curves": ["sequence", "t_s", "force_n"],
+}
+
+
 def _check_schema(manifest: dict[str, Any], key: str, schema: FeatureSchema, path: Path) -> None:
     stored = manifest.get(key, {})
     if stored.get("version") != schema.version or tuple(stored.get("names", ())) != schema.names:
@@ -292,5 +302,7 @@ def load_dataset(directory: Path) -> Dataset:
             raise InputError(f"{path}: missing table") from None
         except Exception as exc:  # pyarrow raises several types for damaged files
             raise InputError(f"{path}: unreadable Parquet table ({type(exc).__name__})") from None
+        if tables[name].empty:  # a dataset without ICFN samples or without holds
+            tables[name] = tables[name].reindex(columns=_KEY_COLUMNS[name])
     return Dataset(tables["icfn"], tables["rcfn_sequences"], tables["rcfn_features"],
                    tables["rcfn_curves"], manifest)
