@@ -214,3 +214,26 @@ def test_bad_input_in_process(
 ) -> None:
     code, out, err = run_fit_main(bad_case(tmp_path, name), monkeypatch, capsys)
     assert_one_error_line(code, out, err, expected)
+
+
+@pytest.mark.parametrize("variant", ["semicolon-decimal-comma", "tab", "blank-rows"])
+def test_spreadsheet_exports_read_as_the_plain_csv(
+    good_csv: Path, tmp_path: Path, variant: str, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    text = good_csv.read_text(encoding="utf-8")
+    if variant == "semicolon-decimal-comma":
+        other = text.replace(",", ";").replace(".", ",")
+    elif variant == "tab":
+        other = text.replace(",", "\t")
+    else:
+        lines = text.splitlines()
+        other = "\n".join([*lines[:50], "", ",,", *lines[50:], "   "]) + "\n"
+    path = tmp_path / f"{variant}.csv"
+    path.write_text(other, encoding="utf-8")
+    _, plain, _ = run_fit_main([good_csv, "--json"], monkeypatch, capsys)
+    code, out, err = run_fit_main([path, "--json"], monkeypatch, capsys)
+    assert (code, err) == (0, "")
+    got, want = json.loads(out), json.loads(plain)
+    assert got["hold_start_s"] == want["hold_start_s"]
+    assert got["prony"]["terms"] == want["prony"]["terms"]

@@ -165,6 +165,9 @@ def load_relaxation_csv(path: str | Path) -> RelaxationRecord:
 
     The first row names the columns; ``time_s``, ``displacement_mm`` and
     ``force_n`` must be among them (in any order, other columns are ignored).
+    Fields are separated by commas, or by semicolons or tabs when the header
+    has no comma, and then numbers may have a decimal comma (a European
+    spreadsheet's export).  Blank rows are skipped.
 
     Parameters
     ----------
@@ -200,9 +203,12 @@ def load_relaxation_csv(path: str | Path) -> RelaxationRecord:
         raise InputError(f"{path}: not a text CSV file (binary content)")
 
     rows: list[tuple[int, list[str]]] = []
-    reader = csv.reader(io.StringIO(text, newline=""))
+    # A European spreadsheet's export: semicolons between fields, commas in numbers.
+    first = text.lstrip().split("\n", 1)[0]
+    delimiter = next((d for d in (";", "\t") if "," not in first and d in first), ",")
+    reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
     try:
-        rows.extend((reader.line_num, row) for row in reader if row)
+        rows.extend((reader.line_num, row) for row in reader if any(c.strip() for c in row))
     except csv.Error as exc:
         raise InputError(f"{path}, line {reader.line_num}: not a valid CSV file: {exc}") from None
     if not rows:
@@ -223,6 +229,8 @@ def load_relaxation_csv(path: str | Path) -> RelaxationRecord:
             )
         for j, (col, k) in enumerate(zip(COLUMNS, index, strict=True)):
             cell = row[k].strip()
+            if delimiter != ",":
+                cell = cell.replace(",", ".")
             try:
                 value = float(cell)
             except ValueError:
