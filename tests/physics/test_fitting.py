@@ -417,3 +417,14 @@ def test_a_prony_series_with_more_terms_than_the_hold_shows_is_refused() -> None
     assert len(fit_prony(t, f, n_terms=1).tau_s) == 1
     with pytest.raises(InputError, match="Prony series is not identifiable on this hold"):
         fit_prony(t, f, n_terms=3)
+
+
+def test_a_long_record_is_searched_pooled_and_solved_on_every_sample() -> None:
+    """Past 20 000 samples the global search runs on 2 000 pooled bins; the last solve on
+    all samples lands on the modes (a million rows fitted in 30 s instead of 12 min)."""
+    t = np.linspace(0.0, 1800.0, 30_001)
+    f = prony_force(t, 2.0, (1.5, 1.0, 0.5), (5.0, 60.0, 600.0))
+    f = f + 1e-3 * np.random.default_rng(4).standard_normal(t.size)
+    fit = fit_prony(t, f, n_terms=3)
+    assert fit.tau_s == pytest.approx((5.0, 60.0, 600.0), rel=5e-3)
+    assert fit.k_n == pytest.approx((1.5, 1.0, 0.5), rel=5e-3)

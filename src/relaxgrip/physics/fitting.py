@@ -80,6 +80,9 @@ _MIN_SEED_RATIO = 1.5
 #: within this many force ranges of the hold: else two terms have merged.
 _MIN_TERM_RATIO = 1.05
 _MAX_AMPLITUDE_RANGES = 10.0
+#: Records of more samples are searched on this many pooled bins (:meth:`_Problem.coarse`).
+_COARSE_ABOVE = 20_000
+_COARSE_BINS = 2_000
 #: Samples within this share of the step of the plateau show its recording resolution.
 _NEAR_PLATEAU = 0.01
 _LSQ_TOL = 1e-12
@@ -531,7 +534,11 @@ def fit_prony(
     if isinstance(n_terms, bool) or not isinstance(n_terms, int | np.integer) or n_terms < 1:
         raise ValueError(f"n_terms must be an integer >= 1, got {n_terms!r}")
     problem = _Problem.build(t_s, f_n, n_params=2 * int(n_terms) + 1, weighting=weighting)
-    best = problem.best_n_terms(int(n_terms))
+    if problem.t_s.size > _COARSE_ABOVE:
+        # A long record: the global search on pooled samples, the last solve on all.
+        best = problem.refine(problem.coarse(_COARSE_BINS).best_n_terms(int(n_terms)).log_tau)
+    else:
+        best = problem.best_n_terms(int(n_terms))
     order = np.argsort(best.log_tau)
     return PronyFit(
         f_eq_n=float(best.coef[0]),
@@ -620,6 +627,27 @@ class _Problem:
             anchored=anchor is not None,
             f_range=float(np.ptp(f)),
         )
+
+    def coarse(self, n_bins: int) -> _Problem:
+        """The problem on the samples pooled into ``n_bins`` log-spaced time bins.
+
+        Each bin keeps its samples' total weight at their weighted mean time
+        and force, so the objective is the full one less each bin's spread
+        about its mean, which an exponential sum varies too little within a
+        bin to see.  The relaxation-time bounds stay the full problem's.
+        """
+        w = self.sqrt_w**2
+        f = self.target / self.sqrt_w
+        edges = np.geomspace(max(float(self.t_s[1]), 1e-9), float(self.t_s[-1]), n_bins)
+        group = np.searchsorted(edges, self.t_s, side="left")
+        total = np.bincount(group, weights=w)
+        keep = total > 0
+        mean_t = np.bincount(group, weights=w * self.t_s)[keep] / total[keep]
+        mean_f = np.bincount(group, weights=w * f)[keep] / total[keep]
+        sqrt_w = np.sqrt(total[keep])
+        return _Problem(t_s=mean_t, sqrt_w=sqrt_w, target=sqrt_w * mean_f,
+                        log_tau_lo=self.log_tau_lo, log_tau_hi=self.log_tau_hi,
+                        anchored=self.anchored, f_range=self.f_range)
 
     def log_grid(self, per_decade: int) -> FloatArray:
         """Log-spaced relaxation times over the admissible range (natural log)."""
