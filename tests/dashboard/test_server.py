@@ -100,7 +100,7 @@ def test_state_messages_carry_the_live_view(served) -> None:
                    and s["marker"] == "tracking")
     assert s["phase"] == "done"
     assert s["backend"] == "twin"
-    assert s["estimator"] == "relax"
+    assert s["estimator"] == "observer"
     assert s["truth_n"] == pytest.approx(0.0, abs=1e-6)  # the twin's truth, shown
     assert s["mode"] == "stiff"
     assert s["setpoint_c"] is None
