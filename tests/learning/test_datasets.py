@@ -173,3 +173,13 @@ def test_a_dataset_without_holds_reads_as_one_with_no_rcfn_rows(small: Path, tmp
     assert_one_error_line(code, out, err, "the dataset has no ")
     code, out, err = run_main(["evaluate", "--data", icfn_only], monkeypatch, capsys)
     assert_one_error_line(code, out, err, "no RCFN sequences in split 'test'")
+
+
+def test_a_build_too_small_to_train_says_so(small: Path) -> None:
+    """Six RCFN sequences are all repeatability holds, kept for test: the manifest warns
+    that `relaxgrip train` will find no RCFN train or val rows."""
+    manifest = json.loads((small / "manifest.json").read_text())
+    assert manifest["counts"]["splits"].get("rcfn_sequences test") == 6
+    gaps = [w for w in manifest["warnings"] if w.startswith("no rcfn_sequences")]
+    assert len(gaps) == 2
+    assert "the first 18 are the repeatability holds" in gaps[0]

@@ -61,6 +61,8 @@ def dataset_build(
         emit_json(manifest)
         return
     counts = manifest["counts"]
+    for warning in manifest["warnings"]:
+        err_console.print(f"warning: {warning}", markup=False, highlight=False, soft_wrap=True)
     console.print(f"{out}: {counts['icfn_samples']} ICFN samples, {counts['rcfn_sequences']} "
                   f"RCFN sequences in {manifest['build']['seconds']:.0f} s "
                   f"({backend}, {jobs} jobs); README.md describes every column")

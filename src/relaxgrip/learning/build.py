@@ -21,11 +21,20 @@ import pandas as pd
 
 from relaxgrip import __version__
 from relaxgrip.errors import InputError
-from relaxgrip.learning.datasets import DatasetSpec, UnitResult, iter_units, run_unit
+from relaxgrip.learning.datasets import (
+    REPEAT_TEMPS_C,
+    REPEATS_PER_GROUP,
+    DatasetSpec,
+    UnitResult,
+    iter_units,
+    run_unit,
+)
 from relaxgrip.learning.datastore import (
     DATASET_FORMAT,
     DATASET_VERSION,
     check_dataset_out,
+    split_counts,
+    training_gaps,
     write_dataset,
 )
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
@@ -183,11 +192,12 @@ def build_dataset(
         "rcfn_features": _table([r.features for r in rcfn], ["sequence", "t_s"]),
         "rcfn_curves": _table([r.curve for r in rcfn], ["sequence", "t_s"]),
     }
-    splits: dict[str, dict[str, int]] = {}
-    for name, key in (("icfn", "episode"), ("rcfn_sequences", "sequence")):
-        table = tables[name]
-        splits[name] = ({str(k): int(v) for k, v in table.groupby("split")[key].nunique().items()}
-                        if len(table) else {})
+    counts = split_counts(tables)
+    repeats = REPEATS_PER_GROUP * len(REPEAT_TEMPS_C)
+    warnings = training_gaps(counts, {
+        "icfn": "more --icfn-samples",
+        "rcfn_sequences": f"more --rcfn-sequences (the first {repeats} are the repeatability "
+                          "holds, all kept for test)"})
     manifest = {
         "format": DATASET_FORMAT,
         "format_version": DATASET_VERSION,
@@ -201,9 +211,9 @@ def build_dataset(
             "icfn_dropped": sum(r.dropped for r in icfn),
             "rcfn_sequences": len(tables["rcfn_sequences"]),
             "rcfn_dropped": sum(r.dropped for r in rcfn),
-            "splits": {f"{name} {split}": n for name, per in splits.items()
-                       for split, n in per.items()},
+            "splits": counts,
         },
+        "warnings": warnings,
         "noise": _noise_levels(),
         "build": {"backend": backend, "jobs": jobs, "seconds": time.perf_counter() - start},
     }

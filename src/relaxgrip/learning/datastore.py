@@ -20,6 +20,7 @@ import json
 import os
 import shutil
 import tempfile
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,7 +36,8 @@ from relaxgrip.physics.fitting import osculating_reduced
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["DATASET_FORMAT", "Dataset", "check_dataset_out", "load_dataset", "write_dataset"]
+__all__ = ["DATASET_FORMAT", "Dataset", "check_dataset_out", "load_dataset", "split_counts",
+           "training_gaps", "write_dataset"]
 
 DATASET_FORMAT = "relaxgrip-dataset"
 DATASET_VERSION = 1
@@ -150,6 +152,27 @@ def _readme(tables: dict[str, pd.DataFrame], manifest: dict[str, Any]) -> str:
         parts += ["", f"## {name}.parquet", "", intro[name], "",
                   _columns_table(list(tables[name].columns))]
     return "\n".join(parts) + "\n"
+
+
+def split_counts(tables: Mapping[str, pd.DataFrame]) -> dict[str, int]:
+    """Episodes and sequences per split, as ``{"icfn train": n, "rcfn_sequences val": n, ...}``."""
+    counts: dict[str, int] = {}
+    for name, key in (("icfn", "episode"), ("rcfn_sequences", "sequence")):
+        table = tables[name]
+        if len(table):
+            for split, n in table.groupby("split")[key].nunique().items():
+                counts[f"{name} {split}"] = int(n)
+    return counts
+
+
+def training_gaps(counts: Mapping[str, int], needs: Mapping[str, str]) -> list[str]:
+    """What ``relaxgrip train`` will miss: a line for each table with no train or val rows.
+
+    ``needs`` says, per table (``icfn``, ``rcfn_sequences``), what would give it some.
+    """
+    return [f"no {name} {part} rows: `relaxgrip train` needs {need}"
+            for name, need in needs.items() for part in ("train", "val")
+            if not counts.get(f"{name} {part}")]
 
 
 def check_dataset_out(out_dir: Path) -> Path:

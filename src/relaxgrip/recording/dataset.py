@@ -52,6 +52,8 @@ from relaxgrip.learning.datastore import (
     DATASET_FORMAT,
     DATASET_VERSION,
     check_dataset_out,
+    split_counts,
+    training_gaps,
     write_dataset,
 )
 from relaxgrip.learning.store import ModelBundle
@@ -344,17 +346,10 @@ def dataset_from_recordings(
     }
     if tables["icfn"].empty:
         raise InputError("no ICFN sample in the recordings (no frame with features and truth)")
-    counts_split = {}
-    for name, key in (("icfn", "episode"), ("rcfn_sequences", "sequence")):
-        table = tables[name]
-        if len(table):
-            for s, n in table.groupby("split")[key].nunique().items():
-                counts_split[f"{name} {s}"] = int(n)
-    needs = {"icfn": "recordings with frames and a force truth in both",
-             "rcfn_sequences": f"fixed-aperture holds of {MIN_HOLD_S:g} s or more in both"}
-    warnings = [f"no {name} {part} rows: `relaxgrip train` needs {need}"
-                for name, need in needs.items() for part in ("train", "val")
-                if not counts_split.get(f"{name} {part}")]
+    counts_split = split_counts(tables)
+    warnings = training_gaps(counts_split, {
+        "icfn": "recordings with frames and a force truth in both",
+        "rcfn_sequences": f"fixed-aperture holds of {MIN_HOLD_S:g} s or more in both"})
     manifest = {
         "format": DATASET_FORMAT,
         "format_version": DATASET_VERSION,
