@@ -208,8 +208,9 @@ def test_a_heater_that_does_not_warm_its_finger_latches_a_fault():
     duties = [loop.update(features(float(t), frozen), float(t)) for t in range(0, 75)]
     assert min(duties[30]) > 0.8
     assert loop.status is TemperatureStatus.HEATER_FAULT
-    assert loop.fault is not None
-    assert "heater 0 drove" in loop.fault
+    fault = loop.fault
+    assert fault is not None
+    assert "heater 0 drove" in fault
     assert duties[-1] == (0.0, 0.0)
     loop.set_temperature(58.0)  # the operator's call
     assert loop.fault is None

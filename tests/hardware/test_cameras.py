@@ -283,7 +283,8 @@ def test_a_camera_stuck_in_read_is_released_after_the_read_not_beside_it() -> No
     source.start()
     assert cap.in_read.wait(5.0)
     source.close()  # gives up waiting for the stuck thread
-    assert not cap.released
+    released_early = cap.released
+    assert not released_early
     cap.unblock.set()
     deadline = time.monotonic() + 5.0
     while not cap.released and time.monotonic() < deadline:

@@ -121,7 +121,7 @@ def test_recover_cli(relax_hold: tuple[Path, HoldResult], tmp_path: Path,
     assert_one_error_line(code, out, err, "no such recording")
 
 
-def _summary(path: Path):  # type: ignore[no-untyped-def]
+def _summary(path: Path):
     with open(path, "rb") as f:
         return make_reader(f).get_summary()
 
@@ -177,7 +177,7 @@ def test_recover_refuses_outputs_it_cannot_write(
     assert list(tmp_path.iterdir()) == []  # no temporary left behind
 
 
-def _rewritten(src: Path, dst: Path, change) -> None:  # type: ignore[no-untyped-def]
+def _rewritten(src: Path, dst: Path, change) -> None:
     """Copy a recording with ``change(topic, message)`` applied to its first message per topic."""
     changed: set[str] = set()
 
@@ -193,7 +193,7 @@ def _rewritten(src: Path, dst: Path, change) -> None:  # type: ignore[no-untyped
     _copy(src, dst, first)
 
 
-def _drop(key: str):  # type: ignore[no-untyped-def]
+def _drop(key: str):
     return lambda m: {k: v for k, v in m.items() if k != key}
 
 
@@ -210,7 +210,7 @@ def _drop(key: str):  # type: ignore[no-untyped-def]
                                            "object"),
 ])
 @pytest.mark.parametrize("command", ["replay", "from-recordings"])
-def test_a_malformed_message_is_one_line(command: str, topic: str, change, words: str,  # type: ignore[no-untyped-def]
+def test_a_malformed_message_is_one_line(command: str, topic: str, change, words: str,
                                          relax_hold: tuple[Path, HoldResult], tmp_path: Path,
                                          monkeypatch: pytest.MonkeyPatch,
                                          capsys: pytest.CaptureFixture[str]) -> None:
