@@ -338,10 +338,11 @@ class TemperatureLoop:
         if self.fault is not None:
             self.status = TemperatureStatus.HEATER_FAULT
             return 0.0, 0.0
-        if thermal.t_s != self._last_ir_t:
+        new_frame = thermal.t_s != self._last_ir_t
+        if new_frame:
             self._duty = self._regulate(thermal, self.setpoint_c)
         duties = tuple(0.0 if cut else d for cut, d in zip(self._cut, self._duty, strict=True))
-        fault = self._watch(thermal, duties)
+        fault = self._watch(thermal, duties) if new_frame else None  # readings change per frame
         if fault is not None:
             self.fault, self.status = fault, TemperatureStatus.HEATER_FAULT
             self._duty = (0.0, 0.0)
