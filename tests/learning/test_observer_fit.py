@@ -24,6 +24,7 @@ def holds(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_fit_on_twin_holds_gives_physical_parameters_and_a_share_spread(holds: Path,
                                                                         tmp_path: Path) -> None:
     model = fit_observer(holds, tmp_path / "obs", icfn=None)
+    assert model.identified_on_ == "train"
     temps = model.temps_c_
     assert np.all(np.diff(temps) > 0)
     _, k_cold, tau_cold = model.parameters(float(temps[0]))
@@ -49,3 +50,24 @@ def test_fit_refuses_hyperparameters_out_of_range(holds: Path) -> None:
         ObserverModel(n_terms=0).fit(data)
     with pytest.raises(InputError, match="band_level"):
         ObserverModel(band_level=1.0).fit(data)
+
+
+def test_fitting_without_train_holds_says_so(holds: Path, tmp_path: Path,
+                                             monkeypatch: pytest.MonkeyPatch,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    import shutil
+
+    import pandas as pd
+
+    from tests.clitools import run_main
+
+    no_train = tmp_path / "no-train"
+    shutil.copytree(holds, no_train)
+    table = no_train / "rcfn_sequences.parquet"
+    sequences = pd.read_parquet(table)
+    sequences["split"] = "test"
+    sequences.to_parquet(table, index=False)
+    code, _, err = run_main(["fit-observer", "--data", no_train, "--out", tmp_path / "obs"],
+                            monkeypatch, capsys)
+    assert code == 0, err
+    assert "has no RCFN train sequences: the observer was identified on all 30" in err

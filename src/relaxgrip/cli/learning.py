@@ -198,6 +198,10 @@ def fit_observer_command(
 
     start = time.perf_counter()
     model = fit_observer(data, out)
+    if model.identified_on_ != "train":
+        err_console.print(f"warning: {data} has no RCFN train sequences: the observer was "
+                          f"identified on all {model.n_sequences_}, and its band has no held-out "
+                          "holds", markup=False, highlight=False, soft_wrap=True)
     console.print(f"{out}: observer of {model.n_terms} branches on {model.n_sequences_} "
                   f"sequences, {model.temps_c_.size} temperature knots, "
                   f"{time.perf_counter() - start:.0f} s")

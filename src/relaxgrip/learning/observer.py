@@ -263,6 +263,8 @@ class ObserverModel:
         holds = self._prepare(data)
         train = [h for h in holds if h.split == "train"] or holds
         held = [h for h in holds if h.split != "train"] or holds
+        # Without train holds every hold identifies the model and calibrates its band.
+        self.identified_on_ = "train" if any(h.split == "train" for h in holds) else "all"
         groups = sorted({h.group for h in train})
         group_temps = np.array([np.mean([h.temp_c for h in train if h.group == g])
                                 for g in groups])
@@ -648,5 +650,6 @@ def fit_observer(data_dir: Path, out_dir: Path, icfn: ICFN | None = None) -> Obs
         "dataset": {"path": str(data_dir), "spec": spec,
                     "twin_version": data.manifest.get("twin_version")},
         "n_sequences": model.n_sequences_,
+        "identified_on": model.identified_on_,
     })
     return model
