@@ -130,12 +130,13 @@ class CameraIntrinsics:
             raise InputError(f"image size must be positive, got {self.width_px}x{self.height_px}")
         for name in ("fx_px", "fy_px"):
             value = getattr(self, name)
-            if not (math.isfinite(value) and 0 < value <= MAX_FOCAL_PX):
-                raise InputError(f"{name} must be a positive number of pixels up to "
-                                 f"{MAX_FOCAL_PX:.0e}, got {value}")
-        for name in ("cx_px", "cy_px"):
-            if not math.isfinite(getattr(self, name)):
-                raise InputError(f"{name} must be finite, got {getattr(self, name)}")
+            if not (math.isfinite(value) and 1.0 <= value <= MAX_FOCAL_PX):
+                raise InputError(f"{name} must be 1 to {MAX_FOCAL_PX:.0e} pixels, got {value}")
+        for name, size in (("cx_px", self.width_px), ("cy_px", self.height_px)):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and -size <= value <= 2 * size):
+                raise InputError(f"{name} must lie within the image or one image size off it "
+                                 f"({-size} to {2 * size} px), got {value}")
         if len(self.dist) not in (0, 4, 5, 8, 12, 14):
             raise InputError(
                 f"distortion needs 4, 5, 8, 12 or 14 coefficients, got {len(self.dist)}"

@@ -68,9 +68,12 @@ def test_table_output(
         (["{png}", "--dict", "9X9"], "not an ArUco dictionary"),
         (["{png}", "--dist", "1,x"], "--dist must be numbers"),
         (["{png}", "--dist", "1,2,3"], "distortion needs 4, 5, 8"),
-        (["{png}", "--fx", "-3"], "fx_px must be a positive number"),
-        (["{png}", "--fx", "1e300"], "fx_px must be a positive number of pixels up to 1e+06"),
-        (["{png}", "--marker-mm", "0"], "--marker-mm must be > 0"),
+        (["{png}", "--fx", "-3"], "fx_px must be 1 to 1e+06 pixels"),
+        (["{png}", "--fx", "1e300"], "fx_px must be 1 to 1e+06 pixels"),
+        (["{png}", "--fx", "1e-300"], "fx_px must be 1 to 1e+06 pixels"),
+        (["{png}", "--cx", "1e300"], "cx_px must lie within the image"),
+        (["{png}", "--marker-mm", "1e100"], "--marker-mm must be 0.1-10000 mm"),
+        (["{png}", "--marker-mm", "0"], "--marker-mm must be 0.1-10000 mm"),
     ],
 )
 def test_bad_input(
@@ -86,3 +89,33 @@ def test_bad_input(
     argv = [a.replace("{png}", str(marker_png[0])) for a in args]
     code, out, err = run_main(["perceive", *argv], monkeypatch, capsys)
     assert_one_error_line(code, out, err, expected)
+
+
+@pytest.mark.parametrize("variant", ["rgba-transparent", "16-bit-hot-pixel", "float-nan"])
+def test_images_as_labs_save_them_read_as_the_plain_one(
+    marker_png: tuple[Path, np.ndarray], tmp_path: Path, variant: str,
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A transparent background is white paper; one hot or not-a-number pixel does not
+    flatten a 16-bit or float image's contrast."""
+    path, _ = marker_png
+    grey = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    assert grey is not None
+    if variant == "rgba-transparent":  # the marker opaque, the rest transparent and black
+        alpha = np.where(grey < 200, 255, 0).astype(np.uint8)
+        image = cv2.merge([np.where(alpha > 0, grey, 0)] * 3 + [alpha])
+        out = tmp_path / "marker.png"
+    elif variant == "16-bit-hot-pixel":  # 10-bit data in a 16-bit file, one pixel saturated
+        image = (grey.astype(np.uint16) * 4)
+        image[0, 0] = 65535
+        out = tmp_path / "marker16.png"
+    else:
+        image = grey.astype(np.float32) / 255.0
+        image[0, 0] = np.nan
+        out = tmp_path / "marker.tiff"
+    assert cv2.imwrite(str(out), image)
+    code, plain, _ = run_main(["perceive", path, "--json"], monkeypatch, capsys)
+    code2, other, err = run_main(["perceive", out, "--json"], monkeypatch, capsys)
+    assert (code, code2) == (0, 0), err
+    (want,), (got,) = json.loads(plain)["markers"], json.loads(other)["markers"]
+    assert np.allclose(got["tvec_m"], want["tvec_m"], atol=2e-5)

@@ -245,3 +245,66 @@ def test_a_pose_ippe_cannot_give_falls_back_or_is_non_finite() -> None:
     pose = PoseSolver(rig.marker.size_m, far).solve(corners)
     assert np.isfinite(pose.tvec_m).all()
     assert pose.tvec_m[2] > 100.0  # 12 mm over 40 px at 10^6 px: 300 m away
+
+
+def test_a_marker_back_far_from_where_it_was_lost_is_tracked_without_a_crash() -> None:
+    """Lost for two seconds, back 40 mm to the right: the corners' old velocity must not
+    carry the edge follower's prediction out of the frame (it had raised on every frame)."""
+    from relaxgrip.backend import Frame
+    from relaxgrip.perception.marker import MarkerTracker, TrackStatus
+    from relaxgrip.rig import RigGeometry
+    from relaxgrip.twin.render_rgb import RgbRenderer
+    from relaxgrip.twin.sensors import RgbSensorConfig
+
+    rig = RigGeometry()
+    renderer = RgbRenderer(rig, RgbSensorConfig(), 0)
+    tracker = MarkerTracker(rig.rgb.intrinsics, rig.marker)
+    base = rig.marker2cam(0.0, 0.04)
+    left, right = base.copy(), base.copy()
+    left[0, 3] -= 0.02
+    right[0, 3] += 0.02
+    blank = np.full((*rig.rgb.intrinsics.shape, 3), 128, np.uint8)
+    frames = [renderer.render(k, left) for k in range(20)] + [blank] * 60
+    frames += [renderer.render(100 + k, right) for k in range(20)]
+    states = [tracker.update(Frame(k / 30, k, image)) for k, image in enumerate(frames)]
+    assert states[19].status is TrackStatus.TRACKING
+    assert states[50].status is TrackStatus.LOST
+    back = [s.status for s in states[80:]]
+    assert back.count(TrackStatus.TRACKING) >= 15
+    assert states[-1].pose is not None
+    assert states[-1].pose.tvec_m[0] == pytest.approx(right[0, 3], abs=5e-4)
+
+
+def test_frames_from_before_the_last_one_are_not_tracked() -> None:
+    from relaxgrip.backend import Frame
+    from relaxgrip.perception.marker import MarkerTracker, TrackStatus
+    from relaxgrip.rig import RigGeometry
+    from relaxgrip.twin.render_rgb import RgbRenderer
+    from relaxgrip.twin.sensors import RgbSensorConfig
+
+    rig = RigGeometry()
+    renderer = RgbRenderer(rig, RgbSensorConfig(), 0)
+    tracker = MarkerTracker(rig.rgb.intrinsics, rig.marker)
+    pose = rig.marker2cam(0.0, 0.04)
+    for k in range(12):
+        tracker.update(Frame(1.0 + k / 30, k, renderer.render(k, pose)))
+    for t in (0.5, float("nan")):
+        state = tracker.update(Frame(t, 99, renderer.render(99, pose)))
+        assert state.status is TrackStatus.INVALID
+    jumped = pose.copy()
+    jumped[0, 3] += 0.02  # 20 mm within one frame: implausible, rejected (the clock was kept)
+    assert tracker.update(Frame(1.4, 13, renderer.render(13, jumped))).status \
+        is TrackStatus.REJECTED
+
+
+def test_corners_that_give_no_pose_give_a_non_finite_one() -> None:
+    from relaxgrip.perception.marker import PoseSolver
+    from relaxgrip.rig import RigGeometry
+
+    rig = RigGeometry()
+    solver = PoseSolver(rig.marker.size_m, rig.rgb.intrinsics)
+    for corners in (np.full((4, 2), np.nan), np.array([[300.0, 200.0]] * 4),
+                    np.array([[300.0, 200.0], [320.0, 200.0], [340.0, 200.0], [360.0, 200.0]])):
+        pose = solver.solve(corners)
+        assert not pose.valid
+        assert np.isnan(pose.rvec).all()

@@ -213,3 +213,23 @@ def test_rcfn_closure_ratio_of_a_loading_that_crept_in_at_the_end() -> None:
     # second alone the ratio would be unknown and the RCFN silent.
     assert builder.closure_ratio == pytest.approx(4.0, rel=0.05)
     assert builder.build(40.0) is not None
+
+
+def test_a_frame_delivered_again_after_later_ones_is_not_processed() -> None:
+    """An old RGB or infrared frame (another seq, an earlier time) changes nothing: the
+    held infrared stays the newest, and the percept is the last one."""
+    clock = VirtualClock()
+    twin = GripperTwin(TwinConfig(), seed=0, clock=clock)
+    perception = Perception(twin.config.rig)
+    first = twin.observe()
+    rows = run(perception, twin, clock, 3.0, Command())
+    last_obs, last = rows[-1]
+    assert first.ir is not None
+    assert first.rgb is not None
+    stale_ir = Frame(first.ir.t_s, 10_000, first.ir.image)
+    stale_rgb = Frame(first.rgb.t_s, 10_000, first.rgb.image)
+    again = perception.update(stale_rgb, stale_ir, last_obs.motor_position_mm)
+    assert again is last
+    assert perception.ir.latest is not None
+    assert last.thermal is not None
+    assert perception.ir.latest.t_s == last.thermal.t_s

@@ -26,19 +26,44 @@ __all__ = ["perceive"]
 
 
 def _read_gray(path: Path) -> np.ndarray[Any, np.dtype[np.uint8]]:
-    """Read any image OpenCV can decode as 8-bit grey."""
+    """Read any image OpenCV can decode as 8-bit grey.
+
+    Transparent pixels are taken as white (a marker printed on nothing); a
+    16-bit or float image is stretched between its 0.1st and 99.9th
+    percentiles, so that one hot or dead pixel does not flatten the rest.
+    Pixel positions are those stored in the file (an EXIF orientation tag is
+    not applied).
+    """
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     data = np.fromfile(path, dtype=np.uint8)
-    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    log = cv2.utils.logging
+    previous = log.getLogLevel()
+    log.setLogLevel(log.LOG_LEVEL_SILENT)  # a truncated file: our error line, not also OpenCV's
+    try:
+        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    finally:
+        log.setLogLevel(previous)
     if image is None:
         raise InputError(f"{path}: not an image OpenCV can read")
+    if image.ndim == 3 and image.shape[2] in (2, 4):  # an alpha channel: over white
+        white = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(image.dtype, 1.0)
+        alpha = image[..., -1:].astype(np.float32) / white
+        colour = image[..., :-1].astype(np.float32)
+        image = (colour * alpha + white * (1.0 - alpha)).astype(image.dtype)
+    if image.ndim == 3:  # grey first: the scaling below then touches one channel
+        image = image[..., 0] if image.shape[2] == 1 else cv2.cvtColor(
+            image, cv2.COLOR_BGR2GRAY)
     if image.dtype != np.uint8:  # 16-bit or float images: scale to 8 bits
-        lo, hi = float(image.min()), float(image.max())
-        image = ((image - lo) * (255.0 / max(hi - lo, 1e-12))).astype(np.uint8)
-    if image.ndim == 3:
-        code = cv2.COLOR_BGRA2GRAY if image.shape[2] == 4 else cv2.COLOR_BGR2GRAY
-        image = cv2.cvtColor(image, code)
+        values = image.astype(np.float32)
+        finite = np.isfinite(values)
+        if not finite.any():
+            raise InputError(f"{path}: no finite pixel value")
+        lo, hi = (float(v) for v in np.percentile(values[finite], [0.1, 99.9]))
+        values[~finite] = lo
+        np.subtract(values, lo, out=values)
+        np.multiply(values, 255.0 / max(hi - lo, 1e-12), out=values)
+        image = np.clip(values, 0.0, 255.0, out=values).astype(np.uint8)
     return to_gray(np.asarray(image, dtype=np.uint8))
 
 
@@ -79,8 +104,8 @@ def perceive(
     if name not in ARUCO_DICTIONARIES:
         raise InputError(f"--dict {dictionary!r} is not an ArUco dictionary; "
                          f"known: {', '.join(ARUCO_DICTIONARIES)}")
-    if not (math.isfinite(marker_mm) and marker_mm > 0):
-        raise InputError(f"--marker-mm must be > 0, got {marker_mm}")
+    if not (math.isfinite(marker_mm) and 0.1 <= marker_mm <= 10_000.0):
+        raise InputError(f"--marker-mm must be 0.1-10000 mm, got {marker_mm}")
     gray = _read_gray(image)
     h, w = gray.shape
     intrinsics = CameraIntrinsics(
@@ -94,10 +119,11 @@ def perceive(
     for det in detect_markers(gray, make_detector(marker.aruco_dictionary)):
         corners = det.corners_px
         if edge_refine:
-            refined = refine_corners_by_edges(gray, corners, intrinsics)
+            refined = refine_corners_by_edges(
+                gray, corners, intrinsics, modules=int(marker.aruco_dictionary.markerSize) + 2)
             corners = corners if refined is None else refined
         pose = solver.solve(corners)
-        found.append({
+        found.append({  # a marker whose corners give no pose is listed with none (null)
             "id": det.marker_id,
             "rvec": pose.rvec.tolist(),
             "tvec_m": pose.tvec_m.tolist(),

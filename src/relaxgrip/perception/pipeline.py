@@ -125,6 +125,8 @@ class Perception:
         self._proximity: ProximityEstimator | None = None
         self._last_rgb_seq: int | None = None
         self._last_ir_seq: int | None = None
+        self._last_rgb_t: float | None = None
+        self._last_ir_t: float | None = None
         self._last: Percept | None = None
 
     def set_target(self, target: ProximityTarget | None) -> None:
@@ -136,6 +138,7 @@ class Perception:
         self.tracker.reset()
         self.ir = StreamSync(self.ir.max_age_s)
         self._last_rgb_seq = self._last_ir_seq = None
+        self._last_rgb_t = self._last_ir_t = None
         self._last = None
 
     def update(self, rgb: Frame | None, ir: Frame | None, motor_position_mm: float) -> Percept:
@@ -153,8 +156,10 @@ class Perception:
         -------
         Percept
         """
-        if ir is not None and ir.seq != self._last_ir_seq:
-            self._last_ir_seq = ir.seq
+        # A frame is processed once, and only if it is newer than the last of its stream
+        # (a frame delivered again after a later one would set the clock back).
+        if ir is not None and ir.seq != self._last_ir_seq and _newer(ir, self._last_ir_t):
+            self._last_ir_seq, self._last_ir_t = ir.seq, ir.t_s
             try:
                 self.ir.hold(self.thermal.extract(ir, motor_position_mm))
             except FrameError as exc:
@@ -163,9 +168,10 @@ class Perception:
             t_s = self._last.t_s if self._last is not None else 0.0
             marker = MarkerState(t_s, TrackStatus.INVALID, message="no RGB frame")
             return self._percept(marker, None, None)
-        if rgb.seq == self._last_rgb_seq and self._last is not None:
+        if self._last is not None and (rgb.seq == self._last_rgb_seq
+                                       or not _newer(rgb, self._last_rgb_t)):
             return self._last
-        self._last_rgb_seq = rgb.seq
+        self._last_rgb_seq, self._last_rgb_t = rgb.seq, rgb.t_s
         marker = self.tracker.update(rgb)
         proximity = None
         if self._proximity is not None and marker.status is not TrackStatus.INVALID:
@@ -184,3 +190,8 @@ class Perception:
         thermal = self.ir.latest
         features = None if thermal is None else build_icfn_features(marker, thermal)
         return Percept(t, marker, thermal, self.ir.age_s(t), self.ir.error, features, proximity)
+
+
+def _newer(frame: Frame, last_t_s: float | None) -> bool:
+    """Whether ``frame`` comes after the last frame of its stream (time ``last_t_s``)."""
+    return math.isfinite(frame.t_s) and (last_t_s is None or frame.t_s > last_t_s)
