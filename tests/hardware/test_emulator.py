@@ -173,3 +173,23 @@ def test_wall_clock_watchdog_trips_on_time_when_the_frame_host_stops_reading(
     assert emu.endpoint.core.fault_flags & FaultFlag.WATCHDOG
     assert quiet_s < 0.5
     assert emu.publisher.messages_dropped > 0
+
+
+def test_stopping_twice_closes_no_descriptor_it_does_not_own(tmp_path: Path) -> None:
+    """The fixtures close the gripper (which stops the emulator) and stop it again: the
+    second stop must not close a descriptor the system has since given to someone else."""
+    import os
+
+    emu = McuEmulator(TwinConfig(), seed=0, clock=VirtualClock())
+    slave = emu._pty.slave
+    emu.start()
+    emu.stop()
+    fd = os.open(tmp_path / "log.txt", os.O_WRONLY | os.O_CREAT)
+    os.dup2(fd, slave)  # the number the pty's slave had, now someone else's file
+    os.close(fd)
+    try:
+        emu.stop()
+        os.write(slave, b"still open\n")
+    finally:
+        os.close(slave)
+    assert (tmp_path / "log.txt").read_text(encoding="utf-8") == "still open\n"
