@@ -119,3 +119,32 @@ def test_images_as_labs_save_them_read_as_the_plain_one(
     assert (code, code2) == (0, 0), err
     (want,), (got,) = json.loads(plain)["markers"], json.loads(other)["markers"]
     assert np.allclose(got["tvec_m"], want["tvec_m"], atol=2e-5)
+
+
+def test_a_phone_jpeg_is_read_turned_as_its_exif_orientation_says(
+    marker_png: tuple[Path, np.ndarray], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    from PIL import Image  # matplotlib's dependency
+
+    path, _ = marker_png
+    image = Image.open(path)
+    exif = image.getexif()
+    exif[0x0112] = 6  # turn 90° clockwise to display
+    turned = tmp_path / "portrait.jpg"
+    image.save(turned, exif=exif, quality=95)
+    code, out, err = run_main(["perceive", turned, "--json"], monkeypatch, capsys)
+    assert code == 0, err
+    found = json.loads(out)
+    assert (found["width_px"], found["height_px"]) == (480, 640)
+    shown = cv2.imread(str(turned), cv2.IMREAD_GRAYSCALE)
+    assert shown is not None
+    assert shown.shape == (640, 480)
+    from relaxgrip.perception.marker import detect_markers, make_detector
+    from relaxgrip.rig import MarkerMount
+
+    (marker,) = found["markers"]
+    (seen,) = detect_markers(np.asarray(shown, np.uint8),
+                             make_detector(MarkerMount().aruco_dictionary))
+    # The same corners as in the picture as shown (within the edge fit's refinement).
+    assert np.abs(np.asarray(marker["corners_px"]) - seen.corners_px).max() < 1.0

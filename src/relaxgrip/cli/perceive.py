@@ -31,8 +31,9 @@ def _read_gray(path: Path) -> np.ndarray[Any, np.dtype[np.uint8]]:
     Transparent pixels are taken as white (a marker printed on nothing); a
     16-bit or float image is stretched between its 0.1st and 99.9th
     percentiles, so that one hot or dead pixel does not flatten the rest.
-    Pixel positions are those stored in the file (an EXIF orientation tag is
-    not applied).
+    A JPEG is turned as its EXIF orientation says, as ``cv2.imread`` and
+    image viewers show it (a phone's portrait photo); other formats are read
+    as stored.
     """
     if not path.is_file():
         raise InputError(f"{path}: no such file")
@@ -41,7 +42,10 @@ def _read_gray(path: Path) -> np.ndarray[Any, np.dtype[np.uint8]]:
     previous = log.getLogLevel()
     log.setLogLevel(log.LOG_LEVEL_SILENT)  # a truncated file: our error line, not also OpenCV's
     try:
-        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+        # A JPEG has no alpha: decoded with its EXIF orientation applied, depth kept.
+        jpeg = data[:2].tobytes() == b"\xff\xd8"
+        flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR if jpeg else cv2.IMREAD_UNCHANGED
+        image = cv2.imdecode(data, flags) if data.size else None
     finally:
         log.setLogLevel(previous)
     if image is None:
