@@ -144,26 +144,37 @@ def test_lost_marker_stops_the_motor_until_it_is_back(models):
 
     res, _ = grasp(models, "icfn", change=blind, seed=5,
                    plan=GraspPlan(target_n=3.0, temp_c=40.0, hold_s=20.0))
-    lost = res.log.first(EventKind.MARKER_LOST)
-    back = res.log.first(EventKind.MARKER_BACK)
-    assert lost is not None
-    assert back is not None
+    lost, back, gone = held_while_lost(res, EventKind.MARKER_LOST, EventKind.MARKER_BACK)
     assert 25.0 <= lost.t_s < 25.2
     assert 27.0 <= back.t_s < 28.0
-    gone = (res["t_s"] > lost.t_s) & (res["t_s"] < back.t_s)
-    assert np.all(res["velocity_cmd_mm_s"][gone] == 0.0)
     assert np.ptp(res["motor_mm"][gone]) < 0.02
 
 
-def test_stale_infrared_turns_the_heaters_off(models):
+def frozen_ir(start_s: float, end_s: float = math.inf) -> Callable[[Observation], Observation]:
+    """The infrared frame of ``start_s`` delivered again until ``end_s`` (a stalled camera)."""
     frozen: dict[str, Frame] = {}
 
     def stall(obs: Observation) -> Observation:
-        if obs.ir is not None and obs.t_s >= 20.0:
+        if obs.ir is not None and start_s <= obs.t_s < end_s:
             return replace(obs, ir=frozen.setdefault("ir", obs.ir))
         return obs
 
-    res, _ = grasp(models, "relax", change=stall, seed=6, temp_c=45.0,
+    return stall
+
+
+def held_while_lost(res: LoopResult, lost_kind: EventKind, back_kind: EventKind
+                    ) -> tuple[Any, Any, np.ndarray]:
+    """The lost and back events, and the periods between them: the motor held still."""
+    lost, back = res.log.first(lost_kind), res.log.first(back_kind)
+    assert lost is not None
+    assert back is not None
+    gone: np.ndarray = (res["t_s"] > lost.t_s) & (res["t_s"] < back.t_s)
+    assert np.all(res["velocity_cmd_mm_s"][gone] == 0.0)
+    return lost, back, gone
+
+
+def test_stale_infrared_turns_the_heaters_off(models):
+    res, _ = grasp(models, "relax", change=frozen_ir(20.0), seed=6, temp_c=45.0,
                    plan=GraspPlan(target_n=3.0, temp_c=45.0, hold_s=15.0))
     event = res.log.first(EventKind.IR_STALE)
     assert event is not None
@@ -181,23 +192,11 @@ def test_stale_infrared_turns_the_heaters_off(models):
 
 
 def test_the_force_loop_waits_for_the_infrared_and_resumes(models):
-    frozen: dict[str, Frame] = {}
-
-    def stall(obs: Observation) -> Observation:
-        if obs.ir is not None and 20.0 <= obs.t_s < 26.0:
-            return replace(obs, ir=frozen.setdefault("ir", obs.ir))
-        return obs
-
-    res, _ = grasp(models, "icfn", change=stall, seed=6,
+    res, _ = grasp(models, "icfn", change=frozen_ir(20.0, 26.0), seed=6,
                    plan=GraspPlan(target_n=3.0, temp_c=40.0, hold_s=20.0))
-    lost = res.log.first(EventKind.ESTIMATE_LOST)
-    back = res.log.first(EventKind.ESTIMATE_BACK)
-    assert lost is not None
-    assert back is not None
+    lost, back, _ = held_while_lost(res, EventKind.ESTIMATE_LOST, EventKind.ESTIMATE_BACK)
     assert 23.0 <= lost.t_s <= 24.1
     assert 26.0 <= back.t_s < 27.1
-    gone = (res["t_s"] > lost.t_s) & (res["t_s"] < back.t_s)
-    assert np.all(res["velocity_cmd_mm_s"][gone] == 0.0)
     after = (res["t_s"] > back.t_s + 5.0) & during(res, GraspPhase.HOLD)
     assert after.sum() > 30
     assert np.abs(res["estimate_n"][after] - 3.0).max() < 0.3  # regulating again

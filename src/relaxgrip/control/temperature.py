@@ -3,7 +3,7 @@
 One PID per finger on what the infrared camera reads of it (the finger's mean
 over its top face, or the tip beams for the adhesive pads), with a
 feed-forward duty from the heat model; the stiffness modes of the paper are
-named setpoints.  Two guards come before any control:
+named setpoints.  Three guards come before any control:
 
 * **over-temperature**: a finger whose hottest reading passes
   :attr:`ThermalLimits.max_temp_c` gets no power until it has cooled
@@ -17,8 +17,8 @@ named setpoints.  Two guards come before any control:
   :attr:`ThermalLimits.fault_window_s` whose finger's reading has not risen
   :attr:`ThermalLimits.fault_min_rise_k` is taken as a broken heater, a
   frozen camera or a camera that sees something else, and every heater
-  stays off until a setpoint is given again.  At full duty a finger warms
-  about 20 K in that time (below).
+  stays off until a setpoint is given again.  At full duty a finger at
+  ambient warms about 25 K in that time (:class:`ThermalLimits`).
 
 The PID runs when a new infrared frame arrives (1 Hz) and its duty is held
 between frames.
@@ -38,6 +38,7 @@ from __future__ import annotations
 import enum
 import math
 import statistics
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from relaxgrip.control.pid import PID, PIDGains
@@ -268,10 +269,7 @@ class TemperatureLoop:
                 out.append(self._of(seen, sum(visible) / len(visible)))
                 continue
             mean_c, then = clear
-            # The median change: a beam the object half covers drops with it, not the finger.
-            moved = [b - a for b, a, c in zip(now, then, covered, strict=True)
-                     if not c and math.isfinite(b) and math.isfinite(a)]
-            out.append(self._of(then, mean_c) + (statistics.median(moved) if moved else 0.0))
+            out.append(self._of(then, mean_c) + _median_change(now, then, covered))
         return tuple(out)
 
     def _pads_while_grasping(self, j: int, beams: tuple[float, ...]) -> float | None:
@@ -282,9 +280,8 @@ class TemperatureLoop:
         tip = [b for b in before[-2:] if math.isfinite(b)]
         if not tip:
             return None
-        moved = [b - a for b, a in zip(beams[:-2], before[:-2], strict=True)
-                 if math.isfinite(b) and math.isfinite(a)]
-        return sum(tip) / len(tip) + (statistics.median(moved) if moved else 0.0)
+        proximal = (False,) * (len(beams) - 2) + (True, True)
+        return sum(tip) / len(tip) + _median_change(beams, before, proximal)
 
     def _remember_clear(self, thermal: ThermalFeatures) -> None:
         """Keep each finger's latest uncovered frame (once per infrared frame)."""
@@ -386,6 +383,16 @@ class TemperatureLoop:
             pid.gains = _shifted(pid.gains, feedforward)
             out.append(feedforward + pid.update(setpoint_c, reading, dt))
         return out[0], out[1]
+
+
+def _median_change(now: Sequence[float], then: Sequence[float], skip: Sequence[bool]) -> float:
+    """The median change of the beams since ``then``, the ``skip`` ones left out (K; 0: none).
+
+    The median, for a beam an object half covers drops with it, not with the finger.
+    """
+    moved = [b - a for b, a, s in zip(now, then, skip, strict=True)
+             if not s and math.isfinite(b) and math.isfinite(a)]
+    return statistics.median(moved) if moved else 0.0
 
 
 def _shifted(gains: PIDGains, feedforward: float) -> PIDGains:

@@ -227,9 +227,9 @@ def find_hold(
     ``rel_tol |step| + noise_factor sigma`` of it, where ``step`` is the
     plateau minus the initial displacement and ``sigma`` a robust noise
     estimate: the scaled median absolute deviation of the first differences
-    on the plateau, and at least the recording's resolution (the smallest
-    non-zero difference there; a displacement logged in encoder counts
-    differs by whole counts).  The hold is the longest run of in-band
+    on the plateau, and at least the recording's resolution where most of
+    those differences are zero (a displacement logged in encoder counts: the
+    smallest non-zero one is a count).  The hold is the longest run of in-band
     samples: it starts after a ramp's overshoot has settled, and it ends
     where the record leaves the plateau again (a test machine unloading at
     the end), which is cut.
@@ -285,7 +285,7 @@ def find_hold(
     # next on the plateau, and when it does, by a count: the resolution, below which
     # the noise estimate cannot go (a ramp changes at every sample, and is no plateau).
     near = np.abs(tail - plateau) <= _NEAR_PLATEAU * abs(step)
-    changes = np.abs(np.diff(tail)[near[1:] & near[:-1]])
+    changes = np.abs(d_tail[near[1:] & near[:-1]])
     counts = changes[changes > 0.0]
     if counts.size and counts.size <= 0.5 * changes.size:
         sigma = max(sigma, float(np.min(counts)))

@@ -65,7 +65,7 @@ from relaxgrip.perception.features import (
     marker_pose,
 )
 from relaxgrip.physics.fitting import fit_reduced
-from relaxgrip.recording.reader import malformed_fields, read_session
+from relaxgrip.recording.reader import malformed_fields, read_replayable_session, read_session
 from relaxgrip.recording.replay import replay_periods
 
 __all__ = ["FIXED_APERTURE_TOL_MM", "MIN_HOLD_S", "dataset_from_recordings"]
@@ -301,10 +301,7 @@ def dataset_from_recordings(
         raise InputError(f"split shares must be >= 0 and sum to 1, got {split}")
     check_dataset_out(out_dir)
     for f in files:  # every file checked before any work
-        if read_session(f).get("grasp_in_progress"):
-            raise InputError(f"{f}: the recording began during a grasp: its marker zero is not "
-                             "in it, so its samples would be wrong; record from before the "
-                             "grasp starts")
+        read_replayable_session(f)
     start = time.perf_counter()
     icfn: list[dict[str, list[Any]]] = []
     seqs: list[dict[str, Any]] = []

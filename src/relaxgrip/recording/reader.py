@@ -35,7 +35,7 @@ from relaxgrip.recording.schemas import RECORDING_FORMAT, RECORDING_VERSION
 from relaxgrip.rig import RigGeometry
 
 __all__ = ["Period", "RecoverReport", "iter_messages", "iter_periods", "malformed_fields",
-           "read_session", "recover", "rig_from_dict"]
+           "read_replayable_session", "read_session", "recover", "rig_from_dict"]
 
 _MAGIC = b"\x89MCAP0\r\n"
 _FOOTER_OPCODE = 0x02
@@ -148,6 +148,25 @@ def read_session(path: Path, tolerant: bool = False) -> dict[str, Any]:
             return _check_session(path, message)
         break
     raise InputError(f"{path}: not a relaxgrip recording (no session message first)")
+
+
+def read_replayable_session(path: Path, tolerant: bool = False) -> dict[str, Any]:
+    """:func:`read_session` of a recording that can be replayed: one begun before its grasp.
+
+    Raises
+    ------
+    InputError
+        As :func:`read_session`, or a recording begun during a grasp (the
+        dashboard's Record button): the marker's zero and the estimator's
+        state from before it are not in it.
+    """
+    session = read_session(path, tolerant)
+    if session.get("grasp_in_progress"):
+        raise InputError(
+            f"{path}: the recording began during a grasp (phase "
+            f"{session.get('started_in_phase')}): the marker's zero and the estimator's state "
+            "from before it are not in it; record from before the grasp starts")
+    return session
 
 
 def _check_session(path: Path, session: dict[str, Any]) -> dict[str, Any]:

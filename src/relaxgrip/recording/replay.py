@@ -38,6 +38,7 @@ from relaxgrip.recording.reader import (
     Period,
     iter_periods,
     malformed_fields,
+    read_replayable_session,
     read_session,
     rig_from_dict,
 )
@@ -68,12 +69,7 @@ def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
     InputError
         Not a readable relaxgrip recording, no frames, an unknown estimator.
     """
-    session = read_session(path, tolerant)
-    if session.get("grasp_in_progress"):
-        raise InputError(
-            f"{path}: the recording began during a grasp (phase "
-            f"{session.get('started_in_phase')}): the marker's zero and the estimator's state "
-            "from before it are not in it; record from before the grasp starts")
+    session = read_replayable_session(path, tolerant)
     name = estimator or str(session.get("estimator"))
     if name not in {k.value for k in EstimatorKind}:
         raise InputError(f"{path}: cannot replay estimator {name!r} (fixed, icfn or relax)")
