@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from relaxgrip.errors import InputError
-from relaxgrip.validate import parse_seeds
+from relaxgrip.validate import parse_floats, parse_seeds
 
 
 @pytest.mark.parametrize(("text", "seeds"), [("10-15", [10, 11, 12, 13, 14, 15]),
@@ -19,3 +19,18 @@ def test_seed_lists(text: str, seeds: list[int]) -> None:
 def test_bad_seed_lists_are_refused(text: str) -> None:
     with pytest.raises(InputError, match="seed"):
         parse_seeds(text)
+
+
+@pytest.mark.parametrize(("text", "values"), [("1,3,5,8", [1.0, 3.0, 5.0, 8.0]),
+                                              (" 2.5 , 40", [2.5, 40.0]), ("7", [7.0])])
+def test_number_lists(text: str, values: list[float]) -> None:
+    assert parse_floats(text, "--targets") == values
+
+
+@pytest.mark.parametrize(("text", "match"), [("", "numbers like"), ("1,x", "numbers like"),
+                                             ("1,,2", "numbers like"), ("nan", "finite"),
+                                             ("1,inf", "finite"), ("5,5.0", "repeats")])
+def test_bad_number_lists_are_refused(text: str, match: str) -> None:
+    with pytest.raises(InputError, match=match) as info:
+        parse_floats(text, "--temps")
+    assert str(info.value).startswith("--temps")

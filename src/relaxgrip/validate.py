@@ -77,3 +77,25 @@ def parse_seeds(text: str) -> list[int]:
     if len(set(seeds)) != len(seeds):
         raise InputError(f"seeds repeat in {text!r}")
     return seeds
+
+
+def parse_floats(text: str, name: str) -> list[float]:
+    """Finite numbers from ``1,3,5,8``; at least one, no repeats.
+
+    Raises
+    ------
+    InputError
+        Naming ``name`` (the flag) and the text.
+    """
+    values: list[float] = []
+    for part in text.split(","):
+        try:
+            value = float(part.strip())
+        except ValueError:
+            raise InputError(f"{name} must be numbers like 1,3,5,8, got {text!r}") from None
+        if not math.isfinite(value):
+            raise InputError(f"{name} must be finite numbers, got {part.strip()!r}")
+        values.append(value)
+    if len(set(values)) != len(values):
+        raise InputError(f"{name} repeats a value in {text!r}")
+    return values

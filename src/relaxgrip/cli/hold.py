@@ -180,7 +180,9 @@ def hold(
         console.print(f"error budget, estimate − true force over {lo:g}–{hi:g} s: onset "
                       f"{parts['onset_n']:+.3f} N, Eq. 10 relaxation "
                       f"{parts['relaxation_n']:+.3f} N, added closure {parts['closure_n']:+.3f} N"
-                      f" = {parts['total_n']:+.3f} N")
+                      + (f", calibration {parts['calibration_n']:+.3f} N"
+                         if "calibration_n" in parts else "")
+                      + f" = {parts['total_n']:+.3f} N")
     if figure is not None:
         console.print(f"figure: {figure}")
 

@@ -276,3 +276,64 @@ def calibrate_band_command(
     console.print(f"band scale {result.band_scale:.4g} (90 % over resampled seeds: {lo:.3g}-"
                   f"{hi:.3g}) over {result.samples} hold samples, {verb}, "
                   f"{time.perf_counter() - start:.0f} s")
+
+
+@app.command("calibrate-hold")
+def calibrate_hold_command(
+    models: Annotated[Path, typer.Argument(
+        help="Model directory (relaxgrip train); relax's calibrated error is written into its "
+             "manifest.", show_default=False)],
+    targets: Annotated[str, typer.Option(
+        "--targets", help="Target forces of the grid (N), comma-separated.")] = "1,3,5,8",
+    temps: Annotated[str, typer.Option(
+        "--temps", help="Finger temperatures of the grid (°C), comma-separated.")
+    ] = "30,40,48,55",
+    seeds: Annotated[str, typer.Option(
+        "--seeds", help="Twin seeds per condition: 1000-1007, 3,5,8 or a mix (take ones not "
+                        "used to check). Each run counts about once.")] = "1000-1007",
+    duration_s: Annotated[float, typer.Option(
+        "--duration-s", help="Hold length (s); the grid's times reach it.")] = 280.0,
+    jobs: Annotated[int, typer.Option("--jobs", help="Holds in parallel.")] = 2,
+    dry_run: Annotated[bool, typer.Option(
+        "--dry-run", help="Measure and report; do not rewrite the directory.")] = False,
+    json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+) -> None:
+    """Measure relax's closed-loop error on a grid of holds; relax takes it off its estimate."""
+    from relaxgrip.experiments.hold_calibration import calibrate_hold
+    from relaxgrip.fileio import check_writable
+    from relaxgrip.learning.store import load_models, set_hold_bias
+    from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
+    from relaxgrip.validate import check_jobs, check_positive, parse_floats, parse_seeds
+
+    target_list = parse_floats(targets, "--targets")
+    temp_list = parse_floats(temps, "--temps")
+    seed_list = parse_seeds(seeds)
+    check_positive(duration_s, "--duration-s")
+    check_jobs(jobs)
+    bundle = load_models(models, icfn_feature_schema=ICFN_SCHEMA,
+                         rcfn_feature_schema=RCFN_SCHEMA)
+    if not dry_run:
+        check_writable(models, InputError)
+    count = len(target_list) * len(temp_list) * len(seed_list)
+    start = time.perf_counter()
+    with (console.status(f"{count} closed-loop holds …") if not json_out else nullcontext()):
+        result = calibrate_hold(target_list, temp_list, seed_list, duration_s, bundle, jobs)
+    if not dry_run:
+        set_hold_bias(models, result.bias, result.record())
+    if json_out:
+        emit_json({"models": str(models), "written": not dry_run, "bias": result.bias.to_dict(),
+                   **result.record()})
+        return
+    table = Table(title=f"relax, estimate − true force over the steady state, uncalibrated "
+                        f"(seeds {seeds})")
+    for column in ("target (N)", "temperature (°C)", "mean (N)", "SE (N)", "MAE (N)"):
+        table.add_column(column, justify="right")
+    summary = result.summary()
+    for target in result.targets_n:
+        for temp in result.temps_c:
+            row = summary[f"{target:g}N {temp:g}C"]
+            table.add_row(f"{target:g}", f"{temp:g}", f"{row['est_error_mean_n']:+.3f}",
+                          f"{row['se_n']:.3f}", f"{row['mae_n']:.3f}")
+    console.print(table)
+    verb = "measured (not written)" if dry_run else f"written to {models}"
+    console.print(f"{count} holds, {verb}, {time.perf_counter() - start:.0f} s")

@@ -50,6 +50,13 @@ again).
   per-frame ICFN read the hold onset 0.07-0.21 N low on average for four
   of five training seeds at 5 N (0.43-0.76 N at 8 N).  The baselines keep the
   paper's per-frame ICFN.
+* With a calibrated model directory (``relaxgrip calibrate-hold``,
+  :mod:`relaxgrip.learning.hold_bias`), ``relax`` takes off its estimate the
+  mean error that closed-loop holds against the force ball measured at its
+  ``F_inst``, finger temperature and hold time, so the controller holds the
+  force those holds had, not the one its estimate reads.  What is left is
+  each run's own offset: mostly the relaxing share of the finger without the
+  marker, which nothing the estimator reads identifies.
 * ``observer`` (:mod:`relaxgrip.control.observer`): Prony-series branch
   states in reduced time, driven by the measured deflection and temperature,
   for any displacement history and temperature path; started from ``relax``'s
@@ -74,6 +81,7 @@ from relaxgrip.learning.history import (
     features_deflection_m,
     features_temp_c,
 )
+from relaxgrip.learning.hold_bias import HoldBias
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
@@ -128,6 +136,10 @@ class ForceEstimate:
         Time since the hold onset (s; nan before it).
     band_lo_n, band_hi_n : float
         The estimate's 95 % band (N; nan when the estimator gives none).
+    calibration_n : float
+        The calibrated closed-loop error taken off ``force_n`` (N;
+        :mod:`relaxgrip.learning.hold_bias`); nan when none was (the
+        ``observer`` reports it while its estimate is ``relax``'s).
     """
 
     force_n: float
@@ -138,6 +150,7 @@ class ForceEstimate:
     hold_s: float = NAN
     band_lo_n: float = NAN
     band_hi_n: float = NAN
+    calibration_n: float = NAN
 
     @property
     def valid(self) -> bool:
@@ -360,6 +373,11 @@ class RelaxEstimator:
     tare_window_s : float
         The ICFN's reading at rest is measured over this long before contact
         and tared if it is clearly off (:class:`IcfnEstimator`; 0: never).
+    bias : HoldBias, optional
+        The closed-loop error ``relaxgrip calibrate-hold`` measured with
+        these models: during the hold it is taken off the estimate, looked
+        up at ``F_inst``, the fingers' temperature as read and the hold time.
+        Without it the estimate is Eq. 10's alone.
     """
 
     name = "relax"
@@ -368,7 +386,7 @@ class RelaxEstimator:
     def __init__(self, icfn: ICFN, rcfn: RCFN, stiffness_window_s: float = 4.0,
                  onset_window_s: float = 0.6, onset_before_s: float = 1.0,
                  smoothing_s: float = 0.2, unrelaxed: UnrelaxedIcfn | None = None,
-                 tare_window_s: float = TARE_WINDOW_S) -> None:
+                 tare_window_s: float = TARE_WINDOW_S, bias: HoldBias | None = None) -> None:
         if not stiffness_window_s > 0:
             raise ValueError(f"stiffness window must be > 0 s, got {stiffness_window_s}")
         if not (onset_window_s >= 0 and onset_before_s >= 0
@@ -380,11 +398,13 @@ class RelaxEstimator:
         self.stiffness_window_s = stiffness_window_s
         self.onset_window_s = onset_window_s
         self.onset_before_s = onset_before_s
+        self.bias = bias
         self.reset()
 
     def reset(self) -> None:
         """Forget the grasp."""
         self.icfn.reset()
+        self._temp_c = NAN
         self.features = RcfnFeatures()
         self._loading: deque[tuple[float, float, float, FloatArray]] = deque()
         self._pose_per_mm: FloatArray = np.zeros(6)
@@ -427,14 +447,19 @@ class RelaxEstimator:
         if not math.isfinite(self.f_onset_n):
             return ForceEstimate(NAN, raw, hold_s=hold)
         if percept.thermal is not None:
-            x = self.features.build(finger_temperature_c(percept.thermal))
+            self._temp_c = finger_temperature_c(percept.thermal)
+            x = self.features.build(self._temp_c)
             if x is not None:
                 self._k, self._tau = self.rcfn.relaxation(x, self.f_onset_n)
         if not math.isfinite(self._k):
             return ForceEstimate(NAN, raw, self.f_onset_n, hold_s=hold)
         relaxed = self._k * -math.expm1(-hold / self._tau)  # Eq. 10
-        return ForceEstimate(self.f_onset_n - relaxed + added, raw, self.f_onset_n,
-                             self._k, self._tau, hold)
+        force = self.f_onset_n - relaxed + added
+        if self.bias is None:
+            return ForceEstimate(force, raw, self.f_onset_n, self._k, self._tau, hold)
+        calibration = self.bias.at(self.f_onset_n, self._temp_c, hold)
+        return ForceEstimate(force - calibration, raw, self.f_onset_n, self._k, self._tau, hold,
+                             calibration_n=calibration)
 
     def contact(self, t_s: float) -> float:
         """Tare the ICFN on the free-space frames before the contact (returns the tare, N)."""
@@ -493,13 +518,17 @@ def _closure_slopes(
 
 def make_estimator(kind: EstimatorKind | str, icfn: ICFN, rcfn: RCFN,
                    observer: ObserverModel | None = None,
-                   unrelaxed: UnrelaxedIcfn | None = None) -> ForceEstimator:
+                   unrelaxed: UnrelaxedIcfn | None = None,
+                   hold_bias: HoldBias | None = None) -> ForceEstimator:
     """The estimator named ``kind`` on the given models.
 
     ``observer`` defaults to the shipped parameters.  With ``unrelaxed`` (a
     model directory's :attr:`~relaxgrip.learning.store.ModelBundle.unrelaxed`),
     ``relax`` and ``observer`` read the force from the loading history; the
     baselines ``fixed`` and ``icfn`` always read the paper's per-frame ICFN.
+    ``hold_bias`` (a model directory's calibrated closed-loop error) is
+    taken off ``relax``'s estimate, and so off the ``observer``'s while it is
+    ``relax``'s.
     """
     kind = EstimatorKind(kind)
     if kind is EstimatorKind.OBSERVER:
@@ -507,15 +536,20 @@ def make_estimator(kind: EstimatorKind | str, icfn: ICFN, rcfn: RCFN,
         from relaxgrip.learning.observer import load_default_observer
 
         return ObserverEstimator(icfn, observer if observer is not None
-                                 else load_default_observer(), rcfn=rcfn, unrelaxed=unrelaxed)
+                                 else load_default_observer(), rcfn=rcfn, unrelaxed=unrelaxed,
+                                 hold_bias=hold_bias)
     if kind is EstimatorKind.FIXED:
         return FixedEstimator(icfn)
     if kind is EstimatorKind.ICFN:
         return IcfnEstimator(icfn)
-    return RelaxEstimator(icfn, rcfn, unrelaxed=unrelaxed)
+    return RelaxEstimator(icfn, rcfn, unrelaxed=unrelaxed, bias=hold_bias)
 
 
 def bundle_estimator(kind: EstimatorKind | str, bundle: ModelBundle,
                      observer: ObserverModel | None = None) -> ForceEstimator:
-    """The estimator named ``kind`` on a model directory's models, its unrelaxed ICFN included."""
-    return make_estimator(kind, bundle.icfn, bundle.rcfn, observer, unrelaxed=bundle.unrelaxed)
+    """The estimator named ``kind`` on a model directory's models.
+
+    Its unrelaxed ICFN and, for ``relax``, its calibrated closed-loop error included.
+    """
+    return make_estimator(kind, bundle.icfn, bundle.rcfn, observer, unrelaxed=bundle.unrelaxed,
+                          hold_bias=bundle.hold_bias)

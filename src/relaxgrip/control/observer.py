@@ -67,6 +67,7 @@ from relaxgrip.control.estimators import (
     RelaxEstimator,
 )
 from relaxgrip.learning.history import CONTACT_DEFLECTION_M, LoadingHistory, UnrelaxedIcfn
+from relaxgrip.learning.hold_bias import HoldBias
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
@@ -112,6 +113,10 @@ class ObserverEstimator:
     unrelaxed : UnrelaxedIcfn, optional
         Read the force from the loading history, as ``relax`` does
         (:class:`relaxgrip.control.estimators.IcfnEstimator`).
+    hold_bias : HoldBias, optional
+        ``relax``'s calibrated closed-loop error, taken off the ``relax``
+        estimator alongside: while Eq. 10 is the estimate, the observer's
+        estimate is calibrated ``relax``'s, and it continues from that.
     """
 
     name = "observer"
@@ -123,7 +128,8 @@ class ObserverEstimator:
                  share_fit_motor_mm_s: float = 0.3,
                  share_bounds: tuple[float, float] = (0.5, 1.5),
                  anchor_window_s: tuple[float, float] = (10.0, 2.0),
-                 unrelaxed: UnrelaxedIcfn | None = None) -> None:
+                 unrelaxed: UnrelaxedIcfn | None = None,
+                 hold_bias: HoldBias | None = None) -> None:
         if not (share_fit_s >= 0 and share_fit_temp_k > 0 and share_fit_motor_mm_s > 0):
             raise ValueError("the share fit needs a window >= 0 s and temperature and motor "
                              f"limits > 0, got {share_fit_s} s, {share_fit_temp_k} K, "
@@ -136,8 +142,8 @@ class ObserverEstimator:
         self.model = model
         self.history = LoadingHistory(model, CONTACT_DEFLECTION_M)
         self.onset_window_s = onset_window_s
-        self.relax = None if rcfn is None else RelaxEstimator(icfn, rcfn, smoothing_s=smoothing_s,
-                                                              unrelaxed=unrelaxed)
+        self.relax = None if rcfn is None else RelaxEstimator(
+            icfn, rcfn, smoothing_s=smoothing_s, unrelaxed=unrelaxed, bias=hold_bias)
         # With relax alongside, its reading is the observer's: one ICFN pass per frame.
         self.icfn = (IcfnEstimator(icfn, smoothing_s, unrelaxed, TARE_WINDOW_S)
                      if self.relax is None else self.relax.icfn)
@@ -283,12 +289,14 @@ class ObserverEstimator:
         self.f_onset_n = f_on
         self.scale_n_per_m = f_on / (self._u_on - excess * self._r_on)
         est = self.scale_n_per_m * (u - excess * r)
+        calibration = NAN
         if self._fitting and math.isfinite(relax.force_n):
             # Eq. 10 holds: it is the estimate; the observer carries its offset from it.
             self._offsets.append((hold, relax.force_n - est))
             while hold - self._offsets[0][0] > self.anchor_window_s[0]:
                 self._offsets.popleft()
             est = relax.force_n
+            calibration = relax.calibration_n
         else:
             if math.isnan(self._offset_n):
                 self._offset_n = self._anchor_offset(hold)
@@ -300,7 +308,8 @@ class ObserverEstimator:
             unseen = self.scale_n_per_m * self.share * abs(r - self._r_end)
             half += self.model.band_drift_rel(self.temp_c) * unseen
         return ForceEstimate(est, raw, f_on, relax.k_n, relax.tau_s, hold,
-                             band_lo_n=est - half, band_hi_n=est + half)
+                             band_lo_n=est - half, band_hi_n=est + half,
+                             calibration_n=calibration)
 
     def contact(self, t_s: float) -> float:
         """Tare the ICFN on the free-space frames before the contact (returns the tare, N)."""

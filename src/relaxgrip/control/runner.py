@@ -35,8 +35,8 @@ _STATUS = tuple(TrackStatus)
 _COLUMNS = (
     "t_s", "phase", "motor_mm", "arm_mm", "velocity_cmd_mm_s", "arm_cmd_mm_s", "duty_0", "duty_1",
     "estimate_n", "icfn_n", "f_onset_n", "k_n", "tau_s", "hold_s", "ir_temp_0_c", "ir_temp_1_c",
-    "setpoint_c", "band_lo_n", "band_hi_n", "marker_status", "truth_force_n", "truth_temp_0_c",
-    "truth_temp_1_c", "truth_aperture_mm", "truth_lifted",
+    "setpoint_c", "band_lo_n", "band_hi_n", "calibration_n", "marker_status", "truth_force_n",
+    "truth_temp_0_c", "truth_temp_1_c", "truth_aperture_mm", "truth_lifted",
 )
 
 
@@ -56,8 +56,9 @@ class LoopResult:
         Columns (see :data:`COLUMNS`): time (s), phase code (index into
         :data:`relaxgrip.control.phases.PHASES`), encoder (mm), arm height
         (mm), commands (mm/s, duty), the estimate and its parts (N, s),
-        infrared finger temperatures (°C), setpoint (°C, nan when off), marker
-        status code, and the truth (nan when the backend has none).
+        infrared finger temperatures (°C), setpoint (°C, nan when off), the
+        estimate's band and calibration (N), marker status code, and the
+        truth (nan when the backend has none).
     log : PhaseLog
         Phase transitions and events.
     """
@@ -193,6 +194,7 @@ def _row(obs: Observation, c: GraspController, command: Command) -> tuple[float,
         obs.t_s, float(PHASES.index(c.phase)), obs.motor_position_mm, obs.arm_height_mm,
         command.motor_velocity_mm_s, command.arm_velocity_mm_s, *command.heater_duty,
         est.force_n, est.f_icfn_n, est.f_onset_n, est.k_n, est.tau_s, est.hold_s, *temps,
-        math.nan if setpoint is None else setpoint, est.band_lo_n, est.band_hi_n, status,
+        math.nan if setpoint is None else setpoint, est.band_lo_n, est.band_hi_n,
+        est.calibration_n, status,
         *_truth_row(obs),
     )

@@ -90,10 +90,17 @@ class BudgetSurvey:
         """One budget part (or ``mae_n``) over the seeds, in seed order."""
         return np.array([b[name] for b in self.budgets])
 
+    @property
+    def part_names(self) -> tuple[str, ...]:
+        """:data:`BUDGET_PARTS`, with ``calibration_n`` before the total when the models had one."""
+        if self.budgets and all("calibration_n" in b for b in self.budgets):
+            return (*BUDGET_PARTS[:-1], "calibration_n", BUDGET_PARTS[-1])
+        return BUDGET_PARTS
+
     def parts(self) -> dict[str, dict[str, float]]:
         """Per part: mean, SD and range over the seeds (N)."""
         out = {}
-        for name in BUDGET_PARTS:
+        for name in self.part_names:
             v = self.column(name)
             out[name] = {"mean": float(v.mean()), "sd": float(v.std()),
                          "min": float(v.min()), "max": float(v.max())}
@@ -116,7 +123,7 @@ class BudgetSurvey:
         part does not vary.
         """
         out: dict[str, dict[str, float]] = {}
-        for part in BUDGET_PARTS:
+        for part in self.part_names:
             y = self.column(part)
             out[part] = {group: _explained(self._design(keys), y)
                          for group, keys in SCATTER_GROUPS.items()}

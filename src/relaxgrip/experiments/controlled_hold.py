@@ -51,6 +51,7 @@ from relaxgrip.validate import check_positive
 
 FloatArray = NDArray[np.float64]
 _Job = TypeVar("_Job")
+_Out = TypeVar("_Out")
 
 __all__ = [
     "HOLD_TEMP_RANGE_C",
@@ -190,7 +191,10 @@ class HoldResult:
           ``F_fix(0) - F_fix(t)`` less Eq. 10's ``K (1 - exp(-t / tau))``
           (negative when Eq. 10 predicts more relaxation than the twin shows);
         * ``closure_n``: what the estimator adds to Eq. 10 (the closure since the
-          onset) less what that closure adds to the true force, ``F_true - F_fix``.
+          onset) less what that closure adds to the true force, ``F_true - F_fix``;
+        * ``calibration_n``, with a calibrated model directory only: the
+          calibrated closed-loop error taken off the estimate (negative when
+          the calibration found the estimate high).
 
         ``total_n`` is their sum, the mean estimate error.
 
@@ -212,10 +216,13 @@ class HoldResult:
         hold_s, f_inst, k_n, tau_s = columns[:, ok]
         eq10 = reconstruct(hold_s, f_inst, k_n, tau_s)
         est, truth, fixed = est[ok], truth[ok], fixed[ok]
+        calibration = np.nan_to_num(self.series("calibration_n")[mask][ok])
         f_fix0 = self.fixed_aperture_n[0]
         out = {"onset_n": float(np.mean(f_inst - f_fix0)),
                "relaxation_n": float(np.mean((f_fix0 - fixed) - (f_inst - eq10))),
-               "closure_n": float(np.mean((est - eq10) - (truth - fixed)))}
+               "closure_n": float(np.mean((est + calibration - eq10) - (truth - fixed)))}
+        if np.any(calibration):
+            out["calibration_n"] = -float(np.mean(calibration))
         out["total_n"] = sum(out.values())
         return out
 
@@ -447,7 +454,7 @@ class HoldComparison:
                 "mae_reduction": self.reductions()}
 
 
-def _one_thread(run: Callable[[_Job], HoldResult], job: _Job) -> HoldResult:
+def _one_thread(run: Callable[[_Job], _Out], job: _Job) -> _Out:
     """``run(job)`` with OpenCV on one thread (the parallelism is across holds)."""
     import cv2
 
@@ -455,8 +462,8 @@ def _one_thread(run: Callable[[_Job], HoldResult], job: _Job) -> HoldResult:
     return run(job)
 
 
-def map_holds(run: Callable[[_Job], HoldResult], jobs: Sequence[_Job],
-              n_jobs: int = 1) -> list[HoldResult]:
+def map_holds(run: Callable[[_Job], _Out], jobs: Sequence[_Job],
+              n_jobs: int = 1) -> list[_Out]:
     """``run`` on every job, results in order, ``n_jobs`` holds at once (joblib)."""
     if n_jobs > 1 and len(jobs) > 1:
         from joblib import Parallel, delayed

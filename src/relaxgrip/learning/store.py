@@ -32,6 +32,7 @@ import relaxgrip
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import (
     check_output_dir,
+    check_writable,
     file_entry,
     npz_bytes,
     one_line,
@@ -40,6 +41,7 @@ from relaxgrip.fileio import (
     write_files_atomically,
 )
 from relaxgrip.learning.history import UnrelaxedIcfn
+from relaxgrip.learning.hold_bias import HoldBias
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
@@ -53,6 +55,7 @@ __all__ = [
     "ModelFileError",
     "load_models",
     "save_models",
+    "set_hold_bias",
 ]
 
 #: Written as the manifest's ``format``; a manifest without it is not ours.
@@ -87,12 +90,17 @@ class ModelBundle:
         The ICFN ensemble on unrelaxed forces and the branch parameters of its labels
         (:mod:`relaxgrip.learning.history`); None in directories without them,
         where every estimator reads the paper's ICFN.
+    hold_bias : HoldBias or None
+        ``relax``'s closed-loop error as ``relaxgrip calibrate-hold`` measured
+        it with these models (:mod:`relaxgrip.learning.hold_bias`); None in
+        directories not calibrated, where ``relax`` is the paper's Eq. 10.
     """
 
     icfn: ICFN
     rcfn: RCFN
     manifest: dict[str, Any]
     unrelaxed: UnrelaxedIcfn | None = None
+    hold_bias: HoldBias | None = None
 
     @property
     def icfn_feature_schema(self) -> FeatureSchema:
@@ -379,7 +387,58 @@ def load_models(
             f"the manifest names {n_rcfn}"
         )
     return ModelBundle(icfn=icfn, rcfn=rcfn, manifest=manifest,
-                       unrelaxed=_load_unrelaxed(directory, manifest, n_icfn))
+                       unrelaxed=_load_unrelaxed(directory, manifest, n_icfn),
+                       hold_bias=_load_hold_bias(manifest_path, manifest))
+
+
+#: The manifest section ``relaxgrip calibrate-hold`` writes.
+HOLD_BIAS_KEY = "hold_bias"
+
+
+def _load_hold_bias(path: Path, manifest: Mapping[str, Any]) -> HoldBias | None:
+    """``relax``'s calibrated closed-loop error, when the manifest has one."""
+    section = manifest.get(HOLD_BIAS_KEY)
+    if section is None:
+        return None
+    if not (isinstance(section, dict) and isinstance(section.get("relax"), dict)):
+        raise ModelFileError(f"{path}: manifest '{HOLD_BIAS_KEY}' lacks its 'relax' grid")
+    try:
+        return HoldBias.from_dict(section["relax"])
+    except InputError as exc:
+        raise ModelFileError(f"{path}: {exc}") from None
+
+
+def set_hold_bias(directory: Path, bias: HoldBias, record: Mapping[str, Any]) -> Path:
+    """Store ``relax``'s calibrated closed-loop error in a model directory, atomically.
+
+    Only the manifest is rewritten: the model files, their checksums and the
+    training record stay.  ``record`` (how the calibration was measured) is
+    kept beside the grid.  Training new models writes a manifest without it.
+
+    Returns
+    -------
+    Path
+        The manifest's path.
+
+    Raises
+    ------
+    ModelFileError
+        The directory is not a loadable model directory.
+    InputError
+        It cannot be written.
+    """
+    directory = Path(directory)
+    load_models(directory)  # every file checked before the manifest is touched
+    path = directory / MANIFEST_NAME
+    manifest = _read_manifest(path)
+    check_writable(directory, InputError)
+    manifest[HOLD_BIAS_KEY] = {"relax": bias.to_dict(), "record": dict(record)}
+    try:
+        text = json.dumps(manifest, indent=2, allow_nan=False, default=_json_default)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"calibration record is not JSON-serialisable: {exc}") from exc
+    write_files_atomically(directory, [(MANIFEST_NAME, (text + "\n").encode())])
+    return path
 
 
 def _load_unrelaxed(directory: Path, manifest: Mapping[str, Any],

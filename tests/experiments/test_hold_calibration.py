@@ -1,0 +1,152 @@
+"""Calibrating relax's closed-loop error on holds (``relaxgrip calibrate-hold``)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from relaxgrip.errors import InputError
+from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
+from relaxgrip.experiments.hold_calibration import calibrate_hold, time_bins
+from relaxgrip.learning.hold_bias import HoldBias
+from relaxgrip.learning.store import ModelBundle, load_models
+from relaxgrip.learning.training import default_models_dir, load_default_models
+from tests.clitools import assert_one_error_line, run_main
+
+DURATION_S = 12.0
+
+
+@pytest.fixture(scope="module")
+def uncalibrated() -> ModelBundle:
+    return replace(load_default_models(), hold_bias=None)
+
+
+@pytest.fixture(scope="module")
+def plain_hold(uncalibrated: ModelBundle) -> HoldResult:
+    return run_hold("relax", 5.0, DURATION_S, 40.0, seed=1000, models=uncalibrated)
+
+
+def constant(value_n: float) -> HoldBias:
+    return HoldBias(np.array([5.0]), np.array([40.0]), np.array([1.0]), np.full((1, 1, 1), value_n))
+
+
+def test_time_bins_reach_the_hold_and_no_further() -> None:
+    assert time_bins(280.0)[-1] == (190.0, 280.0)
+    assert time_bins(12.0) == [(0.0, 1.0), (1.0, 3.0), (3.0, 10.0), (10.0, 12.0)]
+    assert time_bins(400.0)[-2:] == [(190.0, 280.0), (280.0, 400.0)]
+    assert time_bins(0.5) == [(0.0, 0.5)]
+
+
+def test_the_estimator_takes_the_calibration_off_and_the_loop_holds_the_difference(
+        uncalibrated: ModelBundle, plain_hold: HoldResult) -> None:
+    """A calibration of +0.3 N says the estimate reads 0.3 N high: the controller then holds
+    the estimate 0.3 N under the target, and the true force rises by about that much."""
+    models = replace(uncalibrated, hold_bias=constant(0.3))
+    hold = run_hold("relax", 5.0, DURATION_S, 40.0, seed=1000, models=models)
+    calibration = hold.series("calibration_n")
+    during = hold.t_s > 0.1  # the onset's own frame is the ICFN's
+    assert np.all(calibration[during] == pytest.approx(0.3))
+    assert np.all(np.isnan(plain_hold.series("calibration_n")))
+    before = hold.loop["hold_s"]
+    assert np.all(np.isnan(hold.loop["calibration_n"][~np.isfinite(before)]))
+    steady = hold.t_s > 6.0
+    shift = float(np.mean(hold.truth_n[steady]) - np.mean(plain_hold.truth_n[steady]))
+    assert shift == pytest.approx(0.3, abs=0.08)
+    budget = run_hold("relax", 5.0, DURATION_S, 40.0, seed=1000, models=models,
+                      budget=True).error_budget()
+    assert budget["calibration_n"] == pytest.approx(-0.3)
+    assert budget["total_n"] == pytest.approx(sum(v for k, v in budget.items() if k != "total_n"))
+
+
+def test_calibration_is_the_mean_error_per_condition_and_time_bin(
+        uncalibrated: ModelBundle, plain_hold: HoldResult) -> None:
+    result = calibrate_hold([5.0, 3.0], [40.0], [1000], DURATION_S, models=uncalibrated)
+    bias = result.bias
+    assert result.targets_n == [3.0, 5.0]
+    assert bias.values_n.shape == (2, 1, len(time_bins(DURATION_S)))
+    err = plain_hold.estimate_n - plain_hold.truth_n
+    for k, (lo, hi) in enumerate(time_bins(DURATION_S)):
+        rows = (plain_hold.t_s >= lo) & (plain_hold.t_s <= hi) & np.isfinite(err)
+        assert bias.values_n[1, 0, k] == pytest.approx(float(np.mean(err[rows])))
+    # The knots are the estimator's own readings: F_inst near each target, the fingers
+    # near 40 °C.
+    assert bias.forces_n == pytest.approx([3.0, 5.0], abs=0.3)
+    assert bias.temps_c == pytest.approx([40.0], abs=2.0)
+    summary = result.summary()["5N 40C"]
+    assert summary["est_error_mean_n"] == pytest.approx(plain_hold.metrics()["est_error_mean_n"])
+    assert np.isnan(summary["se_n"])  # one seed
+    assert json.loads(json.dumps(result.record()))["seeds"] == [1000]
+
+
+def test_calibrating_a_calibrated_bundle_measures_it_without_its_calibration(
+        uncalibrated: ModelBundle) -> None:
+    once = calibrate_hold([5.0], [40.0], [1000], 4.0, models=uncalibrated)
+    again = calibrate_hold([5.0], [40.0], [1000], 4.0,
+                           models=replace(uncalibrated, hold_bias=constant(0.3)))
+    np.testing.assert_array_equal(again.bias.values_n, once.bias.values_n)
+
+
+@pytest.mark.parametrize(("args", "match"), [
+    (([], [40.0], [0]), "target"),
+    (([5.0], [], [0]), "temperature"),
+    (([5.0], [40.0], []), "seed"),
+    (([5.0], [40.0], [-1]), ">= 0"),
+    (([12.0], [40.0], [0]), "target"),
+    (([5.0], [90.0], [0]), "temperature"),
+])
+def test_calibration_refuses_what_cannot_run(args: tuple[list[float], list[float], list[int]],
+                                             match: str) -> None:
+    with pytest.raises(InputError, match=match):
+        calibrate_hold(*args, duration_s=4.0)
+
+
+def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    directory = tmp_path / "models"
+    shutil.copytree(default_models_dir(), directory)
+    args: list[str | Path] = ["calibrate-hold", directory, "--targets", "5", "--temps", "40",
+                              "--seeds", "1000", "--duration-s", "6", "--jobs", "1"]
+    code, out, _ = run_main([*args, "--dry-run"], monkeypatch, capsys)
+    assert code == 0, out
+    assert "measured (not written)" in out
+    before = load_models(directory).hold_bias
+    code, out, _ = run_main([*args, "--json"], monkeypatch, capsys)
+    assert code == 0
+    record = json.loads(out)
+    assert record["written"] is True
+    bias = load_models(directory).hold_bias
+    assert bias is not None
+    assert bias.to_dict() == record["bias"]
+    assert before is None or before.to_dict() != bias.to_dict()
+    code, out, _ = run_main(["hold", "--models", directory, "--duration-s", "6", "--json",
+                             "--budget"], monkeypatch, capsys)
+    assert code == 0
+    held = json.loads(out)
+    assert held["error_budget"]["calibration_n"] == pytest.approx(
+        -record["summary"]["5N 40C"]["est_error_mean_n"], abs=0.05)
+
+
+@pytest.mark.parametrize(("args", "expected"), [
+    (["calibrate-hold", "{missing}"], "missing"),
+    (["calibrate-hold", "{models}", "--targets", "1,x"], "--targets"),
+    (["calibrate-hold", "{models}", "--targets", "5,5"], "--targets"),
+    (["calibrate-hold", "{models}", "--temps", "nan"], "--temps"),
+    (["calibrate-hold", "{models}", "--targets", "11"], "target"),
+    (["calibrate-hold", "{models}", "--seeds", "5-2"], "5-2"),
+    (["calibrate-hold", "{models}", "--jobs", "0"], "--jobs"),
+    (["calibrate-hold", "{models}", "--duration-s", "0"], "--duration-s"),
+])
+def test_cli_bad_input(args: list[str], expected: str, tmp_path: Path,
+                       monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    directory = tmp_path / "models"
+    shutil.copytree(default_models_dir(), directory)
+    before = (directory / "manifest.json").read_bytes()
+    filled: list[str | Path] = [a.format(models=directory, missing=tmp_path / "missing")
+                                for a in args]
+    assert_one_error_line(*run_main(filled, monkeypatch, capsys), expected)
+    assert (directory / "manifest.json").read_bytes() == before
