@@ -284,13 +284,14 @@ def calibrate_hold_command(
         help="Model directory (relaxgrip train); relax's calibrated error is written into its "
              "manifest.", show_default=False)],
     targets: Annotated[str, typer.Option(
-        "--targets", help="Target forces of the grid (N), comma-separated.")] = "1,3,5,8",
+        "--targets", help="Target forces of the grid (N), comma-separated.")
+    ] = "1,2,3,4,5,6,7,8",
     temps: Annotated[str, typer.Option(
         "--temps", help="Finger temperatures of the grid (°C), comma-separated.")
-    ] = "30,40,48,55",
+    ] = "30,35,40,45,50,55",
     seeds: Annotated[str, typer.Option(
         "--seeds", help="Twin seeds per condition: 1000-1007, 3,5,8 or a mix (take ones not "
-                        "used to check). Each run counts about once.")] = "1000-1007",
+                        "used to check). Each run counts about once.")] = "1000-1005",
     duration_s: Annotated[float, typer.Option(
         "--duration-s", help="Hold length (s); the grid's times reach it.")] = 280.0,
     jobs: Annotated[int, typer.Option("--jobs", help="Holds in parallel.")] = 2,

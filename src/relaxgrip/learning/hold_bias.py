@@ -12,8 +12,10 @@ is used, not modelled.
 
 :class:`HoldBias` is that measurement: the mean of estimate − true force
 over calibration holds on a grid of onset forces, finger temperatures and
-times since the onset, interpolated linearly between the grid's knots
-(time on a log scale) and held at its edges outside.  The estimator takes
+times since the onset (smoothed over force and temperature by
+:func:`relaxgrip.experiments.hold_calibration.smooth_bias`), interpolated
+linearly between the grid's knots (time on a log scale) and held at its
+edges outside.  The estimator takes
 it off its estimate (:class:`relaxgrip.control.estimators.RelaxEstimator`),
 so the controller holds the force the calibration holds measured, not the
 force the estimate read.  ``relaxgrip calibrate-hold`` measures it
