@@ -42,6 +42,8 @@ def constant(value_n: float) -> HoldBias:
 
 def test_time_bins_reach_the_hold_and_no_further() -> None:
     assert time_bins(280.0)[-1] == (190.0, 280.0)
+    assert time_bins(280.02)[-1] == (190.0, 280.02)  # no sliver of a bin without frames
+    assert time_bins(1.01) == [(0.0, 1.01)]
     assert time_bins(12.0) == [(0.0, 1.0), (1.0, 3.0), (3.0, 10.0), (10.0, 12.0)]
     assert time_bins(400.0)[-2:] == [(190.0, 280.0), (280.0, 400.0)]
     assert time_bins(0.5) == [(0.0, 0.5)]
@@ -66,6 +68,67 @@ def test_the_estimator_takes_the_calibration_off_and_the_loop_holds_the_differen
                       budget=True).error_budget()
     assert budget["calibration_n"] == pytest.approx(-0.3)
     assert budget["total_n"] == pytest.approx(sum(v for k, v in budget.items() if k != "total_n"))
+
+
+def test_the_lookup_follows_the_onset_force_and_the_hold_time(uncalibrated: ModelBundle,
+                                                               monkeypatch: pytest.MonkeyPatch,
+                                                               ) -> None:
+    """Every hold frame takes off the grid's value at its F_inst and hold time, also on frames
+    whose infrared shows no finger beam (the last temperature read stands)."""
+    import relaxgrip.control.estimators as estimators
+
+    real = estimators.finger_temperature_c  # type: ignore[attr-defined]
+    calls = {"n": 0}
+
+    def sometimes_blind(thermal: object) -> float:
+        calls["n"] += 1
+        return float("nan") if calls["n"] % 3 == 0 else real(thermal)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(estimators, "finger_temperature_c", sometimes_blind)
+    values = np.array([[[0.05, 0.10, 0.20]], [[0.25, 0.30, 0.40]]])
+    bias = HoldBias(np.array([4.0, 6.0]), np.array([40.0]), np.array([1.0, 3.0, 9.0]), values)
+    hold = run_hold("relax", 5.0, DURATION_S, 40.0, seed=1000,
+                    models=replace(uncalibrated, hold_bias=bias))
+    rows = hold.t_s > 0.1
+    onset, held = hold.series("f_onset_n")[rows], hold.series("hold_s")[rows]
+    expected = np.array([bias.at(f, 40.0, h) for f, h in zip(onset, held, strict=True)])
+    np.testing.assert_allclose(hold.series("calibration_n")[rows], expected, rtol=1e-9)
+    assert calls["n"] > 3
+    assert np.ptp(expected) > 0.1
+
+
+def test_the_observer_takes_the_calibration_off_and_fits_its_share_without_it(
+        uncalibrated: ModelBundle) -> None:
+    """The share is fitted to Eq. 10's relaxation: a constant calibration does not move it
+    (fitted against the calibrated estimate, 0.3 N would have read as relaxation)."""
+    from relaxgrip.control import GraspController
+    from relaxgrip.control.observer import ObserverEstimator
+
+    shares: dict[str, float] = {}
+
+    class ShareTap:
+        def __init__(self, key: str) -> None:
+            self.key = key
+
+        def start(self, *args: object) -> None:
+            pass
+
+        def step(self, obs: object, controller: GraspController, command: object) -> None:
+            assert isinstance(controller.estimator, ObserverEstimator)
+            shares[self.key] = controller.estimator.share
+
+    plain = run_hold("observer", 5.0, DURATION_S, 40.0, seed=1000, models=uncalibrated,
+                     recorder=ShareTap("plain"))
+    calibrated = run_hold("observer", 5.0, DURATION_S, 40.0, seed=1000,
+                          models=replace(uncalibrated, hold_bias=constant(0.3)),
+                          recorder=ShareTap("calibrated"))
+    assert shares["calibrated"] == pytest.approx(shares["plain"], abs=0.03)
+    assert shares["plain"] != 1.0  # the fit ran
+    rows = calibrated.t_s > 0.1
+    np.testing.assert_allclose(calibrated.series("calibration_n")[rows], 0.3)
+    steady = calibrated.t_s > 6.0
+    shift = float(np.mean(calibrated.truth_n[steady]) - np.mean(plain.truth_n[steady]))
+    assert shift == pytest.approx(0.3, abs=0.08)
 
 
 def test_calibration_keeps_each_conditions_mean_error_and_smooths_them(
@@ -130,6 +193,23 @@ def test_calibrating_a_calibrated_bundle_measures_it_without_its_calibration(
 def test_a_condition_needs_two_seeds() -> None:
     with pytest.raises(InputError, match="5N 40C needs holds on at least two seeds"):
         calibration_from_holds([5.0], [40.0], [1], 4.0, {"5N 40C": [{"seed": 1}]})
+
+
+def _row(seed: int, bins: list[float]) -> dict[str, float | int | list[float]]:
+    return {"seed": seed, "bins_n": bins, "f_inst_n": 5.0, "temp_c": 40.0, "mae_n": 0.05,
+            "est_error_mean_n": bins[-1]}
+
+
+def test_a_bin_one_seed_missed_is_the_mean_of_the_others() -> None:
+    nan = float("nan")
+    holds = {"5N 40C": [_row(1, [0.1, 0.2, 0.3]), _row(2, [0.1, nan, 0.1]),
+                        _row(3, [0.1, 0.4, 0.2])]}
+    result = calibration_from_holds([5.0], [40.0], [1, 2, 3], 4.0, holds)
+    assert np.all(np.isfinite(result.bias.values_n))
+    assert abs(result.bias.values_n[0, 0, 1]) <= 0.3 + 1e-9  # shrunk from the mean of 0.2, 0.4
+    holds["5N 40C"] = holds["5N 40C"][:2]
+    with pytest.raises(InputError, match="fewer than two seeds gave an estimate"):
+        calibration_from_holds([5.0], [40.0], [1, 2], 4.0, holds)
 
 
 @pytest.mark.parametrize(("args", "match"), [

@@ -26,15 +26,22 @@ def grid() -> HoldBias:
     return HoldBias(forces, temps, times, values)
 
 
-def test_lookup_is_exact_at_the_knots_linear_between_and_held_outside() -> None:
+def test_lookup_is_exact_at_the_knots_linear_between_and_fades_outside() -> None:
     bias = grid()
     assert bias.at(5.0, 40.0, 1.0) == pytest.approx(0.5 - 0.4)
     assert bias.at(5.0, 40.0, 9.0) == pytest.approx(0.5 - 0.4 + 0.001)
     assert bias.at(3.0, 35.0, 1.0) == pytest.approx(0.3 - 0.35)  # linear in force and temperature
     # Time is linear on log(1 + t): halfway between log 2 and log 10 is t = sqrt(20) - 1.
     assert bias.at(1.0, 30.0, math.sqrt(20.0) - 1.0) == pytest.approx(0.1 - 0.3 + 0.0005)
-    assert bias.at(0.2, 20.0, 0.0) == pytest.approx(bias.at(1.0, 30.0, 1.0))  # held below
-    assert bias.at(9.0, 70.0, 500.0) == pytest.approx(bias.at(5.0, 50.0, 9.0))  # and above
+    # Time is held before the first knot and after the last.
+    assert bias.at(1.0, 30.0, 0.0) == pytest.approx(bias.at(1.0, 30.0, 1.0))
+    assert bias.at(5.0, 50.0, 500.0) == pytest.approx(bias.at(5.0, 50.0, 9.0))
+    # Force and temperature fade to none over one end spacing (4 N, 10 K) beyond the grid.
+    assert bias.at(7.0, 50.0, 9.0) == pytest.approx(0.5 * bias.at(5.0, 50.0, 9.0))
+    assert bias.at(5.0, 25.0, 1.0) == pytest.approx(0.5 * bias.at(5.0, 30.0, 1.0))
+    assert bias.at(0.0, 30.0, 1.0) == pytest.approx(0.75 * bias.at(1.0, 30.0, 1.0))
+    assert bias.at(9.0, 50.0, 9.0) == 0.0
+    assert bias.at(5.0, 61.0, 9.0) == 0.0
     for bad in ((math.nan, 40.0, 1.0), (5.0, math.nan, 1.0), (5.0, 40.0, math.inf)):
         assert bias.at(*bad) == 0.0
 
@@ -85,7 +92,7 @@ def test_set_hold_bias_rewrites_only_the_manifest(tmp_path: Path) -> None:
     assert {p.name: sha(p) for p in directory.glob("*.npz")} == files
     manifest = json.loads((directory / "manifest.json").read_text())
     assert manifest["training"] == training
-    assert manifest["hold_bias"]["record"] == {"seeds": [7]}
+    assert manifest["hold_bias"]["record"]["seeds"] == [7]
     # New models trained into the directory carry no calibration of the old ones.
     save_models(directory, bundle.icfn, bundle.rcfn, icfn_feature_schema=ICFN_SCHEMA,
                 rcfn_feature_schema=RCFN_SCHEMA, twin_version="test", training={},
@@ -116,3 +123,18 @@ def test_set_hold_bias_refuses_a_directory_that_is_not_models(tmp_path: Path) ->
     with pytest.raises(ModelFileError):
         set_hold_bias(tmp_path / "missing", grid(), {})
     assert not (tmp_path / "missing").exists()
+
+
+def test_set_hold_bias_refuses_models_that_changed_while_it_measured(tmp_path: Path) -> None:
+    directory = tmp_path / "models"
+    shutil.copytree(default_models_dir(), directory)
+    measured = load_models(directory).manifest
+    changed = json.loads(json.dumps(measured))
+    changed["icfn"]["sha256"] = "0" * 64
+    before = (directory / "manifest.json").read_bytes()
+    with pytest.raises(InputError, match="models changed while the calibration ran"):
+        set_hold_bias(directory, grid(), {}, measured_on=changed)
+    assert (directory / "manifest.json").read_bytes() == before
+    set_hold_bias(directory, grid(), {}, measured_on=measured)
+    record = json.loads((directory / "manifest.json").read_text())["hold_bias"]["record"]
+    assert record["model_sha256"]["icfn"] == measured["icfn"]["sha256"]

@@ -176,3 +176,18 @@ def test_a_dashboard_recording_replays_exactly_and_one_begun_mid_grasp_is_refuse
     times = [m["t_s"] for t, _, m in iter_messages(late) if t == "/relaxgrip/events"]
     first = next(m["t_s"] for t, _, m in iter_messages(late) if t == "/relaxgrip/observation")
     assert min(times) >= first - 1 / 30
+
+
+def test_replay_shows_a_calibration_other_than_the_recordings(
+        relax_hold: tuple[Path, HoldResult], models: ModelBundle) -> None:
+    """The estimate's calibration is recorded; replayed against a directory calibrated
+    otherwise, the difference is named, not only seen in the estimate."""
+    from relaxgrip.learning.hold_bias import HoldBias
+
+    path, _ = relax_hold
+    same = replay(path, models).metrics()
+    assert same["calibration_valid_agreement"] == 1.0
+    other = (HoldBias(np.array([5.0]), np.array([40.0]), np.array([1.0]), np.full((1, 1, 1), 0.2))
+             if models.hold_bias is None else None)
+    changed = replay(path, replace(models, hold_bias=other)).metrics()
+    assert changed["calibration_valid_agreement"] < 1.0

@@ -302,7 +302,7 @@ def calibrate_hold_command(
     """Measure relax's closed-loop error on a grid of holds; relax takes it off its estimate."""
     from relaxgrip.experiments.hold_calibration import calibrate_hold
     from relaxgrip.fileio import check_writable
-    from relaxgrip.learning.store import load_models, set_hold_bias
+    from relaxgrip.learning.store import MANIFEST_NAME, load_models, set_hold_bias
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
     from relaxgrip.validate import check_jobs, check_positive, parse_floats, parse_seeds
 
@@ -314,13 +314,13 @@ def calibrate_hold_command(
     bundle = load_models(models, icfn_feature_schema=ICFN_SCHEMA,
                          rcfn_feature_schema=RCFN_SCHEMA)
     if not dry_run:
-        check_writable(models, InputError)
+        check_writable(models / MANIFEST_NAME, InputError)
     count = len(target_list) * len(temp_list) * len(seed_list)
     start = time.perf_counter()
     with (console.status(f"{count} closed-loop holds …") if not json_out else nullcontext()):
         result = calibrate_hold(target_list, temp_list, seed_list, duration_s, bundle, jobs)
     if not dry_run:
-        set_hold_bias(models, result.bias, result.record())
+        set_hold_bias(models, result.bias, result.record(), measured_on=bundle.manifest)
     if json_out:
         emit_json({"models": str(models), "written": not dry_run, "bias": result.bias.to_dict(),
                    **result.record()})

@@ -138,8 +138,7 @@ class ForceEstimate:
         The estimate's 95 % band (N; nan when the estimator gives none).
     calibration_n : float
         The calibrated closed-loop error taken off ``force_n`` (N;
-        :mod:`relaxgrip.learning.hold_bias`); nan when none was (the
-        ``observer`` reports it while its estimate is ``relax``'s).
+        :mod:`relaxgrip.learning.hold_bias`); nan when none was.
     """
 
     force_n: float
@@ -447,8 +446,10 @@ class RelaxEstimator:
         if not math.isfinite(self.f_onset_n):
             return ForceEstimate(NAN, raw, hold_s=hold)
         if percept.thermal is not None:
-            self._temp_c = finger_temperature_c(percept.thermal)
-            x = self.features.build(self._temp_c)
+            temp = finger_temperature_c(percept.thermal)
+            if math.isfinite(temp):  # no beam in view: the calibration keeps the last reading
+                self._temp_c = temp
+            x = self.features.build(temp)
             if x is not None:
                 self._k, self._tau = self.rcfn.relaxation(x, self.f_onset_n)
         if not math.isfinite(self._k):
@@ -527,8 +528,7 @@ def make_estimator(kind: EstimatorKind | str, icfn: ICFN, rcfn: RCFN,
     ``relax`` and ``observer`` read the force from the loading history; the
     baselines ``fixed`` and ``icfn`` always read the paper's per-frame ICFN.
     ``hold_bias`` (a model directory's calibrated closed-loop error) is
-    taken off ``relax``'s estimate, and so off the ``observer``'s while it is
-    ``relax``'s.
+    taken off ``relax``'s and the ``observer``'s estimate.
     """
     kind = EstimatorKind(kind)
     if kind is EstimatorKind.OBSERVER:

@@ -114,9 +114,10 @@ class ObserverEstimator:
         Read the force from the loading history, as ``relax`` does
         (:class:`relaxgrip.control.estimators.IcfnEstimator`).
     hold_bias : HoldBias, optional
-        ``relax``'s calibrated closed-loop error, taken off the ``relax``
-        estimator alongside: while Eq. 10 is the estimate, the observer's
-        estimate is calibrated ``relax``'s, and it continues from that.
+        ``relax``'s calibrated closed-loop error (at ``F_inst``, the
+        temperature as read and the hold time), taken off the observer's
+        estimate throughout: while Eq. 10 is the estimate it is calibrated
+        ``relax``'s.  The share is fitted to Eq. 10 without it.
     """
 
     name = "observer"
@@ -276,10 +277,14 @@ class ObserverEstimator:
                     or abs(self.temp_c - steady_c) > self.share_fit_temp_k
                     or abs(motor_mm - self._motor[0][1]) > self.share_fit_motor_mm_s):
                 self._fitting = False
-        if self._fitting and hold > self.onset_window_s and math.isfinite(relax.force_n):
+        # Eq. 10 itself, the calibration put back: the share is fitted to the model's
+        # relaxation, and the calibration is taken off the observer's estimate below.
+        calibration = relax.calibration_n if math.isfinite(relax.calibration_n) else 0.0
+        eq10 = relax.force_n + calibration
+        if self._fitting and hold > self.onset_window_s and math.isfinite(eq10):
             # F_inst (u - x R) = F_eq10 (u_onset - x R_onset), x = share - 1
-            a = f_on * r - relax.force_n * self._r_on
-            b = f_on * u - relax.force_n * self._u_on
+            a = f_on * r - eq10 * self._r_on
+            b = f_on * u - eq10 * self._u_on
             self._fit_ab += a * b
             self._fit_aa += a * a
             if self._fit_aa > 0:
@@ -289,19 +294,18 @@ class ObserverEstimator:
         self.f_onset_n = f_on
         self.scale_n_per_m = f_on / (self._u_on - excess * self._r_on)
         est = self.scale_n_per_m * (u - excess * r)
-        calibration = NAN
-        if self._fitting and math.isfinite(relax.force_n):
+        if self._fitting and math.isfinite(eq10):
             # Eq. 10 holds: it is the estimate; the observer carries its offset from it.
-            self._offsets.append((hold, relax.force_n - est))
+            self._offsets.append((hold, eq10 - est))
             while hold - self._offsets[0][0] > self.anchor_window_s[0]:
                 self._offsets.popleft()
-            est = relax.force_n
-            calibration = relax.calibration_n
+            est = eq10
         else:
             if math.isnan(self._offset_n):
                 self._offset_n = self._anchor_offset(hold)
                 self._r_end = r
             est += self._offset_n
+        est -= calibration
         half = self.model.band_rel(hold) * f_on
         if math.isfinite(self._r_end):
             # What the branches relax after the fit carries the run's share spread.
@@ -309,7 +313,7 @@ class ObserverEstimator:
             half += self.model.band_drift_rel(self.temp_c) * unseen
         return ForceEstimate(est, raw, f_on, relax.k_n, relax.tau_s, hold,
                              band_lo_n=est - half, band_hi_n=est + half,
-                             calibration_n=calibration)
+                             calibration_n=relax.calibration_n)
 
     def contact(self, t_s: float) -> float:
         """Tare the ICFN on the free-space frames before the contact (returns the tare, N)."""

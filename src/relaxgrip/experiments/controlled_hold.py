@@ -216,12 +216,13 @@ class HoldResult:
         hold_s, f_inst, k_n, tau_s = columns[:, ok]
         eq10 = reconstruct(hold_s, f_inst, k_n, tau_s)
         est, truth, fixed = est[ok], truth[ok], fixed[ok]
-        calibration = np.nan_to_num(self.series("calibration_n")[mask][ok])
+        calibrated = self.series("calibration_n")[mask][ok]
+        calibration = np.nan_to_num(calibrated)
         f_fix0 = self.fixed_aperture_n[0]
         out = {"onset_n": float(np.mean(f_inst - f_fix0)),
                "relaxation_n": float(np.mean((f_fix0 - fixed) - (f_inst - eq10))),
                "closure_n": float(np.mean((est + calibration - eq10) - (truth - fixed)))}
-        if np.any(calibration):
+        if np.isfinite(calibrated).any():
             out["calibration_n"] = -float(np.mean(calibration))
         out["total_n"] = sum(out.values())
         return out

@@ -46,7 +46,8 @@ from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION
 from relaxgrip.validate import check_positive
 
-__all__ = ["DEFAULT_SEEDS", "DEFAULT_TARGETS_N", "DEFAULT_TEMPS_C", "MIN_SE_N", "TIME_EDGES_S",
+__all__ = ["DEFAULT_SEEDS", "DEFAULT_TARGETS_N", "DEFAULT_TEMPS_C", "MIN_BIN_S", "MIN_SE_N",
+           "TIME_EDGES_S",
            "HoldCalibration", "calibrate_hold", "calibration_from_holds", "smooth_bias",
            "time_bins"]
 
@@ -62,14 +63,18 @@ DEFAULT_SEEDS = tuple(range(1000, 1006))
 #: Edges of the time bins since the onset (s); each bin's mean error sits at its centre
 #: on ``log(1 + t)``.  The early bins are short: the error settles over the first 30 s.
 TIME_EDGES_S = (0.0, 1.0, 3.0, 10.0, 30.0, 100.0, 190.0, 280.0)
+#: The shortest last bin (s): 15 frames at the camera's 30 Hz.
+MIN_BIN_S = 0.5
 
 
 def time_bins(duration_s: float) -> list[tuple[float, float]]:
     """The bins of :data:`TIME_EDGES_S` a hold of ``duration_s`` reaches, the last cut there.
 
-    A hold longer than 280 s has one more, from 280 s to its end.
+    A hold longer than 280 s has one more, from 280 s to its end.  A last
+    bin shorter than :data:`MIN_BIN_S` joins the one before (a sliver of a
+    bin may hold no frame at all).
     """
-    edges = [e for e in TIME_EDGES_S if e < duration_s]
+    edges = [e for e in TIME_EDGES_S if e == 0.0 or e < duration_s - MIN_BIN_S]
     ends = [*edges[1:], duration_s]
     return list(zip(edges, ends, strict=True))
 
@@ -311,15 +316,18 @@ def calibration_from_holds(targets: list[float], temps: list[float], seeds: list
     f_inst, read_c = np.empty(shape), np.empty(shape)
     for i, target in enumerate(targets):
         for j, temp in enumerate(temps):
-            rows = holds[_condition(target, temp)]
-            errors = np.array([r["bins_n"] for r in rows])
-            means[i, j] = np.mean(errors, axis=0)
-            ses[i, j] = np.std(errors, axis=0, ddof=1) / math.sqrt(len(rows))
-            f_inst[i, j] = np.mean([r["f_inst_n"] for r in rows])
-            read_c[i, j] = np.mean([r["temp_c"] for r in rows])
-    if not (np.all(np.isfinite(means)) and np.all(np.isfinite(f_inst))
-            and np.all(np.isfinite(read_c))):
-        raise InputError("a calibration condition gave no estimate, onset or temperature")
+            name = _condition(target, temp)
+            errors = np.array([r["bins_n"] for r in holds[name]], dtype=np.float64)
+            counts = np.isfinite(errors).sum(axis=0)
+            if counts.min() < 2:
+                raise InputError(f"in the condition {name}, fewer than two seeds gave an "
+                                 "estimate in every time bin")
+            means[i, j] = np.nanmean(errors, axis=0)
+            ses[i, j] = np.nanstd(errors, axis=0, ddof=1) / np.sqrt(counts)
+            f_inst[i, j] = np.nanmean([r["f_inst_n"] for r in holds[name]])
+            read_c[i, j] = np.nanmean([r["temp_c"] for r in holds[name]])
+    if not (np.all(np.isfinite(f_inst)) and np.all(np.isfinite(read_c))):
+        raise InputError("a calibration condition gave no onset force or temperature")
     forces = f_inst.mean(axis=1)
     readings = read_c.mean(axis=0)
     for name, axis, setpoints in (("onset forces", forces, targets),

@@ -14,8 +14,8 @@ is used, not modelled.
 over calibration holds on a grid of onset forces, finger temperatures and
 times since the onset (smoothed over force and temperature by
 :func:`relaxgrip.experiments.hold_calibration.smooth_bias`), interpolated
-linearly between the grid's knots (time on a log scale) and held at its
-edges outside.  The estimator takes
+linearly between the grid's knots (time on a log scale), fading to none
+beyond its forces and temperatures.  The estimator takes
 it off its estimate (:class:`relaxgrip.control.estimators.RelaxEstimator`),
 so the controller holds the force the calibration holds measured, not the
 force the estimate read.  ``relaxgrip calibrate-hold`` measures it
@@ -50,6 +50,21 @@ def _weights(knots: FloatArray, x: float) -> tuple[int, int, float]:
     hi = int(np.searchsorted(knots, x, side="right"))
     lo = hi - 1
     return lo, hi, float((x - knots[lo]) / (knots[hi] - knots[lo]))
+
+
+def _inside(knots: FloatArray, x: float) -> float:
+    """1 within the knots, falling linearly to 0 one end spacing beyond them.
+
+    Nothing was measured there: the calibration fades to none rather than
+    carrying its edge on (a single knot is a constant everywhere).
+    """
+    if knots.size == 1:
+        return 1.0
+    if x < knots[0]:
+        return max(0.0, 1.0 - float((knots[0] - x) / (knots[1] - knots[0])))
+    if x > knots[-1]:
+        return max(0.0, 1.0 - float((x - knots[-1]) / (knots[-1] - knots[-2])))
+    return 1.0
 
 
 def _axis(values: Sequence[float] | FloatArray, name: str) -> FloatArray:
@@ -108,10 +123,15 @@ class HoldBias:
     def at(self, force_n: float, temp_c: float, hold_s: float) -> float:
         """The calibrated error at this onset force, temperature and hold time (N).
 
-        Linear between knots, held at the grid's edges; 0 when an argument
-        is not finite (no onset force yet, no temperature seen).
+        Linear between knots.  Beyond the grid's forces and temperatures it
+        falls linearly to 0 over one end spacing (none was measured there);
+        before the first and after the last time it is held.  0 when an
+        argument is not finite (no onset force yet, no temperature seen).
         """
         if not (math.isfinite(force_n) and math.isfinite(temp_c) and math.isfinite(hold_s)):
+            return 0.0
+        fade = _inside(self.forces_n, force_n) * _inside(self.temps_c, temp_c)
+        if fade == 0.0:
             return 0.0
         fi = _weights(self.forces_n, force_n)
         ti = _weights(self.temps_c, temp_c)
@@ -123,7 +143,7 @@ class HoldBias:
                     w = wa * wb * wc
                     if w:
                         total += w * float(self.values_n[a, b, c])
-        return total
+        return fade * total
 
     def to_dict(self) -> dict[str, Any]:
         """The manifest's form (plain lists)."""

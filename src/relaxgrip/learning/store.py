@@ -54,6 +54,7 @@ __all__ = [
     "ModelBundle",
     "ModelFileError",
     "load_models",
+    "model_checksums",
     "save_models",
     "set_hold_bias",
 ]
@@ -408,12 +409,31 @@ def _load_hold_bias(path: Path, manifest: Mapping[str, Any]) -> HoldBias | None:
         raise ModelFileError(f"{path}: {exc}") from None
 
 
-def set_hold_bias(directory: Path, bias: HoldBias, record: Mapping[str, Any]) -> Path:
+#: The manifest sections whose files a calibration belongs to.
+_MODEL_SECTIONS = ("icfn", "rcfn", "icfn_unrelaxed", "history")
+
+
+def model_checksums(manifest: Mapping[str, Any]) -> dict[str, str]:
+    """The sha256 of each model file a manifest names, by section."""
+    return {key: str(manifest[key]["sha256"]) for key in _MODEL_SECTIONS
+            if isinstance(manifest.get(key), dict) and "sha256" in manifest[key]}
+
+
+def set_hold_bias(directory: Path, bias: HoldBias, record: Mapping[str, Any],
+                  measured_on: Mapping[str, Any] | None = None) -> Path:
     """Store ``relax``'s calibrated closed-loop error in a model directory, atomically.
 
     Only the manifest is rewritten: the model files, their checksums and the
     training record stay.  ``record`` (how the calibration was measured) is
-    kept beside the grid.  Training new models writes a manifest without it.
+    kept beside the grid, with the checksums of the models it was measured
+    on.  Training new models writes a manifest without it.
+
+    Parameters
+    ----------
+    measured_on : mapping, optional
+        The manifest of the models the holds ran with
+        (:attr:`ModelBundle.manifest`); if the directory's models are not
+        those any more (trained anew while the holds ran), nothing is written.
 
     Returns
     -------
@@ -431,8 +451,13 @@ def set_hold_bias(directory: Path, bias: HoldBias, record: Mapping[str, Any]) ->
     load_models(directory)  # every file checked before the manifest is touched
     path = directory / MANIFEST_NAME
     manifest = _read_manifest(path)
-    check_writable(directory, InputError)
-    manifest[HOLD_BIAS_KEY] = {"relax": bias.to_dict(), "record": dict(record)}
+    checksums = model_checksums(manifest)
+    if measured_on is not None and model_checksums(measured_on) != checksums:
+        raise InputError(f"{directory}: its models changed while the calibration ran; "
+                         "nothing written")
+    check_writable(path, InputError)
+    manifest[HOLD_BIAS_KEY] = {"relax": bias.to_dict(),
+                               "record": {**record, "model_sha256": checksums}}
     try:
         text = json.dumps(manifest, indent=2, allow_nan=False, default=_json_default)
     except (TypeError, ValueError) as exc:

@@ -152,6 +152,10 @@ class ReplayResult:
         Marker status of each period.
     truth_n : ndarray
         True contact force where the recording has it (N; nan otherwise).
+    recorded_calibration_n, replayed_calibration_n : ndarray
+        The calibrated closed-loop error taken off the estimate, recorded and
+        replayed (N; nan: none, and in recordings from before it was recorded):
+        a model directory calibrated since the recording shows here.
     """
 
     path: str
@@ -164,12 +168,18 @@ class ReplayResult:
     recorded_status: list[str]
     replayed_status: list[str]
     truth_n: FloatArray
+    recorded_calibration_n: FloatArray | None = None
+    replayed_calibration_n: FloatArray | None = None
 
     def metrics(self) -> dict[str, Any]:
         """Differences of the estimate and the ICFN, and the agreement of validity and status."""
         out: dict[str, Any] = {"periods": int(self.t_s.size)}
-        for key, a, b in (("estimate", self.recorded_n, self.replayed_n),
-                          ("icfn", self.recorded_icfn_n, self.replayed_icfn_n)):
+        pairs = [("estimate", self.recorded_n, self.replayed_n),
+                 ("icfn", self.recorded_icfn_n, self.replayed_icfn_n)]
+        if self.recorded_calibration_n is not None and self.replayed_calibration_n is not None:
+            pairs.append(("calibration", self.recorded_calibration_n,
+                          self.replayed_calibration_n))
+        for key, a, b in pairs:
             both = np.isfinite(a) & np.isfinite(b)
             diff = np.abs(a[both] - b[both])
             out[f"{key}_compared"] = int(both.sum())
@@ -198,7 +208,7 @@ def replay(path: Path, models: ModelBundle, tolerant: bool = False) -> ReplayRes
     InputError
         As :func:`replay_periods`.
     """
-    rows: list[tuple[float, float, float, float, float, float]] = []
+    rows: list[tuple[float, ...]] = []
     rec_status: list[str] = []
     rep_status: list[str] = []
     with malformed_fields(path):
@@ -208,10 +218,11 @@ def replay(path: Path, models: ModelBundle, tolerant: bool = False) -> ReplayRes
             perception = period.get("/relaxgrip/perception")
             rows.append((period.t_s, _f(rec.get("force_n")), estimate.force_n,
                          _f(rec.get("f_icfn_n")), estimate.f_icfn_n,
-                         math.nan if truth is None else float(truth["contact_force_n"])))
+                         math.nan if truth is None else float(truth["contact_force_n"]),
+                         _f(rec.get("calibration_n")), estimate.calibration_n))
             rec_status.append("" if perception is None else str(perception["marker_status"]))
             rep_status.append(percept.marker.status.value)
     name = str(read_session(path, tolerant).get("estimator"))
-    cols = np.array(rows, dtype=np.float64).reshape(-1, 6)
+    cols = np.array(rows, dtype=np.float64).reshape(-1, 8)
     return ReplayResult(str(path), name, cols[:, 0], cols[:, 1], cols[:, 2], cols[:, 3],
-                        cols[:, 4], rec_status, rep_status, cols[:, 5])
+                        cols[:, 4], rec_status, rep_status, cols[:, 5], cols[:, 6], cols[:, 7])
