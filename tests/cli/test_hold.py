@@ -84,13 +84,15 @@ def test_budget_prints_the_parts_of_the_estimate_error(monkeypatch, capsys):
     assert code == 0, err
     d = json.loads(out)
     parts = d["error_budget"]
-    assert set(parts) == {"onset_n", "relaxation_n", "closure_n", "total_n"}
+    # The shipped models are calibrated (relaxgrip calibrate-hold): the calibration is a part.
+    assert set(parts) == {"onset_n", "relaxation_n", "closure_n", "calibration_n", "total_n"}
     assert parts["total_n"] == pytest.approx(d["est_error_mean_n"], abs=1e-9)
     code, out, err = run_main(["hold", "--duration-s", "14", "--seed", "3", "--budget"],
                               monkeypatch, capsys)
     assert code == 0, err
     assert "error budget" in out
     assert f"= {parts['total_n']:+.3f} N" in " ".join(out.split())
+    assert f"calibration {parts['calibration_n']:+.3f} N" in " ".join(out.split())
 
 
 def test_missing_or_foreign_models_are_refused(monkeypatch, capsys, tmp_path: Path):
