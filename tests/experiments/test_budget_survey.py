@@ -38,7 +38,9 @@ def test_each_run_is_its_budgeted_hold_with_the_twins_draw(survey) -> None:
 def test_the_summary_is_over_the_seeds(survey) -> None:
     total = survey.column("total_n")
     parts = survey.parts()
-    assert list(parts) == list(BUDGET_PARTS)
+    # The shipped models are calibrated: the calibration is a part before the total.
+    assert list(parts) == [*BUDGET_PARTS[:-1], "calibration_n", BUDGET_PARTS[-1]]
+    assert survey.part_names == tuple(parts)
     assert parts["total_n"]["mean"] == pytest.approx(total.mean())
     assert parts["total_n"]["sd"] == pytest.approx(total.std())
     assert parts["onset_n"]["min"] <= parts["onset_n"]["mean"] <= parts["onset_n"]["max"]
