@@ -52,3 +52,21 @@ def assert_one_error_line(code: int, out: str, err: str, expected: str) -> None:
     assert len(lines) == 1, err
     assert lines[0].startswith("error: ")
     assert expected in lines[0]
+
+
+def assert_refused_unchanged(args: list[str], expected: str, source: Path, tmp_path: Path,
+                             monkeypatch: pytest.MonkeyPatch,
+                             capsys: pytest.CaptureFixture[str]) -> None:
+    """Bad input on a copy of the model directory ``source``: one error line, its manifest intact.
+
+    ``{dir}`` in ``args`` is the copy, ``{missing}`` a path that does not exist.
+    """
+    import shutil
+
+    directory = tmp_path / "dir"
+    shutil.copytree(source, directory)
+    before = (directory / "manifest.json").read_bytes()
+    filled: list[str | Path] = [a.format(dir=directory, missing=tmp_path / "missing")
+                                for a in args]
+    assert_one_error_line(*run_main(filled, monkeypatch, capsys), expected)
+    assert (directory / "manifest.json").read_bytes() == before

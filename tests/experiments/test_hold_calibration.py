@@ -21,7 +21,7 @@ from relaxgrip.experiments.hold_calibration import (
 from relaxgrip.learning.hold_bias import HoldBias
 from relaxgrip.learning.store import ModelBundle, load_models
 from relaxgrip.learning.training import default_models_dir, load_default_models
-from tests.clitools import assert_one_error_line, run_main
+from tests.clitools import assert_refused_unchanged, run_main
 
 DURATION_S = 12.0
 
@@ -255,21 +255,15 @@ def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: py
 
 @pytest.mark.parametrize(("args", "expected"), [
     (["calibrate-hold", "{missing}"], "missing"),
-    (["calibrate-hold", "{models}", "--targets", "1,x"], "--targets"),
-    (["calibrate-hold", "{models}", "--targets", "5,5"], "--targets"),
-    (["calibrate-hold", "{models}", "--temps", "nan"], "--temps"),
-    (["calibrate-hold", "{models}", "--targets", "11"], "target"),
-    (["calibrate-hold", "{models}", "--seeds", "5-2"], "5-2"),
-    (["calibrate-hold", "{models}", "--seeds", "3"], "two seeds"),
-    (["calibrate-hold", "{models}", "--jobs", "0"], "--jobs"),
-    (["calibrate-hold", "{models}", "--duration-s", "0"], "--duration-s"),
+    (["calibrate-hold", "{dir}", "--targets", "1,x"], "--targets"),
+    (["calibrate-hold", "{dir}", "--targets", "5,5"], "--targets"),
+    (["calibrate-hold", "{dir}", "--temps", "nan"], "--temps"),
+    (["calibrate-hold", "{dir}", "--targets", "11"], "target"),
+    (["calibrate-hold", "{dir}", "--seeds", "5-2"], "5-2"),
+    (["calibrate-hold", "{dir}", "--seeds", "3"], "two seeds"),
+    (["calibrate-hold", "{dir}", "--jobs", "0"], "--jobs"),
+    (["calibrate-hold", "{dir}", "--duration-s", "0"], "--duration-s"),
 ])
 def test_cli_bad_input(args: list[str], expected: str, tmp_path: Path,
                        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
-    directory = tmp_path / "models"
-    shutil.copytree(default_models_dir(), directory)
-    before = (directory / "manifest.json").read_bytes()
-    filled: list[str | Path] = [a.format(models=directory, missing=tmp_path / "missing")
-                                for a in args]
-    assert_one_error_line(*run_main(filled, monkeypatch, capsys), expected)
-    assert (directory / "manifest.json").read_bytes() == before
+    assert_refused_unchanged(args, expected, default_models_dir(), tmp_path, monkeypatch, capsys)
