@@ -58,7 +58,7 @@ def replay_cmd(
         f"ICFN per frame: max {m['icfn_max_abs_diff_n']:.4f} N, mean "
         f"{m['icfn_mean_abs_diff_n']:.4f} N; marker status agreement "
         f"{m['marker_status_agreement']:.1%}")
-    if m.get("calibration_valid_agreement", 1.0) < 1.0:
+    if m["calibration_valid_agreement"] < 1.0:
         console.print("the calibration taken off the estimate was not the same: the model "
                       "directory was calibrated (relaxgrip calibrate-hold) differently from the "
                       "recording's")

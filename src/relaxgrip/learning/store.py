@@ -122,6 +122,15 @@ def _json_default(value: object) -> Any:
     raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
 
 
+def _manifest_bytes(manifest: Mapping[str, Any], record: str) -> bytes:
+    """The manifest as ``manifest.json`` holds it; ValueError naming ``record`` if it cannot be."""
+    try:
+        text = json.dumps(manifest, indent=2, allow_nan=False, default=_json_default)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{record} record is not JSON-serialisable: {exc}") from exc
+    return (text + "\n").encode()
+
+
 def check_models_out(directory: Path) -> Path:
     """Check that models can be written at ``directory`` (before training them).
 
@@ -241,15 +250,11 @@ def save_models(
         **sections,
         "training": dict(training),
     }
-    try:
-        text = json.dumps(manifest, indent=2, allow_nan=False, default=_json_default)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"training record is not JSON-serialisable: {exc}") from exc
+    text = _manifest_bytes(manifest, "training")
     directory.mkdir(parents=True, exist_ok=True)
     write_files_atomically(
         directory,
-        [(ICFN_FILE, icfn_data), (RCFN_FILE, rcfn_data), *extra,
-         (MANIFEST_NAME, (text + "\n").encode())],
+        [(ICFN_FILE, icfn_data), (RCFN_FILE, rcfn_data), *extra, (MANIFEST_NAME, text)],
     )
     return directory / MANIFEST_NAME
 
@@ -448,9 +453,8 @@ def set_hold_bias(directory: Path, bias: HoldBias, record: Mapping[str, Any],
         It cannot be written.
     """
     directory = Path(directory)
-    load_models(directory)  # every file checked before the manifest is touched
+    manifest = load_models(directory).manifest  # every file checked before it is rewritten
     path = directory / MANIFEST_NAME
-    manifest = _read_manifest(path)
     checksums = model_checksums(manifest)
     if measured_on is not None and model_checksums(measured_on) != checksums:
         raise InputError(f"{directory}: its models changed while the calibration ran; "
@@ -458,11 +462,7 @@ def set_hold_bias(directory: Path, bias: HoldBias, record: Mapping[str, Any],
     check_writable(path, InputError)
     manifest[HOLD_BIAS_KEY] = {"relax": bias.to_dict(),
                                "record": {**record, "model_sha256": checksums}}
-    try:
-        text = json.dumps(manifest, indent=2, allow_nan=False, default=_json_default)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"calibration record is not JSON-serialisable: {exc}") from exc
-    write_files_atomically(directory, [(MANIFEST_NAME, (text + "\n").encode())])
+    write_files_atomically(directory, [(MANIFEST_NAME, _manifest_bytes(manifest, "calibration"))])
     return path
 
 

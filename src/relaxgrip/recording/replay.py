@@ -168,18 +168,16 @@ class ReplayResult:
     recorded_status: list[str]
     replayed_status: list[str]
     truth_n: FloatArray
-    recorded_calibration_n: FloatArray | None = None
-    replayed_calibration_n: FloatArray | None = None
+    recorded_calibration_n: FloatArray
+    replayed_calibration_n: FloatArray
 
     def metrics(self) -> dict[str, Any]:
         """Differences of the estimate and the ICFN, and the agreement of validity and status."""
         out: dict[str, Any] = {"periods": int(self.t_s.size)}
-        pairs = [("estimate", self.recorded_n, self.replayed_n),
-                 ("icfn", self.recorded_icfn_n, self.replayed_icfn_n)]
-        if self.recorded_calibration_n is not None and self.replayed_calibration_n is not None:
-            pairs.append(("calibration", self.recorded_calibration_n,
-                          self.replayed_calibration_n))
-        for key, a, b in pairs:
+        for key, a, b in (("estimate", self.recorded_n, self.replayed_n),
+                          ("icfn", self.recorded_icfn_n, self.replayed_icfn_n),
+                          ("calibration", self.recorded_calibration_n,
+                           self.replayed_calibration_n)):
             both = np.isfinite(a) & np.isfinite(b)
             diff = np.abs(a[both] - b[both])
             out[f"{key}_compared"] = int(both.sum())
