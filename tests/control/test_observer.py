@@ -374,3 +374,26 @@ def test_share_spread_is_saved_and_checked(tmp_path: Path) -> None:
         arrays["share_spread_"] = bad
         with pytest.raises(ValueError, match="share_spread_"):
             ObserverModel.from_arrays(arrays, ObserverModel().get_params())
+
+
+def test_drift_scale_is_its_own_and_old_files_keep_one_scale(tmp_path: Path) -> None:
+    """The drift part scales with ``drift_scale`` alone and the held-out part with
+    ``band_scale``; a file from before the two had their own scales (no ``drift_scale``
+    among its parameters) takes the band scale for both, as the band then had."""
+    arrays = _arrays(_model())
+    arrays["share_spread_"] = np.array([0.05, 0.1, 0.15, 0.2])
+    params = ObserverModel().get_params()
+    one = ObserverModel.from_arrays(arrays, params)
+    split = ObserverModel.from_arrays(arrays, {**params, "band_scale": 0.5, "drift_scale": 2.0})
+    assert split.band_drift_rel(45.0) == pytest.approx(2.0 * one.band_drift_rel(45.0))
+    assert split.band_rel(100.0) == pytest.approx(0.5 * one.band_rel(100.0))
+    save_observer(tmp_path / "m", split, {})
+    assert load_observer(tmp_path / "m").drift_scale == 2.0
+    old = {k: v for k, v in params.items() if k != "drift_scale"}
+    legacy = ObserverModel.from_arrays(arrays, {**old, "band_scale": 0.3})
+    assert legacy.drift_scale == 0.3
+    assert legacy.band_drift_rel(45.0) == pytest.approx(0.3 * one.band_drift_rel(45.0))
+    for bad in ({"drift_scale": -1.0}, {"band_scale": 0.0}, {"drift_scale": math.nan},
+                {"band_scale": "wide"}):
+        with pytest.raises(ValueError, match="band_scale must be > 0 and drift_scale >= 0"):
+            ObserverModel.from_arrays(arrays, {**params, **bad})

@@ -13,12 +13,14 @@ import pytest
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.band_calibration import (
     BandCalibration,
-    band_ratios,
+    BandSamples,
     calibrate_band,
+    fit_scales,
     least_covering,
-    seed_interval,
+    seed_intervals,
 )
 from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
+from relaxgrip.experiments.scenarios import scenario_hold
 from relaxgrip.learning.observer import (
     ObserverFileError,
     default_observer_dir,
@@ -34,20 +36,41 @@ def short_hold() -> HoldResult:
     return run_hold("observer", duration_s=8.0, seed=0)
 
 
-def test_ratios_do_not_depend_on_the_scale_the_observer_held_with(short_hold: HoldResult) -> None:
-    """The same seed with the band twice as wide: the same ratios (the loop is unchanged:
-    the band is only reported), and the coverage of the recorded band is the share of
-    ratios within the scale it had."""
+def test_samples_do_not_depend_on_the_scales_the_observer_held_with(
+        short_hold: HoldResult) -> None:
+    """The same seed with the band's parts at other scales: the same samples (the loop is
+    unchanged: the band is only reported), and the coverage of the recorded band is the
+    samples' at the scales it had."""
     model = load_default_observer()
     wide = load_default_observer()
     wide.band_scale = 2.0 * model.band_scale
+    wide.drift_scale = 3.0 * model.drift_scale
     other = run_hold("observer", duration_s=8.0, seed=0, observer=wide)
-    r = band_ratios(short_hold, model.band_scale)
-    assert r.size > 100
-    np.testing.assert_allclose(band_ratios(other, wide.band_scale), r, rtol=1e-9)
+    x = BandSamples.of(short_hold, model.band_scale, model.drift_scale)
+    assert x.size > 100
+    y = BandSamples.of(other, wide.band_scale, wide.drift_scale)
+    for name in ("error_n", "onset_n", "drift_n"):
+        np.testing.assert_allclose(getattr(y, name), getattr(x, name), rtol=1e-9)
     assert short_hold.metrics()["band_coverage"] == pytest.approx(
-        float(np.mean(r <= model.band_scale)))
+        x.coverage(model.band_scale, model.drift_scale))
     np.testing.assert_array_equal(other.estimate_n, short_hold.estimate_n)
+
+
+def test_the_drift_part_is_recorded_once_the_share_fit_ends() -> None:
+    """A short ramp: zero while the share is fitted, then the relaxing share's part, the
+    recorded half-width the sum of the onset part and it."""
+    model = load_default_observer()
+    hold = scenario_hold("observer", "ramp", seed=1, duration_s=40.0)
+    drift, hold_s = hold.series("band_drift_n"), hold.series("hold_s")
+    assert np.all(drift[hold_s < 5.0] == 0.0)
+    assert drift[-1] > 0.0
+    half = 0.5 * (hold.series("band_hi_n") - hold.series("band_lo_n"))
+    onset = np.array([model.band_rel(t) for t in hold_s]) * hold.series("f_onset_n")
+    started = np.isfinite(onset)  # the onset frame itself has the band of the closing
+    assert started.mean() > 0.99
+    np.testing.assert_allclose(half[started], (onset + drift)[started], rtol=1e-9, atol=1e-12)
+    x = BandSamples.of(hold, model.band_scale, model.drift_scale)
+    assert x.coverage(model.band_scale, 0.0) <= x.coverage(model.band_scale, model.drift_scale)
 
 
 def test_the_least_covering_scale_by_hand() -> None:
@@ -60,36 +83,94 @@ def test_the_least_covering_scale_by_hand() -> None:
         least_covering(np.zeros(0), 0.95)
 
 
-def test_seed_interval_shows_how_sure_the_scale_is() -> None:
-    """Resampling seeds: alike seeds leave the scale sure, unlike ones do not, and more
-    seeds narrow the interval."""
+def _samples(rng: np.random.Generator, n: int, spread: float = 0.0,
+             drift_share: float = 0.5) -> BandSamples:
+    """Errors uniform in [0, 1) times a seed's offset; half of them with a drift part."""
+    drift = np.where(rng.uniform(size=n) < drift_share, rng.uniform(0.5, 1.5, n), 0.0)
+    error = rng.uniform(0, 1, n) * rng.lognormal(0, spread) + drift
+    return BandSamples(error, np.ones(n), drift)
+
+
+def test_fit_scales_by_hand() -> None:
+    """The band scale is set where the drift part is not; the drift scale then covers what
+    the band scale leaves of the others."""
+    still = np.arange(1.0, 101.0)  # band scale: 95 of these within 95
+    error = np.concatenate([still, 95.0 + 2.0 * np.arange(1.0, 21.0)])  # 20 over by 2..40
+    onset = np.ones(120)
+    drift = np.concatenate([np.zeros(100), np.ones(20)])
+    band, scale = fit_scales(BandSamples(error, onset, drift), 0.95)
+    assert band == 95.0
+    assert scale == 38.0  # 19 of the 20 excesses (2, 4, .., 40) within 38
+    x = BandSamples(error, onset, drift)
+    assert x.coverage(band, scale) >= 0.95
+    assert BandSamples(error[:100], onset[:100], drift[:100]).coverage(band, scale) >= 0.95
+    # Covered by the onset part alone: no drift part needed.
+    assert fit_scales(BandSamples(np.full(4, 0.5), np.ones(4), np.array([0, 0, 1, 1.0])),
+                      0.95) == (0.5, 0.0)
+    assert fit_scales(BandSamples(still, onset[:100], drift[:100]), 0.95, 0.7) == (95.0, 0.7)
+    with pytest.raises(InputError, match="without its drift part"):
+        fit_scales(BandSamples(still, onset[:100], np.ones(100)), 0.95)
+
+
+def test_seed_intervals_show_how_sure_the_scales_are() -> None:
+    """Resampling seeds: alike seeds leave the scales sure, unlike ones do not, and more
+    seeds narrow the intervals."""
     rng = np.random.default_rng(1)
-    alike = [rng.uniform(0, 1, 500) for _ in range(12)]
-    lo, hi = seed_interval(alike, 0.95)
-    assert lo <= least_covering(np.concatenate(alike), 0.95) <= hi
+    alike = [_samples(rng, 500) for _ in range(12)]
+    (lo, hi), (dlo, dhi) = seed_intervals(alike, 0.95)
+    band, drift = fit_scales(BandSamples.join(alike), 0.95)
+    assert drift is not None
+    assert lo <= band <= hi
+    assert dlo <= drift <= dhi
     assert hi - lo < 0.03
-    offsets = [rng.uniform(0, 1, 500) * rng.lognormal(0, 0.5) for _ in range(36)]
-    lo12, hi12 = seed_interval(offsets[:12], 0.95)
-    lo36, hi36 = seed_interval(offsets, 0.95)
+    offsets = [_samples(rng, 500, spread=0.5) for _ in range(36)]
+    (lo12, hi12), _ = seed_intervals(offsets[:12], 0.95)
+    (lo36, hi36), _ = seed_intervals(offsets, 0.95)
     assert hi12 - lo12 > 0.2
     assert hi36 - lo36 < hi12 - lo12
-    assert seed_interval([alike[0]], 0.95) == pytest.approx((least_covering(alike[0], 0.95),) * 2)
-    assert seed_interval(offsets, 0.95) == (lo36, hi36)  # reproducible
+    one = seed_intervals([alike[0]], 0.95)
+    assert one[0] == pytest.approx((fit_scales(alike[0], 0.95)[0],) * 2)
+    assert seed_intervals(offsets, 0.95)[0] == (lo36, hi36)  # reproducible
+    none = seed_intervals([_samples(rng, 50, drift_share=0.0)], 0.95)[1]
+    assert all(math.isnan(v) for v in none)
 
 
-def test_calibration_sets_the_least_scale_that_covers_the_level() -> None:
+def test_calibration_sets_the_least_scales_that_cover_the_level() -> None:
     model = load_default_observer()
     result = calibrate_band(model, [0], ["standard"], duration_s=8.0)
     hold = run_hold("observer", duration_s=8.0, seed=0)
-    r = band_ratios(hold, model.band_scale)
-    assert result.band_scale == pytest.approx(least_covering(r, 0.95))
+    x = BandSamples.of(hold, model.band_scale, model.drift_scale)
+    assert result.band_scale == pytest.approx(least_covering(x.error_n / x.onset_n, 0.95))
     assert result.scale_interval == pytest.approx((result.band_scale,) * 2)  # one seed
     assert result.record()["scale_interval_90"] == list(result.scale_interval)
-    assert result.samples == r.size
+    # The standard hold never ends its share fit: the drift scale is kept.
+    assert result.drift_samples == 0
+    assert result.drift_scale == model.drift_scale
+    assert result.record()["drift_interval_90"] == [None, None]
+    assert result.samples == x.size
     row = result.scenarios["standard"]["seeds"]["0"]
     assert row["coverage_after"] >= 0.95
     assert row["coverage_before"] == pytest.approx(hold.metrics()["band_coverage"])
     assert model.band_scale == load_default_observer().band_scale  # the model is not changed
+
+
+def test_calibration_sets_the_drift_scale_where_the_drift_is() -> None:
+    """A short ramp: both scales set, each scenario covered at the level by both parts,
+    and an observer that held with no drift part calibrates it all the same."""
+    model = load_default_observer()
+    result = calibrate_band(model, [1, 2], ["ramp"], duration_s=40.0, n_jobs=2)
+    assert result.drift_samples > 0
+    holds = [scenario_hold("observer", "ramp", seed, 40.0) for seed in (1, 2)]
+    every = BandSamples.join([BandSamples.of(h, model.band_scale, model.drift_scale)
+                              for h in holds])
+    assert (result.band_scale, result.drift_scale) == pytest.approx(fit_scales(every, 0.95))
+    assert every.coverage(result.band_scale, result.drift_scale) >= 0.95
+    silent = load_default_observer()
+    silent.drift_scale = 0.0
+    again = calibrate_band(silent, [1, 2], ["ramp"], duration_s=40.0, n_jobs=2)
+    assert (again.band_scale, again.drift_scale) == pytest.approx(
+        (result.band_scale, result.drift_scale))
+    assert again.previous_drift_scale == 0.0
 
 
 @pytest.mark.parametrize(("seeds", "scenarios", "match"), [([], ["standard"], "seed"),
@@ -115,10 +196,17 @@ def test_set_band_scale_keeps_the_parameters_and_records_how(tmp_path: Path) -> 
     assert manifest["training"]["band_recalibration"] == {"method": "test", "seeds": [1]}
     assert manifest["training"]["n_sequences"] == shipped["n_sequences"]  # the record is kept
     assert manifest["training"]["dataset"] == shipped["dataset"]
+    assert after.drift_scale == before.drift_scale  # kept without a new one
+    set_band_scale(directory, 0.42, {"method": "test"}, drift_scale=1.5)
+    assert load_observer(directory).drift_scale == 1.5
     for bad in (0.0, -1.0, math.nan):
         with pytest.raises(InputError, match="band scale"):
             set_band_scale(directory, bad, {})
+    for bad in (-0.1, math.inf, math.nan):
+        with pytest.raises(InputError, match="drift scale"):
+            set_band_scale(directory, 0.5, {}, drift_scale=bad)
     assert load_observer(directory).band_scale == 0.42
+    assert load_observer(directory).drift_scale == 1.5
     with pytest.raises(ObserverFileError):
         set_band_scale(tmp_path / "missing", 0.5, {})
 
@@ -157,7 +245,7 @@ def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: py
 def test_summary_is_the_mean_over_each_scenarios_holds() -> None:
     rows = {"1": {"mae_n": 0.1, "coverage_before": 0.5, "coverage_after": 1.0},
             "2": {"mae_n": 0.3, "coverage_before": 0.7, "coverage_after": 0.9}}
-    result = BandCalibration(0.2, (0.1, 0.3), 0.95, 10, [1, 2], 0.25,
+    result = BandCalibration(0.2, (0.1, 0.3), 1.0, (0.8, 1.2), 0.95, 10, 4, [1, 2], 0.25, 0.25,
                              {"ramp": {"seeds": rows}})
     assert result.summary() == {"ramp": pytest.approx(
         {"mae_n": 0.2, "coverage_before": 0.6, "coverage_after": 0.95})}

@@ -252,13 +252,14 @@ def calibrate_band_command(
           if not json_out else nullcontext()):
         result = calibrate_band(model, seed_list, names, duration_s, bundle, jobs)
     if not dry_run:
-        set_band_scale(observer, result.band_scale, result.record())
+        set_band_scale(observer, result.band_scale, result.record(), result.drift_scale)
     if json_out:
         emit_json({"observer": str(observer), "written": not dry_run, **result.record(),
                    "summary": result.summary()})
         return
     table = Table(title=f"band coverage at {result.level:.0%}: scale {result.previous_scale:.3g}"
-                        f" -> {result.band_scale:.3g}")
+                        f" -> {result.band_scale:.3g}, drift scale "
+                        f"{result.previous_drift_scale:.3g} -> {result.drift_scale:.3g}")
     for column in ("scenario", "seed", "MAE (N)", "coverage before", "coverage after"):
         table.add_column(column)
     for name, entry in result.scenarios.items():
@@ -275,9 +276,14 @@ def calibrate_band_command(
     console.print(summary)
     verb = "measured (not written)" if dry_run else f"written to {observer}"
     lo, hi = result.scale_interval
+    drift_lo, drift_hi = result.drift_interval
+    drift = (f"drift scale {result.drift_scale:.4g} ({drift_lo:.3g}-{drift_hi:.3g}) over the "
+             f"{result.drift_samples} with the share's drift" if result.drift_samples else
+             f"drift scale kept at {result.drift_scale:.4g}: no sample had the share's drift")
     console.print(f"band scale {result.band_scale:.4g} (90 % over resampled seeds: {lo:.3g}-"
-                  f"{hi:.3g}) over {result.samples} hold samples, {verb}, "
-                  f"{time.perf_counter() - start:.0f} s")
+                  f"{hi:.3g}) over {result.samples} hold samples")
+    console.print(drift)
+    console.print(f"{verb}, {time.perf_counter() - start:.0f} s")
 
 
 @app.command("calibrate-hold")

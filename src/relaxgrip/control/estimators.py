@@ -136,6 +136,10 @@ class ForceEstimate:
         Time since the hold onset (s; nan before it).
     band_lo_n, band_hi_n : float
         The estimate's 95 % band (N; nan when the estimator gives none).
+    band_drift_n : float
+        The part of the band's half-width that carries the relaxing share's
+        spread (N; ``observer`` only, 0 while its share fit runs, nan for the
+        others).
     calibration_n : float
         The calibrated closed-loop error taken off ``force_n`` (N;
         :mod:`relaxgrip.learning.hold_bias`); nan when none was.
@@ -149,6 +153,7 @@ class ForceEstimate:
     hold_s: float = NAN
     band_lo_n: float = NAN
     band_hi_n: float = NAN
+    band_drift_n: float = NAN
     calibration_n: float = NAN
 
     @property

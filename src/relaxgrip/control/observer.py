@@ -229,7 +229,8 @@ class ObserverEstimator:
         u = self.unit_force_m()
         if self._onset_t is None:
             half = self.model.onset_rel_ * self.model.band_scale * f
-            return ForceEstimate(f, raw, band_lo_n=f - half, band_hi_n=f + half)
+            return ForceEstimate(f, raw, band_lo_n=f - half, band_hi_n=f + half,
+                                 band_drift_n=0.0)
         hold = t - self._onset_t
         if relax is not None:
             return self._with_share(relax, raw, hold, u, motor_position_mm)
@@ -243,7 +244,7 @@ class ObserverEstimator:
         est = self.scale_n_per_m * u
         half = self.model.band_rel(hold) * self.f_onset_n
         return ForceEstimate(est, raw, self.f_onset_n, hold_s=hold,
-                             band_lo_n=est - half, band_hi_n=est + half)
+                             band_lo_n=est - half, band_hi_n=est + half, band_drift_n=0.0)
 
     def _with_share(self, relax: ForceEstimate, raw: float, hold: float, u: float,
                     motor_mm: float) -> ForceEstimate:
@@ -306,13 +307,14 @@ class ObserverEstimator:
                 self._r_end = r
             est += self._offset_n
         est -= calibration
-        half = self.model.band_rel(hold) * f_on
+        drift = 0.0
         if math.isfinite(self._r_end):
             # What the branches relax after the fit carries the run's share spread.
             unseen = self.scale_n_per_m * self.share * abs(r - self._r_end)
-            half += self.model.band_drift_rel(self.temp_c) * unseen
+            drift = self.model.band_drift_rel(self.temp_c) * unseen
+        half = self.model.band_rel(hold) * f_on + drift
         return ForceEstimate(est, raw, f_on, relax.k_n, relax.tau_s, hold,
-                             band_lo_n=est - half, band_hi_n=est + half,
+                             band_lo_n=est - half, band_hi_n=est + half, band_drift_n=drift,
                              calibration_n=relax.calibration_n)
 
     def contact(self, t_s: float) -> float:

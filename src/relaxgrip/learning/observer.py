@@ -166,20 +166,29 @@ class ObserverModel:
     band_level : float
         Coverage the band is computed for (0.95: the 95 % band).
     band_scale : float
-        Factor on the band's half-width (a recalibration; 1: as identified).
+        Factor on the band's half-width from the held-out residuals (a
+        recalibration; 1: as identified).
+    drift_scale : float
+        Factor on the band's part from the relaxing share's spread
+        (:meth:`band_drift_rel`; a recalibration, 1: as identified).  Files
+        written before the two parts had scales of their own take
+        ``band_scale``, as both parts had then.
     """
 
     def __init__(self, n_terms: int = 3, loading_speed_mm_s: float = LOADING_SPEED_MM_S,
-                 band_level: float = 0.95, band_scale: float = 1.0) -> None:
+                 band_level: float = 0.95, band_scale: float = 1.0,
+                 drift_scale: float = 1.0) -> None:
         self.n_terms = n_terms
         self.loading_speed_mm_s = loading_speed_mm_s
         self.band_level = band_level
         self.band_scale = band_scale
+        self.drift_scale = drift_scale
 
     def get_params(self) -> dict[str, Any]:
         """Hyperparameters (scikit-learn style)."""
         return {"n_terms": self.n_terms, "loading_speed_mm_s": self.loading_speed_mm_s,
-                "band_level": self.band_level, "band_scale": self.band_scale}
+                "band_level": self.band_level, "band_scale": self.band_scale,
+                "drift_scale": self.drift_scale}
 
     # -- evaluation ---------------------------------------------------------------------
 
@@ -220,11 +229,11 @@ class ObserverModel:
         ``share_spread_`` (relative SD between the dataset's holds of one
         temperature); the observer identifies it where Eq. 10 holds, and the
         relaxation that follows elsewhere (another temperature, a new
-        displacement) carries that scatter.  ``band_scale`` applies.
+        displacement) carries that scatter.  ``drift_scale`` applies.
         """
         self._check_fitted()
         z = NormalDist().inv_cdf(0.5 + 0.5 * self.band_level)  # per frame: not scipy's 46 µs
-        return self.band_scale * z * float(np.interp(temp_c, self.temps_c_, self.share_spread_))
+        return self.drift_scale * z * float(np.interp(temp_c, self.temps_c_, self.share_spread_))
 
     def band_rel(self, hold_s: float) -> float:
         """Half-width of the band relative to the onset force, ``hold_s`` into the hold."""
@@ -258,8 +267,9 @@ class ObserverModel:
         if not (1 <= self.n_terms <= 5):
             raise InputError(f"n_terms must be 1-5, got {self.n_terms}")
         if not (self.loading_speed_mm_s > 0 and 0.5 <= self.band_level < 1.0
-                and self.band_scale > 0):
-            raise InputError("need loading_speed_mm_s > 0, 0.5 <= band_level < 1, band_scale > 0")
+                and self.band_scale > 0 and self.drift_scale >= 0):
+            raise InputError("need loading_speed_mm_s > 0, 0.5 <= band_level < 1, band_scale > 0,"
+                             " drift_scale >= 0")
         holds = self._prepare(data)
         train = [h for h in holds if h.split == "train"] or holds
         held = [h for h in holds if h.split != "train"] or holds
@@ -463,10 +473,17 @@ class ObserverModel:
         ValueError
             Missing, non-finite or misshapen arrays, or unknown parameters.
         """
+        params = dict(params)
+        if "band_scale" in params:  # files from before the drift part had its own scale
+            params.setdefault("drift_scale", params["band_scale"])
         try:
-            model = cls(**dict(params))
+            model = cls(**params)
         except TypeError as exc:
             raise ValueError(f"bad observer parameters: {exc}") from exc
+        if not (_finite_at_least(model.band_scale, 0.0, strict=True)
+                and _finite_at_least(model.drift_scale, 0.0, strict=False)):
+            raise ValueError(f"band_scale must be > 0 and drift_scale >= 0, got "
+                             f"{model.band_scale!r} and {model.drift_scale!r}")
         onset = np.asarray(arrays.get("onset_rel_", [np.nan]), dtype=np.float64).ravel()
         if onset.size != 1 or not np.isfinite(onset).all():
             raise ValueError("array 'onset_rel_' missing or bad")
@@ -564,32 +581,56 @@ def load_observer(directory: Path) -> ObserverModel:
         raise ObserverFileError(f"{npz_path}: {one_line(exc)}") from None
 
 
-def set_band_scale(directory: Path, band_scale: float,
-                   record: Mapping[str, Any]) -> ObserverModel:
-    """Rewrite an observer directory with a recalibrated band scale, atomically.
+def set_band_scale(directory: Path, band_scale: float, record: Mapping[str, Any],
+                   drift_scale: float | None = None) -> ObserverModel:
+    """Rewrite an observer directory with a recalibrated band, atomically.
 
     The parameters and the training record are kept; ``record`` (how the
-    scale was measured) becomes the record's ``band_recalibration``.
+    scales were measured) becomes the record's ``band_recalibration``.
+
+    Parameters
+    ----------
+    directory : Path
+        An observer directory (:func:`save_observer`).
+    band_scale : float
+        The new :attr:`ObserverModel.band_scale` (> 0).
+    record : mapping
+        How it was measured.
+    drift_scale : float, optional
+        The new :attr:`ObserverModel.drift_scale` (>= 0); the directory's is
+        kept without one.
 
     Raises
     ------
     ObserverFileError
         The directory cannot be loaded.
     InputError
-        A scale that is not a positive number.
+        A band scale that is not a positive number, or a drift scale that is
+        not a number >= 0.
     """
     directory = Path(directory)
     model = load_observer(directory)
-    if not (math.isfinite(band_scale) and band_scale > 0):
+    if not _finite_at_least(band_scale, 0.0, strict=True):
         raise InputError(f"band scale must be a positive number, got {band_scale}")
+    if drift_scale is not None and not _finite_at_least(drift_scale, 0.0, strict=False):
+        raise InputError(f"drift scale must be a number >= 0, got {drift_scale}")
     manifest = read_manifest(directory / MANIFEST_NAME, OBSERVER_FORMAT, OBSERVER_VERSION,
                              ObserverFileError, "an observer model directory")
     training = manifest.get("training")
     training = dict(training) if isinstance(training, dict) else {}
     training["band_recalibration"] = dict(record)
     model.band_scale = float(band_scale)
+    if drift_scale is not None:
+        model.drift_scale = float(drift_scale)
     save_observer(directory, model, training)
     return model
+
+
+def _finite_at_least(value: Any, low: float, strict: bool) -> bool:
+    """Whether ``value`` is a finite number above ``low`` (or at it, unless ``strict``)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return False
+    return value > low if strict else value >= low
 
 
 def _share_spread(totals: list[FloatArray]) -> FloatArray:
