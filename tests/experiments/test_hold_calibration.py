@@ -15,12 +15,14 @@ from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
 from relaxgrip.experiments.hold_calibration import (
     calibrate_hold,
     calibration_from_holds,
+    calibration_record,
     smooth_bias,
     time_bins,
 )
 from relaxgrip.learning.hold_bias import HoldBias
 from relaxgrip.learning.store import ModelBundle, load_models
 from relaxgrip.learning.training import default_models_dir, load_default_models
+from relaxgrip.twin import TWIN_VERSION
 from tests.clitools import assert_refused_unchanged, run_main
 
 DURATION_S = 12.0
@@ -263,7 +265,92 @@ def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: py
     (["calibrate-hold", "{dir}", "--seeds", "3"], "two seeds"),
     (["calibrate-hold", "{dir}", "--jobs", "0"], "--jobs"),
     (["calibrate-hold", "{dir}", "--duration-s", "0"], "--duration-s"),
+    (["calibrate-hold", "{dir}", "--add", "--duration-s", "6"], "held 280 s"),
+    (["calibrate-hold", "{dir}", "--add", "--targets", "5", "--temps", "40", "--seeds", "1003"],
+     "already has seed 1003"),
+    (["calibrate-hold", "{dir}", "--add", "--targets", "5", "--temps", "41", "--seeds", "7"],
+     "lack the condition"),
 ])
 def test_cli_bad_input(args: list[str], expected: str, tmp_path: Path,
                        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     assert_refused_unchanged(args, expected, default_models_dir(), tmp_path, monkeypatch, capsys)
+
+
+def test_holds_added_to_a_calibration_are_as_if_run_together(uncalibrated: ModelBundle) -> None:
+    """Seeds added at a condition give the calibration of all of them at once; a condition
+    added widens the grid; the earlier holds are kept as they were."""
+    first = calibrate_hold([5.0], [40.0], [1000, 1001], 4.0, models=uncalibrated)
+    grown = calibrate_hold([5.0], [40.0], [1002], 4.0, models=uncalibrated,
+                           add_to=first.record())
+    together = calibrate_hold([5.0], [40.0], [1000, 1001, 1002], 4.0, models=uncalibrated)
+    assert grown.seeds == [1000, 1001, 1002]
+    assert grown.holds == together.holds
+    np.testing.assert_allclose(grown.bias.values_n, together.bias.values_n, atol=1e-9)
+    assert grown.holds["5N 40C"][:2] == first.holds["5N 40C"]
+    wider = calibrate_hold([3.0], [40.0], [1000, 1001], 4.0, models=uncalibrated,
+                           add_to=grown.record())
+    assert wider.targets_n == [3.0, 5.0]
+    assert [len(wider.holds[c]) for c in ("3N 40C", "5N 40C")] == [2, 3]
+
+
+def _record(**changes: object) -> dict[str, object]:
+    base: dict[str, object] = {"targets_n": [5.0], "temps_c": [40.0], "duration_s": 4.0,
+                               "twin_version": TWIN_VERSION,
+                               "holds": {"5N 40C": [_row(1000, [0.1]), _row(1001, [0.2])]}}
+    return {**base, **changes}
+
+
+@pytest.mark.parametrize(("grid", "record", "match"), [
+    (([5.0], [40.0], [1001]), _record(), "5N 40C already has seed 1001"),
+    (([5.0], [40.0], [1002]), _record(duration_s=280.0), "held 280 s, not 4 s"),
+    (([5.0], [40.0], [1002]), _record(twin_version="relaxgrip-twin-v1"), "calibrate anew"),
+    (([3.0], [45.0], [1002]), _record(), "lack the condition 3N 40C"),
+    (([5.0], [40.0], []), _record(), "at least one seed"),
+])
+def test_adding_refuses_holds_that_do_not_fit_before_running_any(
+        grid: tuple[list[float], list[float], list[int]], record: dict[str, object],
+        match: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    import relaxgrip.experiments.hold_calibration as module
+
+    def no_holds(*_: object) -> None:
+        raise AssertionError("a hold ran")
+
+    monkeypatch.setattr(module, "map_holds", no_holds)
+    with pytest.raises(InputError, match=match):
+        calibrate_hold(*grid, duration_s=4.0, add_to=record)
+
+
+def test_the_record_to_add_to_is_the_one_of_these_models(tmp_path: Path) -> None:
+    directory = tmp_path / "models"
+    shutil.copytree(default_models_dir(), directory)
+    manifest = load_models(directory).manifest
+    record = calibration_record(manifest)
+    assert record["holds"]["5N 40C"][0]["seed"] == 1000
+    with pytest.raises(InputError, match="no hold calibration to add to"):
+        calibration_record({k: v for k, v in manifest.items() if k != "hold_bias"})
+    other = json.loads(json.dumps(manifest))
+    other["hold_bias"]["record"]["model_sha256"]["icfn"] = "0" * 64
+    with pytest.raises(InputError, match="measured on other models"):
+        calibration_record(other)
+    other = json.loads(json.dumps(manifest))
+    del other["hold_bias"]["record"]["holds"]["5N 40C"][0]["bins_n"]
+    with pytest.raises(InputError, match="lacks its holds"):
+        calibration_record(other)
+
+
+def test_cli_adds_seeds_and_records_every_command(tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    directory = tmp_path / "models"
+    shutil.copytree(default_models_dir(), directory)
+    grid: list[str | Path] = ["calibrate-hold", directory, "--targets", "5", "--temps", "40",
+                              "--duration-s", "4", "--jobs", "1"]
+    code, _, _ = run_main([*grid, "--seeds", "1000,1001"], monkeypatch, capsys)
+    assert code == 0
+    code, out, _ = run_main([*grid, "--seeds", "1002", "--add"], monkeypatch, capsys)
+    assert code == 0, out
+    assert "1 holds added to 2" in out
+    record = load_models(directory).manifest["hold_bias"]["record"]
+    assert [r["seed"] for r in record["holds"]["5N 40C"]] == [1000, 1001, 1002]
+    assert len(record["commands"]) == 2
+    assert record["commands"][1].endswith("--seeds 1002 --duration-s 4 --add")

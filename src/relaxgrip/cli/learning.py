@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 import time
 from contextlib import nullcontext
 from dataclasses import replace
@@ -303,12 +304,15 @@ def calibrate_hold_command(
     duration_s: Annotated[float, typer.Option(
         "--duration-s", help="Hold length (s); the grid's times reach it.")] = 280.0,
     jobs: Annotated[int, typer.Option("--jobs", help="Holds in parallel.")] = 2,
+    add: Annotated[bool, typer.Option(
+        "--add", help="Add these holds to the directory's calibration (more seeds at a "
+                      "condition, or conditions more) instead of replacing it.")] = False,
     dry_run: Annotated[bool, typer.Option(
         "--dry-run", help="Measure and report; do not rewrite the directory.")] = False,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Measure relax's closed-loop error on a grid of holds; relax takes it off its estimate."""
-    from relaxgrip.experiments.hold_calibration import calibrate_hold
+    from relaxgrip.experiments.hold_calibration import calibrate_hold, calibration_record
     from relaxgrip.fileio import check_writable
     from relaxgrip.learning.store import MANIFEST_NAME, load_models, set_hold_bias
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
@@ -321,28 +325,39 @@ def calibrate_hold_command(
     check_jobs(jobs)
     bundle = load_models(models, icfn_feature_schema=ICFN_SCHEMA,
                          rcfn_feature_schema=RCFN_SCHEMA)
+    earlier = calibration_record(bundle.manifest) if add else None
     if not dry_run:
         check_writable(models / MANIFEST_NAME, InputError)
-    count = len(target_list) * len(temp_list) * len(seed_list)
+    count = len(set(target_list)) * len(set(temp_list)) * len(seed_list)
     start = time.perf_counter()
     with (console.status(f"{count} closed-loop holds …") if not json_out else nullcontext()):
-        result = calibrate_hold(target_list, temp_list, seed_list, duration_s, bundle, jobs)
+        result = calibrate_hold(target_list, temp_list, seed_list, duration_s, bundle, jobs,
+                                add_to=earlier)
+    # How to measure it again: every command whose holds it holds, in order.
+    command = shlex.join(["relaxgrip", "calibrate-hold", str(models), "--targets", targets,
+                          "--temps", temps, "--seeds", seeds, "--duration-s", f"{duration_s:g}",
+                          *(["--add"] if add else [])])
+    earlier_commands = earlier.get("commands", []) if earlier is not None else []
+    record = {**result.record(), "commands": [
+        *(c for c in earlier_commands if isinstance(c, str)), command]}
     if not dry_run:
-        set_hold_bias(models, result.bias, result.record(), measured_on=bundle.manifest)
+        set_hold_bias(models, result.bias, record, measured_on=bundle.manifest)
     if json_out:
         emit_json({"models": str(models), "written": not dry_run, "bias": result.bias.to_dict(),
-                   **result.record()})
+                   **record})
         return
-    table = Table(title=f"relax, estimate − true force over the steady state, uncalibrated "
-                        f"(seeds {seeds})")
-    for column in ("target (N)", "temperature (°C)", "mean (N)", "SE (N)", "MAE (N)"):
+    table = Table(title="relax, estimate − true force over the steady state, uncalibrated")
+    for column in ("target (N)", "temperature (°C)", "seeds", "mean (N)", "SE (N)", "MAE (N)"):
         table.add_column(column, justify="right")
     summary = result.summary()
     for target in result.targets_n:
         for temp in result.temps_c:
-            row = summary[f"{target:g}N {temp:g}C"]
-            table.add_row(f"{target:g}", f"{temp:g}", f"{row['est_error_mean_n']:+.3f}",
-                          f"{row['se_n']:.3f}", f"{row['mae_n']:.3f}")
+            name = f"{target:g}N {temp:g}C"
+            row = summary[name]
+            table.add_row(f"{target:g}", f"{temp:g}", str(len(result.holds[name])),
+                          f"{row['est_error_mean_n']:+.3f}", f"{row['se_n']:.3f}",
+                          f"{row['mae_n']:.3f}")
     console.print(table)
     verb = "measured (not written)" if dry_run else f"written to {models}"
-    console.print(f"{count} holds, {verb}, {time.perf_counter() - start:.0f} s")
+    added = f" added to {sum(map(len, result.holds.values())) - count}" if add else ""
+    console.print(f"{count} holds{added}, {verb}, {time.perf_counter() - start:.0f} s")

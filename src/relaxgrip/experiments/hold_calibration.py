@@ -22,7 +22,7 @@ correction.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -39,7 +39,7 @@ from relaxgrip.experiments.controlled_hold import (
     run_hold,
 )
 from relaxgrip.learning.hold_bias import HoldBias
-from relaxgrip.learning.store import ModelBundle
+from relaxgrip.learning.store import HOLD_BIAS_KEY, ModelBundle, model_checksums
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.perception.features import finger_temperature_c
 from relaxgrip.serialize import json_safe
@@ -48,7 +48,8 @@ from relaxgrip.validate import check_positive
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TARGETS_N", "DEFAULT_TEMPS_C", "MIN_BIN_S", "MIN_SE_N",
            "TIME_EDGES_S",
-           "HoldCalibration", "calibrate_hold", "calibration_from_holds", "smooth_bias",
+           "HoldCalibration", "calibrate_hold", "calibration_from_holds", "calibration_record",
+           "smooth_bias",
            "time_bins"]
 
 FloatArray = NDArray[np.float64]
@@ -248,7 +249,7 @@ def calibrate_hold(targets_n: Sequence[float] = DEFAULT_TARGETS_N,
                    temps_c: Sequence[float] = DEFAULT_TEMPS_C,
                    seeds: Sequence[int] = DEFAULT_SEEDS,
                    duration_s: float = PAPER_DURATION_S, models: ModelBundle | None = None,
-                   n_jobs: int = 1) -> HoldCalibration:
+                   n_jobs: int = 1, add_to: Mapping[str, Any] | None = None) -> HoldCalibration:
     """Run uncalibrated ``relax`` holds on the grid and measure their mean error.
 
     Parameters
@@ -264,18 +265,28 @@ def calibrate_hold(targets_n: Sequence[float] = DEFAULT_TARGETS_N,
         they carry is not used while measuring.
     n_jobs : int
         Holds in parallel.
+    add_to : mapping, optional
+        An earlier calibration's record (:func:`calibration_record` of the
+        models' manifest): its holds are kept and these added, so that a
+        lab's calibration grows where it holds most (more seeds at its
+        working condition, a condition more).  The grid is then the union of
+        both, and every condition of it needs holds.
 
     Raises
     ------
     InputError
-        An empty axis or no seeds, a target or temperature out of range,
-        or conditions whose readings do not order as their setpoints.
+        An empty axis or fewer than two seeds without ``add_to``, a target or
+        temperature out of range, conditions whose readings do not order as
+        their setpoints, or holds to add that do not fit the earlier ones
+        (another hold length or twin, a seed a condition already has).
     """
     targets = _axis(targets_n, "target")
     temps = _axis(temps_c, "temperature")
-    if len(seeds) < 2:
+    if add_to is None and len(seeds) < 2:
         raise InputError("calibrating the hold needs at least two seeds: how sure each "
                          "condition's mean is comes from their spread")
+    if not seeds:
+        raise InputError("adding to the calibration needs at least one seed")
     if min(seeds) < 0:
         raise InputError(f"seeds must be >= 0, got {min(seeds)}")
     for target in targets:
@@ -283,14 +294,82 @@ def calibrate_hold(targets_n: Sequence[float] = DEFAULT_TARGETS_N,
     for temp in temps:
         check_hold_temp_c(temp)
     check_positive(duration_s, "hold duration")
+    base: dict[str, list[dict[str, Any]]] = {}
+    new = {_condition(target, temp) for target in targets for temp in temps}
+    if add_to is not None:
+        base = _holds_to_add_to(add_to, targets, temps, seeds, duration_s)
+        targets = _axis([*targets, *add_to["targets_n"]], "target")
+        temps = _axis([*temps, *add_to["temps_c"]], "temperature")
+        missing = [name for name in (_condition(f, t) for f in targets for t in temps)
+                   if name not in new and name not in base]
+        if missing:
+            raise InputError(f"with these holds the grid would lack the condition {missing[0]}:"
+                             " hold every target at every temperature")
     bundle = replace(models if models is not None else load_default_models(), hold_bias=None)
     jobs = [(target, temp, int(seed), duration_s, bundle)
-            for target in targets for temp in temps for seed in seeds]
+            for target in _axis(targets_n, "target") for temp in _axis(temps_c, "temperature")
+            for seed in seeds]
+    assert {_condition(target, temp) for target, temp, *_ in jobs} == new
     results = map_holds(_one, jobs, n_jobs)
-    holds: dict[str, list[dict[str, Any]]] = {}
+    holds = {name: list(rows) for name, rows in base.items()}
     for (target, temp, *_), row in zip(jobs, results, strict=True):
         holds.setdefault(_condition(target, temp), []).append(row)
-    return calibration_from_holds(targets, temps, [int(s) for s in seeds], duration_s, holds)
+    every = sorted({int(r["seed"]) for rows in holds.values() for r in rows})
+    return calibration_from_holds(targets, temps, every, duration_s, holds)
+
+
+#: What each stored hold of a calibration record carries.
+_HOLD_FIELDS = ("seed", "bins_n", "f_inst_n", "temp_c", "mae_n", "est_error_mean_n")
+
+
+def calibration_record(manifest: Mapping[str, Any]) -> dict[str, Any]:
+    """The calibration a model directory's manifest carries, checked to add holds to.
+
+    Raises
+    ------
+    InputError
+        None there, one measured on other models than the manifest's, or a
+        record without its holds.
+    """
+    section = manifest.get(HOLD_BIAS_KEY)
+    record = section.get("record") if isinstance(section, dict) else None
+    if not isinstance(record, dict):
+        raise InputError("the models carry no hold calibration to add to (run calibrate-hold "
+                         "without --add)")
+    if record.get("model_sha256") != model_checksums(manifest):
+        raise InputError("the models' hold calibration was measured on other models (trained "
+                         "since); run calibrate-hold without --add")
+    holds = record.get("holds")
+    ok = (isinstance(holds, dict) and all(
+        isinstance(rows, list) and all(isinstance(r, dict) and set(_HOLD_FIELDS) <= r.keys()
+                                       for r in rows) for rows in holds.values())
+        and all(isinstance(record.get(k), list) for k in ("targets_n", "temps_c"))
+        and isinstance(record.get("duration_s"), (int, float)))
+    if not ok:
+        raise InputError("the models' hold calibration record lacks its holds, grid or hold "
+                         "length; run calibrate-hold without --add")
+    return dict(record)
+
+
+def _holds_to_add_to(record: Mapping[str, Any], targets: list[float], temps: list[float],
+                     seeds: Sequence[int], duration_s: float) -> dict[str, list[dict[str, Any]]]:
+    """The earlier calibration's holds, checked against the holds to add."""
+    if not math.isclose(float(record["duration_s"]), duration_s):
+        raise InputError(f"the earlier calibration held {record['duration_s']:g} s, not "
+                         f"{duration_s:g} s: add holds of its length")
+    if record.get("twin_version") != TWIN_VERSION:
+        raise InputError(f"the earlier calibration ran on {record.get('twin_version')}, not "
+                         f"{TWIN_VERSION}: calibrate anew")
+    holds: dict[str, list[dict[str, Any]]] = {
+        name: [dict(r) for r in rows] for name, rows in record["holds"].items()}
+    for target in targets:
+        for temp in temps:
+            name = _condition(target, temp)
+            there = sorted({int(r["seed"]) for r in holds.get(name, [])} & set(map(int, seeds)))
+            if there:
+                raise InputError(f"the condition {name} already has seed {there[0]}: add "
+                                 "other seeds")
+    return holds
 
 
 def calibration_from_holds(targets: list[float], temps: list[float], seeds: list[int],
