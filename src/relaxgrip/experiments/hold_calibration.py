@@ -132,6 +132,8 @@ class HoldCalibration:
     targets_n, temps_c : list of float
         The conditions' targets (N) and temperatures (°C).
     seeds : list of int
+        Every seed a condition was held on (holds added to a calibration
+        can give conditions different seeds: ``holds`` says which).
     duration_s : float
     holds : dict of str to list of dict
         Per condition (``"5N 40C"``), each seed's hold: its error per time
@@ -280,8 +282,8 @@ def calibrate_hold(targets_n: Sequence[float] = DEFAULT_TARGETS_N,
         their setpoints, or holds to add that do not fit the earlier ones
         (another hold length or twin, a seed a condition already has).
     """
-    targets = _axis(targets_n, "target")
-    temps = _axis(temps_c, "temperature")
+    new_targets = _axis(targets_n, "target")
+    new_temps = _axis(temps_c, "temperature")
     if add_to is None and len(seeds) < 2:
         raise InputError("calibrating the hold needs at least two seeds: how sure each "
                          "condition's mean is comes from their spread")
@@ -289,29 +291,27 @@ def calibrate_hold(targets_n: Sequence[float] = DEFAULT_TARGETS_N,
         raise InputError("adding to the calibration needs at least one seed")
     if min(seeds) < 0:
         raise InputError(f"seeds must be >= 0, got {min(seeds)}")
-    for target in targets:
+    for target in new_targets:
         check_target_n(target)
-    for temp in temps:
+    for temp in new_temps:
         check_hold_temp_c(temp)
     check_positive(duration_s, "hold duration")
-    base: dict[str, list[dict[str, Any]]] = {}
-    new = {_condition(target, temp) for target in targets for temp in temps}
+    targets, temps = new_targets, new_temps
+    holds: dict[str, list[dict[str, Any]]] = {}
     if add_to is not None:
-        base = _holds_to_add_to(add_to, targets, temps, seeds, duration_s)
-        targets = _axis([*targets, *add_to["targets_n"]], "target")
-        temps = _axis([*temps, *add_to["temps_c"]], "temperature")
+        holds = _holds_to_add_to(add_to, new_targets, new_temps, seeds, duration_s)
+        targets = _axis([*new_targets, *add_to["targets_n"]], "target")
+        temps = _axis([*new_temps, *add_to["temps_c"]], "temperature")
+        new = {_condition(f, t) for f in new_targets for t in new_temps}
         missing = [name for name in (_condition(f, t) for f in targets for t in temps)
-                   if name not in new and name not in base]
+                   if name not in new and name not in holds]
         if missing:
             raise InputError(f"with these holds the grid would lack the condition {missing[0]}:"
                              " hold every target at every temperature")
     bundle = replace(models if models is not None else load_default_models(), hold_bias=None)
     jobs = [(target, temp, int(seed), duration_s, bundle)
-            for target in _axis(targets_n, "target") for temp in _axis(temps_c, "temperature")
-            for seed in seeds]
-    assert {_condition(target, temp) for target, temp, *_ in jobs} == new
+            for target in new_targets for temp in new_temps for seed in seeds]
     results = map_holds(_one, jobs, n_jobs)
-    holds = {name: list(rows) for name, rows in base.items()}
     for (target, temp, *_), row in zip(jobs, results, strict=True):
         holds.setdefault(_condition(target, temp), []).append(row)
     every = sorted({int(r["seed"]) for rows in holds.values() for r in rows})
