@@ -213,7 +213,7 @@ def fit_observer_command(
 @app.command("calibrate-band")
 def calibrate_band_command(
     observer: Annotated[Path, typer.Argument(
-        help="Observer directory (relaxgrip fit-observer); its band scale is rewritten.",
+        help="Observer directory (relaxgrip fit-observer); its band's scales are rewritten.",
         show_default=False)],
     seeds: Annotated[str, typer.Option(
         "--seeds", help="Twin seeds: 12-47, 3,5,8 or a mix (take ones not used to check). "
