@@ -40,20 +40,25 @@ def test_samples_do_not_depend_on_the_scales_the_observer_held_with(
         short_hold: HoldResult) -> None:
     """The same seed with the band's parts at other scales: the same samples (the loop is
     unchanged: the band is only reported), and the coverage of the recorded band is the
-    samples' at the scales it had."""
+    samples' at the scales it had.  A short ramp, so that both parts are there."""
     model = load_default_observer()
     wide = load_default_observer()
     wide.band_scale = 2.0 * model.band_scale
     wide.drift_scale = 3.0 * model.drift_scale
-    other = run_hold("observer", duration_s=8.0, seed=0, observer=wide)
-    x = BandSamples.of(short_hold, model.band_scale, model.drift_scale)
+    ramp = scenario_hold("observer", "ramp", seed=1, duration_s=40.0)
+    other = scenario_hold("observer", "ramp", seed=1, duration_s=40.0, observer=wide)
+    x = BandSamples.of(ramp, model.band_scale, model.drift_scale)
     assert x.size > 100
+    assert np.count_nonzero(x.drift_n > 0) > 100
     y = BandSamples.of(other, wide.band_scale, wide.drift_scale)
     for name in ("error_n", "onset_n", "drift_n"):
         np.testing.assert_allclose(getattr(y, name), getattr(x, name), rtol=1e-9)
-    assert short_hold.metrics()["band_coverage"] == pytest.approx(
+    assert ramp.metrics()["band_coverage"] == pytest.approx(
         x.coverage(model.band_scale, model.drift_scale))
-    np.testing.assert_array_equal(other.estimate_n, short_hold.estimate_n)
+    np.testing.assert_array_equal(other.estimate_n, ramp.estimate_n)
+    standard = BandSamples.of(short_hold, model.band_scale, model.drift_scale)
+    assert short_hold.metrics()["band_coverage"] == pytest.approx(
+        standard.coverage(model.band_scale, model.drift_scale))
 
 
 def test_the_drift_part_is_recorded_once_the_share_fit_ends() -> None:
@@ -102,8 +107,9 @@ def test_fit_scales_by_hand() -> None:
     assert band == 95.0
     assert scale == 38.0  # 19 of the 20 excesses (2, 4, .., 40) within 38
     x = BandSamples(error, onset, drift)
-    assert x.coverage(band, scale) >= 0.95
-    assert BandSamples(error[:100], onset[:100], drift[:100]).coverage(band, scale) >= 0.95
+    assert x.coverage(band, scale) == pytest.approx(114 / 120)  # 95 of 100 and 19 of 20
+    assert x.coverage(band, scale - 1e-9) < x.coverage(band, scale)  # the least such scale
+    assert x.coverage(band, 0.0) == pytest.approx(95 / 120)  # no drift part: none of the 20
     # Covered by the onset part alone: no drift part needed.
     assert fit_scales(BandSamples(np.full(4, 0.5), np.ones(4), np.array([0, 0, 1, 1.0])),
                       0.95) == (0.5, 0.0)
@@ -155,8 +161,8 @@ def test_calibration_sets_the_least_scales_that_cover_the_level() -> None:
 
 
 def test_calibration_sets_the_drift_scale_where_the_drift_is() -> None:
-    """A short ramp: both scales set, each scenario covered at the level by both parts,
-    and an observer that held with no drift part calibrates it all the same."""
+    """A short ramp: both scales those of its samples, and an observer that held with no
+    drift part calibrates it all the same."""
     model = load_default_observer()
     result = calibrate_band(model, [1, 2], ["ramp"], duration_s=40.0, n_jobs=2)
     assert result.drift_samples > 0

@@ -306,6 +306,7 @@ def _record(**changes: object) -> dict[str, object]:
     (([5.0], [40.0], [1002]), _record(twin_version="relaxgrip-twin-v1"), "calibrate anew"),
     (([3.0], [45.0], [1002]), _record(), "lack the condition 3N 40C"),
     (([5.0], [40.0], []), _record(), "at least one seed"),
+    (([3.0, 5.0], [40.0], [1002]), _record(), "3N 40C would have holds on one seed"),
 ])
 def test_adding_refuses_holds_that_do_not_fit_before_running_any(
         grid: tuple[list[float], list[float], list[int]], record: dict[str, object],
@@ -354,3 +355,48 @@ def test_cli_adds_seeds_and_records_every_command(tmp_path: Path,
     assert [r["seed"] for r in record["holds"]["5N 40C"]] == [1000, 1001, 1002]
     assert len(record["commands"]) == 2
     assert record["commands"][1].endswith("--seeds 1002 --duration-s 4 --add")
+
+
+def test_a_stored_null_is_read_back_as_nan(uncalibrated: ModelBundle) -> None:
+    """JSON keeps a nan as null: an earlier hold's null onset force or bin is a missing
+    value when holds are added, not a crash."""
+    first = calibrate_hold([5.0], [40.0], [1000, 1001, 1002], 4.0, models=uncalibrated)
+    record = json.loads(json.dumps(first.record()))
+    record["holds"]["5N 40C"][0]["f_inst_n"] = None
+    record["holds"]["5N 40C"][1]["bins_n"][0] = None
+    grown = calibrate_hold([5.0], [40.0], [1003], 4.0, models=uncalibrated, add_to=record)
+    rows = grown.holds["5N 40C"]
+    assert np.isnan(rows[0]["f_inst_n"])
+    assert np.isnan(rows[1]["bins_n"][0])
+    assert np.all(np.isfinite(grown.bias.values_n))
+
+
+@pytest.mark.parametrize("change", [
+    {"targets_n": ["5"]}, {"duration_s": "280"}, {"holds": {"5N 40C": [{"seed": 1}]}},
+    {"holds": {"5N 40C": [{**_row(1000, [0.1]), "bins_n": [0.1, 0.2]}]}},
+])
+def test_a_malformed_record_is_refused(change: dict[str, object]) -> None:
+    manifest = json.loads(json.dumps(load_default_models().manifest))
+    manifest["hold_bias"]["record"].update(_record(**change))
+    with pytest.raises(InputError, match="malformed"):
+        calibration_record(manifest)
+
+
+def test_a_record_from_before_the_command_list_gets_its_command_back(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    directory = tmp_path / "models"
+    shutil.copytree(default_models_dir(), directory)
+    grid: list[str | Path] = ["calibrate-hold", directory, "--targets", "5", "--temps", "40",
+                              "--duration-s", "4.25", "--jobs", "1"]
+    code, _, _ = run_main([*grid, "--seeds", "1000,1001"], monkeypatch, capsys)
+    assert code == 0
+    path = directory / "manifest.json"
+    manifest = json.loads(path.read_text())
+    del manifest["hold_bias"]["record"]["commands"]
+    path.write_text(json.dumps(manifest))
+    code, out, _ = run_main([*grid, "--seeds", "1002", "--add"], monkeypatch, capsys)
+    assert code == 0, out
+    commands = load_models(directory).manifest["hold_bias"]["record"]["commands"]
+    assert commands[0].endswith("--targets 5 --temps 40 --seeds 1000,1001 --duration-s 4.25")
+    assert commands[1].endswith("--seeds 1002 --duration-s 4.25 --add")

@@ -279,12 +279,21 @@ def calibrate_band_command(
     lo, hi = result.scale_interval
     drift_lo, drift_hi = result.drift_interval
     drift = (f"drift scale {result.drift_scale:.4g} ({drift_lo:.3g}-{drift_hi:.3g}) over the "
-             f"{result.drift_samples} with the share's drift" if result.drift_samples else
+             f"{result.drift_samples} samples with the share's drift" if result.drift_samples else
              f"drift scale kept at {result.drift_scale:.4g}: no sample had the share's drift")
     console.print(f"band scale {result.band_scale:.4g} (90 % over resampled seeds: {lo:.3g}-"
                   f"{hi:.3g}) over {result.samples} hold samples")
     console.print(drift)
     console.print(f"{verb}, {time.perf_counter() - start:.0f} s")
+
+
+def _calibrate_hold_command(models: str, targets: str, temps: str, seeds: str,
+                            duration_s: float, add: bool) -> str:
+    """The ``calibrate-hold`` command line that measures these holds again."""
+    duration = f"{duration_s:g}" if float(f"{duration_s:g}") == duration_s else repr(duration_s)
+    return shlex.join(["relaxgrip", "calibrate-hold", models, "--targets", targets, "--temps",
+                       temps, "--seeds", seeds, "--duration-s", duration,
+                       *(["--add"] if add else [])])
 
 
 @app.command("calibrate-hold")
@@ -334,12 +343,17 @@ def calibrate_hold_command(
         result = calibrate_hold(target_list, temp_list, seed_list, duration_s, bundle, jobs,
                                 add_to=earlier)
     # How to measure it again: every command whose holds it holds, in order.
-    command = shlex.join(["relaxgrip", "calibrate-hold", str(models), "--targets", targets,
-                          "--temps", temps, "--seeds", seeds, "--duration-s", f"{duration_s:g}",
-                          *(["--add"] if add else [])])
-    earlier_commands = earlier.get("commands", []) if earlier is not None else []
-    record = {**result.record(), "commands": [
-        *(c for c in earlier_commands if isinstance(c, str)), command]}
+    command = _calibrate_hold_command(str(models), targets, temps, seeds, duration_s, add)
+    earlier_commands: list[str] = []
+    if earlier is not None:
+        stored = earlier.get("commands")
+        earlier_commands = ([c for c in stored if isinstance(c, str)] if isinstance(stored, list)
+                            else [_calibrate_hold_command(  # a record from before the list
+                                str(models), ",".join(f"{v:g}" for v in earlier["targets_n"]),
+                                ",".join(f"{v:g}" for v in earlier["temps_c"]),
+                                ",".join(str(v) for v in earlier.get("seeds", [])),
+                                float(earlier["duration_s"]), False)])
+    record = {**result.record(), "commands": [*earlier_commands, command]}
     if not dry_run:
         set_hold_bias(models, result.bias, record, measured_on=bundle.manifest)
     if json_out:

@@ -178,8 +178,9 @@ def seed_intervals(samples_by_seed: Sequence[BandSamples], level: float, resampl
 
     Returns
     -------
-    tuple of (lo, hi) for ``band_scale``, then for ``drift_scale`` (nan, nan
-    when no draw had a drift part).
+    tuple of (lo, hi) for ``band_scale``, then for ``drift_scale``
+        Each over the draws that could set it: the drift scale's over those
+        with a drift part (nan, nan when none had one).
     """
     rng = np.random.default_rng(rng_seed)
     n = len(samples_by_seed)
@@ -187,7 +188,10 @@ def seed_intervals(samples_by_seed: Sequence[BandSamples], level: float, resampl
     drift: list[float] = []
     for _ in range(resamples):
         draw = BandSamples.join([samples_by_seed[i] for i in rng.integers(0, n, n)])
-        b, d = fit_scales(draw, level)
+        try:
+            b, d = fit_scales(draw, level)
+        except InputError:  # a draw of seeds that recorded nothing to set the band scale on
+            continue
         band.append(b)
         if d is not None:
             drift.append(d)

@@ -308,6 +308,10 @@ def calibrate_hold(targets_n: Sequence[float] = DEFAULT_TARGETS_N,
         if missing:
             raise InputError(f"with these holds the grid would lack the condition {missing[0]}:"
                              " hold every target at every temperature")
+        thin = sorted(name for name in new if len(holds.get(name, [])) + len(seeds) < 2)
+        if thin:
+            raise InputError(f"the condition {thin[0]} would have holds on one seed: a new "
+                             "condition needs at least two")
     bundle = replace(models if models is not None else load_default_models(), hold_bias=None)
     jobs = [(target, temp, int(seed), duration_s, bundle)
             for target in new_targets for temp in new_temps for seed in seeds]
@@ -340,15 +344,35 @@ def calibration_record(manifest: Mapping[str, Any]) -> dict[str, Any]:
         raise InputError("the models' hold calibration was measured on other models (trained "
                          "since); run calibrate-hold without --add")
     holds = record.get("holds")
-    ok = (isinstance(holds, dict) and all(
-        isinstance(rows, list) and all(isinstance(r, dict) and set(_HOLD_FIELDS) <= r.keys()
-                                       for r in rows) for rows in holds.values())
-        and all(isinstance(record.get(k), list) for k in ("targets_n", "temps_c"))
-        and isinstance(record.get("duration_s"), (int, float)))
+    duration = record.get("duration_s")
+    ok = (isinstance(holds, dict) and _numbers(duration) and _numbers(record.get("targets_n"))
+          and _numbers(record.get("temps_c")))
+    if ok and isinstance(holds, dict) and isinstance(duration, (int, float)):
+        bins = len(time_bins(float(duration)))
+        ok = all(isinstance(rows, list) and all(
+            isinstance(r, dict) and set(_HOLD_FIELDS) <= r.keys() and isinstance(r["seed"], int)
+            and _numbers(r["bins_n"], bins) for r in rows) for rows in holds.values())
     if not ok:
         raise InputError("the models' hold calibration record lacks its holds, grid or hold "
-                         "length; run calibrate-hold without --add")
+                         "length, or has them malformed; run calibrate-hold without --add")
     return dict(record)
+
+
+def _numbers(value: Any, length: int | None = None) -> bool:
+    """A number, or a list of numbers or nulls (``length`` long if given; a null is a nan)."""
+    if length is None and not isinstance(value, list):
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return (isinstance(value, list) and (length is None or len(value) == length)
+            and all(v is None or (isinstance(v, (int, float)) and not isinstance(v, bool))
+                    for v in value))
+
+
+def _stored(row: Mapping[str, Any]) -> dict[str, Any]:
+    """A hold as the record stores it, its nulls (JSON's nan) read back as nan."""
+    def num(v: Any) -> Any:
+        return math.nan if v is None else v
+
+    return {k: [num(x) for x in v] if k == "bins_n" else num(v) for k, v in row.items()}
 
 
 def _holds_to_add_to(record: Mapping[str, Any], targets: list[float], temps: list[float],
@@ -361,7 +385,7 @@ def _holds_to_add_to(record: Mapping[str, Any], targets: list[float], temps: lis
         raise InputError(f"the earlier calibration ran on {record.get('twin_version')}, not "
                          f"{TWIN_VERSION}: calibrate anew")
     holds: dict[str, list[dict[str, Any]]] = {
-        name: [dict(r) for r in rows] for name, rows in record["holds"].items()}
+        name: [_stored(r) for r in rows] for name, rows in record["holds"].items()}
     for target in targets:
         for temp in temps:
             name = _condition(target, temp)
