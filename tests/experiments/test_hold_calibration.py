@@ -339,24 +339,6 @@ def test_the_record_to_add_to_is_the_one_of_these_models(tmp_path: Path) -> None
         calibration_record(other)
 
 
-def test_cli_adds_seeds_and_records_every_command(tmp_path: Path,
-                                                  monkeypatch: pytest.MonkeyPatch,
-                                                  capsys: pytest.CaptureFixture[str]) -> None:
-    directory = tmp_path / "models"
-    shutil.copytree(default_models_dir(), directory)
-    grid: list[str | Path] = ["calibrate-hold", directory, "--targets", "5", "--temps", "40",
-                              "--duration-s", "4", "--jobs", "1"]
-    code, _, _ = run_main([*grid, "--seeds", "1000,1001"], monkeypatch, capsys)
-    assert code == 0
-    code, out, _ = run_main([*grid, "--seeds", "1002", "--add"], monkeypatch, capsys)
-    assert code == 0, out
-    assert "1 holds added to 2" in out
-    record = load_models(directory).manifest["hold_bias"]["record"]
-    assert [r["seed"] for r in record["holds"]["5N 40C"]] == [1000, 1001, 1002]
-    assert len(record["commands"]) == 2
-    assert record["commands"][1].endswith("--seeds 1002 --duration-s 4 --add")
-
-
 def test_a_stored_null_is_read_back_as_nan(uncalibrated: ModelBundle) -> None:
     """JSON keeps a nan as null: an earlier hold's null onset force or bin is a missing
     value when holds are added, not a crash."""
@@ -382,21 +364,31 @@ def test_a_malformed_record_is_refused(change: dict[str, object]) -> None:
         calibration_record(manifest)
 
 
-def test_a_record_from_before_the_command_list_gets_its_command_back(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-        capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_adds_seeds_and_records_every_command(tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """Each --add appends its command; a record from before the list gets its first one
+    rebuilt from what it stores, the hold length exact."""
     directory = tmp_path / "models"
     shutil.copytree(default_models_dir(), directory)
     grid: list[str | Path] = ["calibrate-hold", directory, "--targets", "5", "--temps", "40",
                               "--duration-s", "4.25", "--jobs", "1"]
     code, _, _ = run_main([*grid, "--seeds", "1000,1001"], monkeypatch, capsys)
     assert code == 0
+    code, out, _ = run_main([*grid, "--seeds", "1002", "--add"], monkeypatch, capsys)
+    assert code == 0, out
+    assert "1 holds added to 2" in out
+    record = load_models(directory).manifest["hold_bias"]["record"]
+    assert [r["seed"] for r in record["holds"]["5N 40C"]] == [1000, 1001, 1002]
+    assert len(record["commands"]) == 2
+    assert record["commands"][1].endswith("--seeds 1002 --duration-s 4.25 --add")
     path = directory / "manifest.json"
     manifest = json.loads(path.read_text())
     del manifest["hold_bias"]["record"]["commands"]
     path.write_text(json.dumps(manifest))
-    code, out, _ = run_main([*grid, "--seeds", "1002", "--add"], monkeypatch, capsys)
+    code, out, _ = run_main([*grid, "--seeds", "1003", "--add"], monkeypatch, capsys)
     assert code == 0, out
     commands = load_models(directory).manifest["hold_bias"]["record"]["commands"]
-    assert commands[0].endswith("--targets 5 --temps 40 --seeds 1000,1001 --duration-s 4.25")
-    assert commands[1].endswith("--seeds 1002 --duration-s 4.25 --add")
+    assert commands[0].endswith(
+        "--targets 5 --temps 40 --seeds 1000,1001,1002 --duration-s 4.25")
+    assert commands[1].endswith("--seeds 1003 --duration-s 4.25 --add")
