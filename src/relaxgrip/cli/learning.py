@@ -337,7 +337,7 @@ def calibrate_hold_command(
     earlier = calibration_record(bundle.manifest) if add else None
     if not dry_run:
         check_writable(models / MANIFEST_NAME, InputError)
-    count = len(set(target_list)) * len(set(temp_list)) * len(seed_list)
+    count = len(target_list) * len(temp_list) * len(seed_list)  # parse_floats: no repeats
     start = time.perf_counter()
     with (console.status(f"{count} closed-loop holds …") if not json_out else nullcontext()):
         result = calibrate_hold(target_list, temp_list, seed_list, duration_s, bundle, jobs,

@@ -72,6 +72,7 @@ from relaxgrip.learning.icfn import ICFN
 from relaxgrip.perception.features import ICFN_SCHEMA
 from relaxgrip.physics.fitting import fit_prony
 from relaxgrip.physics.viscoelastic import branch_update
+from relaxgrip.validate import check_finite, check_positive
 
 FloatArray = NDArray[np.float64]
 
@@ -610,10 +611,9 @@ def set_band_scale(directory: Path, band_scale: float, record: Mapping[str, Any]
     """
     directory = Path(directory)
     model = load_observer(directory)
-    if not _finite_at_least(band_scale, 0.0, strict=True):
-        raise InputError(f"band scale must be a positive number, got {band_scale}")
-    if drift_scale is not None and not _finite_at_least(drift_scale, 0.0, strict=False):
-        raise InputError(f"drift scale must be a number >= 0, got {drift_scale}")
+    check_positive(band_scale, "band scale")
+    if drift_scale is not None and check_finite(drift_scale, "drift scale") < 0:
+        raise InputError(f"drift scale must be >= 0, got {drift_scale}")
     manifest = read_manifest(directory / MANIFEST_NAME, OBSERVER_FORMAT, OBSERVER_VERSION,
                              ObserverFileError, "an observer model directory")
     training = manifest.get("training")
