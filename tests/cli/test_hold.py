@@ -84,8 +84,10 @@ def test_budget_prints_the_parts_of_the_estimate_error(monkeypatch, capsys):
     assert code == 0, err
     d = json.loads(out)
     parts = d["error_budget"]
-    # The shipped models are calibrated (relaxgrip calibrate-hold): the calibration is a part.
-    assert set(parts) == {"onset_n", "relaxation_n", "closure_n", "calibration_n", "total_n"}
+    # The shipped models are calibrated (relaxgrip calibrate-hold): the calibration is a part,
+    # and so is the closed chain's reading blended in from 5 s of the hold on.
+    assert set(parts) == {"onset_n", "relaxation_n", "closure_n", "calibration_n", "chain_n",
+                          "total_n"}
     assert parts["total_n"] == pytest.approx(d["est_error_mean_n"], abs=1e-9)
     code, out, err = run_main(["hold", "--duration-s", "14", "--seed", "3", "--budget"],
                               monkeypatch, capsys)
@@ -93,6 +95,7 @@ def test_budget_prints_the_parts_of_the_estimate_error(monkeypatch, capsys):
     assert "error budget" in out
     assert f"= {parts['total_n']:+.3f} N" in " ".join(out.split())
     assert f"calibration {parts['calibration_n']:+.3f} N" in " ".join(out.split())
+    assert f"closed chain {parts['chain_n']:+.3f} N" in " ".join(out.split())
 
 
 def test_missing_or_foreign_models_are_refused(monkeypatch, capsys, tmp_path: Path):

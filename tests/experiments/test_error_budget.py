@@ -29,10 +29,14 @@ def test_the_copy_starts_at_the_onset_and_relaxes_while_the_loop_closes(budgeted
 
 def test_the_parts_add_up_to_the_mean_estimate_error(budgeted) -> None:
     parts = budgeted.error_budget()
-    # The shipped models are calibrated: the calibration taken off is a part of its own.
+    # The shipped models are calibrated: the calibration taken off is a part of its own,
+    # and so is what the closed chain's reading added (from 5 s of the hold on).
     assert parts["calibration_n"] < 0.0
+    assert parts["chain_n"] != 0.0
+    assert list(parts) == ["onset_n", "relaxation_n", "closure_n", "calibration_n", "chain_n",
+                           "total_n"]
     total = (parts["onset_n"] + parts["relaxation_n"] + parts["closure_n"]
-             + parts["calibration_n"])
+             + parts["calibration_n"] + parts["chain_n"])
     assert parts["total_n"] == pytest.approx(total, abs=1e-12)
     assert total == pytest.approx(budgeted.metrics()["est_error_mean_n"], abs=1e-9)
     f_inst = budgeted.series("f_onset_n")[-1]

@@ -182,6 +182,8 @@ def hold(
                       f"{parts['relaxation_n']:+.3f} N, added closure {parts['closure_n']:+.3f} N"
                       + (f", calibration {parts['calibration_n']:+.3f} N"
                          if "calibration_n" in parts else "")
+                      + (f", closed chain {parts['chain_n']:+.3f} N"
+                         if "chain_n" in parts else "")
                       + f" = {parts['total_n']:+.3f} N")
     if figure is not None:
         console.print(f"figure: {figure}")

@@ -75,6 +75,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from relaxgrip.control.chain import ChainParams, ClosedChain
 from relaxgrip.learning.history import (
     LoadingHistory,
     UnrelaxedIcfn,
@@ -143,6 +144,11 @@ class ForceEstimate:
     calibration_n : float
         The calibrated closed-loop error taken off ``force_n`` (N;
         :mod:`relaxgrip.learning.hold_bias`); nan when none was.
+    chain_n : float
+        What the closed chain's reading added to ``force_n`` (N;
+        :mod:`relaxgrip.control.chain`); nan when it added nothing (before its
+        reference time, a rigid object, not ``relax`` or the observer's
+        share fit).
     """
 
     force_n: float
@@ -155,6 +161,7 @@ class ForceEstimate:
     band_hi_n: float = NAN
     band_drift_n: float = NAN
     calibration_n: float = NAN
+    chain_n: float = NAN
 
     @property
     def valid(self) -> bool:
@@ -382,6 +389,11 @@ class RelaxEstimator:
         these models: during the hold it is taken off the estimate, looked
         up at ``F_inst``, the fingers' temperature as read and the hold time.
         Without it the estimate is Eq. 10's alone.
+    chain : ChainParams, optional
+        The closed chain's reading blended into the (calibrated) Eq. 10
+        estimate during the hold (:mod:`relaxgrip.control.chain`); the
+        default blends it with weight 0.2, ``ChainParams(weight=0)`` is the
+        paper's Eq. 10 alone.
     """
 
     name = "relax"
@@ -390,7 +402,8 @@ class RelaxEstimator:
     def __init__(self, icfn: ICFN, rcfn: RCFN, stiffness_window_s: float = 4.0,
                  onset_window_s: float = 0.6, onset_before_s: float = 1.0,
                  smoothing_s: float = 0.2, unrelaxed: UnrelaxedIcfn | None = None,
-                 tare_window_s: float = TARE_WINDOW_S, bias: HoldBias | None = None) -> None:
+                 tare_window_s: float = TARE_WINDOW_S, bias: HoldBias | None = None,
+                 chain: ChainParams | None = None) -> None:
         if not stiffness_window_s > 0:
             raise ValueError(f"stiffness window must be > 0 s, got {stiffness_window_s}")
         if not (onset_window_s >= 0 and onset_before_s >= 0
@@ -403,12 +416,14 @@ class RelaxEstimator:
         self.onset_window_s = onset_window_s
         self.onset_before_s = onset_before_s
         self.bias = bias
+        self.chain = ClosedChain(chain)
         self.reset()
 
     def reset(self) -> None:
         """Forget the grasp."""
         self.icfn.reset()
-        self._temp_c = NAN
+        self.chain.reset()
+        self._temp_c = self._loading_temp_c = NAN
         self.features = RcfnFeatures()
         self._loading: deque[tuple[float, float, float, FloatArray]] = deque()
         self._pose_per_mm: FloatArray = np.zeros(6)
@@ -427,6 +442,10 @@ class RelaxEstimator:
         pose = marker_pose(percept.marker)
         t = percept.t_s
         if self._onset_t is None:
+            if percept.thermal is not None:
+                temp = finger_temperature_c(percept.thermal)
+                if math.isfinite(temp):
+                    self._loading_temp_c = temp
             if pose is not None:
                 self.features.observe(t, pose, motor_position_mm)
             if math.isfinite(raw) and pose is not None:
@@ -461,11 +480,15 @@ class RelaxEstimator:
             return ForceEstimate(NAN, raw, self.f_onset_n, hold_s=hold)
         relaxed = self._k * -math.expm1(-hold / self._tau)  # Eq. 10
         force = self.f_onset_n - relaxed + added
-        if self.bias is None:
-            return ForceEstimate(force, raw, self.f_onset_n, self._k, self._tau, hold)
-        calibration = self.bias.at(self.f_onset_n, self._temp_c, hold)
-        return ForceEstimate(force - calibration, raw, self.f_onset_n, self._k, self._tau, hold,
-                             calibration_n=calibration)
+        calibration = NAN if self.bias is None else self.bias.at(self.f_onset_n, self._temp_c, hold)
+        if self.bias is not None:
+            force -= calibration
+        deflection = None if pose is None else float(pose[0])
+        blended = self.chain.blend(hold, motor_position_mm, deflection, force)
+        return ForceEstimate(blended, raw, self.f_onset_n, self._k, self._tau, hold,
+                             calibration_n=calibration,
+                             chain_n=(blended - force if math.isfinite(self.chain.reading_n)
+                                      else NAN))
 
     def contact(self, t_s: float) -> float:
         """Tare the ICFN on the free-space frames before the contact (returns the tare, N)."""
@@ -478,13 +501,24 @@ class RelaxEstimator:
         self.f_onset_n = NAN
         self._k = self._tau = NAN
         self._loading.clear()
+        self.chain.reset()
         self.icfn.end_hold(t_s)
+
+    def loading_slopes(self) -> tuple[float, float, float]:
+        """What a :class:`~relaxgrip.control.chain.ClosedChain` starts from.
+
+        The closure stiffness (N/mm), the marker's deflection per millimetre of
+        travel (m/mm) and the loading's temperature (°C).
+        """
+        return (self.closure_stiffness_n_per_mm, float(self._pose_per_mm[0]),
+                self._loading_temp_c)
 
     def start_hold(self, t_s: float, motor_position_mm: float) -> None:
         """Fix the onset, its pose and the closure stiffness; start ``F_inst`` on the loading."""
         self._onset_t = t_s
         self._onset_motor = motor_position_mm
         self.closure_stiffness_n_per_mm, self._pose_per_mm = _closure_slopes(self._loading)
+        self.chain.start(*self.loading_slopes())
         before = [raw - self.closure_stiffness_n_per_mm * (m - motor_position_mm)
                   for t, m, raw, _ in self._loading if t >= t_s - self.onset_before_s]
         self._onset_sum, self._onset_n = float(sum(before)), len(before)

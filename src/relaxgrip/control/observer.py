@@ -60,6 +60,7 @@ from collections import deque
 import numpy as np
 from numpy.typing import NDArray
 
+from relaxgrip.control.chain import ChainParams, ClosedChain
 from relaxgrip.control.estimators import (
     TARE_WINDOW_S,
     ForceEstimate,
@@ -77,6 +78,8 @@ from relaxgrip.perception.pipeline import Percept
 __all__ = ["ObserverEstimator"]
 
 NAN = math.nan
+#: The closed chain's share of the observer's estimate once the share fit has ended.
+OBSERVER_CHAIN_WEIGHT = 0.3
 FloatArray = NDArray[np.float64]
 
 
@@ -118,6 +121,11 @@ class ObserverEstimator:
         temperature as read and the hold time), taken off the observer's
         estimate throughout: while Eq. 10 is the estimate it is calibrated
         ``relax``'s.  The share is fitted to Eq. 10 without it.
+    chain : ChainParams, optional
+        With ``rcfn``: the closed chain's reading (:mod:`relaxgrip.control.chain`)
+        blended into the observer's estimate once the share fit has ended,
+        counted from there (give it ``ref_s = inf``).  While the fit runs
+        the estimate is ``relax``'s, its own chain included.
     """
 
     name = "observer"
@@ -130,7 +138,7 @@ class ObserverEstimator:
                  share_bounds: tuple[float, float] = (0.5, 1.5),
                  anchor_window_s: tuple[float, float] = (10.0, 2.0),
                  unrelaxed: UnrelaxedIcfn | None = None,
-                 hold_bias: HoldBias | None = None) -> None:
+                 hold_bias: HoldBias | None = None, chain: ChainParams | None = None) -> None:
         if not (share_fit_s >= 0 and share_fit_temp_k > 0 and share_fit_motor_mm_s > 0):
             raise ValueError("the share fit needs a window >= 0 s and temperature and motor "
                              f"limits > 0, got {share_fit_s} s, {share_fit_temp_k} K, "
@@ -153,12 +161,16 @@ class ObserverEstimator:
         self.share_fit_motor_mm_s = share_fit_motor_mm_s
         self.share_bounds = share_bounds
         self.anchor_window_s = anchor_window_s
+        self.chain = ClosedChain(chain if chain is not None
+                                 else ChainParams(weight=OBSERVER_CHAIN_WEIGHT, ref_s=math.inf))
         self.reset()
 
     def reset(self) -> None:
         """Forget the grasp."""
         self.icfn.reset()
         self.history.reset()
+        self.chain.reset()
+        self._deflection_m: float | None = None
         self.temp_c = NAN
         self._onset_t: float | None = None
         self._sum_f = self._sum_u = 0.0
@@ -224,6 +236,7 @@ class ObserverEstimator:
             if math.isfinite(temp):
                 self.temp_c = temp
         pose = marker_pose(percept.marker)
+        self._deflection_m = None if pose is None else float(pose[0])
         if pose is not None and math.isfinite(self.temp_c):
             self.advance(t, float(pose[0]), self.temp_c)
         u = self.unit_force_m()
@@ -278,10 +291,13 @@ class ObserverEstimator:
                     or abs(self.temp_c - steady_c) > self.share_fit_temp_k
                     or abs(motor_mm - self._motor[0][1]) > self.share_fit_motor_mm_s):
                 self._fitting = False
-        # Eq. 10 itself, the calibration put back: the share is fitted to the model's
-        # relaxation, and the calibration is taken off the observer's estimate below.
+        # Eq. 10 itself, the calibration put back and the closed chain's reading taken
+        # out: the share is fitted to the model's relaxation, and the calibration is
+        # taken off the observer's estimate below.
         calibration = relax.calibration_n if math.isfinite(relax.calibration_n) else 0.0
-        eq10 = relax.force_n + calibration
+        chain = relax.chain_n if math.isfinite(relax.chain_n) else 0.0
+        blended = relax.force_n + calibration
+        eq10 = blended - chain
         if self._fitting and hold > self.onset_window_s and math.isfinite(eq10):
             # F_inst (u - x R) = F_eq10 (u_onset - x R_onset), x = share - 1
             a = f_on * r - eq10 * self._r_on
@@ -295,18 +311,26 @@ class ObserverEstimator:
         self.f_onset_n = f_on
         self.scale_n_per_m = f_on / (self._u_on - excess * self._r_on)
         est = self.scale_n_per_m * (u - excess * r)
-        if self._fitting and math.isfinite(eq10):
-            # Eq. 10 holds: it is the estimate; the observer carries its offset from it.
-            self._offsets.append((hold, eq10 - est))
+        fitting = self._fitting and math.isfinite(blended)
+        if fitting:
+            # Eq. 10 holds: it is the estimate (with the chain's reading blended in, as
+            # relax's); the observer carries its offset from it.
+            self._offsets.append((hold, blended - est))
             while hold - self._offsets[0][0] > self.anchor_window_s[0]:
                 self._offsets.popleft()
-            est = eq10
+            est = blended
         else:
             if math.isnan(self._offset_n):
                 self._offset_n = self._anchor_offset(hold)
                 self._r_end = r
+                self.chain.refer_from(hold)
             est += self._offset_n
         est -= calibration
+        chain_n = relax.chain_n if fitting else NAN
+        if not fitting:
+            blended_est = self.chain.blend(hold, motor_mm, self._deflection_m, est)
+            if math.isfinite(self.chain.reading_n):
+                chain_n, est = blended_est - est, blended_est
         drift = 0.0
         if math.isfinite(self._r_end):
             # What the branches relax after the fit carries the run's share spread.
@@ -315,7 +339,7 @@ class ObserverEstimator:
         half = self.model.band_rel(hold) * f_on + drift
         return ForceEstimate(est, raw, f_on, relax.k_n, relax.tau_s, hold,
                              band_lo_n=est - half, band_hi_n=est + half, band_drift_n=drift,
-                             calibration_n=relax.calibration_n)
+                             calibration_n=relax.calibration_n, chain_n=chain_n)
 
     def contact(self, t_s: float) -> float:
         """Tare the ICFN on the free-space frames before the contact (returns the tare, N)."""
@@ -336,3 +360,4 @@ class ObserverEstimator:
         self.scale_n_per_m = self.f_onset_n = NAN
         if self.relax is not None:
             self.relax.start_hold(t_s, motor_position_mm)
+            self.chain.start(*self.relax.loading_slopes())

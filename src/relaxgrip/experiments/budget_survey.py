@@ -92,10 +92,10 @@ class BudgetSurvey:
 
     @property
     def part_names(self) -> tuple[str, ...]:
-        """:data:`BUDGET_PARTS`, with ``calibration_n`` before the total when the models had one."""
-        if self.budgets and all("calibration_n" in b for b in self.budgets):
-            return (*BUDGET_PARTS[:-1], "calibration_n", BUDGET_PARTS[-1])
-        return BUDGET_PARTS
+        """:data:`BUDGET_PARTS`, with the calibration and chain parts every run had."""
+        extra = tuple(name for name in ("calibration_n", "chain_n")
+                      if self.budgets and all(name in b for b in self.budgets))
+        return (*BUDGET_PARTS[:-1], *extra, BUDGET_PARTS[-1])
 
     def parts(self) -> dict[str, dict[str, float]]:
         """Per part: mean, SD and range over the seeds (N)."""

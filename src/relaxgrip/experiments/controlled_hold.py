@@ -194,7 +194,9 @@ class HoldResult:
           onset) less what that closure adds to the true force, ``F_true - F_fix``;
         * ``calibration_n``, with a calibrated model directory only: the
           calibrated closed-loop error taken off the estimate (negative when
-          the calibration found the estimate high).
+          the calibration found the estimate high);
+        * ``chain_n``, when the closed chain's reading was blended in
+          (:mod:`relaxgrip.control.chain`): what it added to the estimate.
 
         ``total_n`` is their sum, the mean estimate error.
 
@@ -218,12 +220,17 @@ class HoldResult:
         est, truth, fixed = est[ok], truth[ok], fixed[ok]
         calibrated = self.series("calibration_n")[mask][ok]
         calibration = np.nan_to_num(calibrated)
+        chained = self.series("chain_n")[mask][ok]
+        chain = np.nan_to_num(chained)
         f_fix0 = self.fixed_aperture_n[0]
         out = {"onset_n": float(np.mean(f_inst - f_fix0)),
                "relaxation_n": float(np.mean((f_fix0 - fixed) - (f_inst - eq10))),
-               "closure_n": float(np.mean((est + calibration - eq10) - (truth - fixed)))}
+               "closure_n": float(np.mean((est - chain + calibration - eq10)
+                                          - (truth - fixed)))}
         if np.isfinite(calibrated).any():
             out["calibration_n"] = -float(np.mean(calibration))
+        if np.isfinite(chained).any():
+            out["chain_n"] = float(np.mean(chain))
         out["total_n"] = sum(out.values())
         return out
 

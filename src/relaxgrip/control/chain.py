@@ -1,0 +1,195 @@
+"""The closed chain's own reading of the force during a hold, blended into Eq. 10's.
+
+Beyond the paper.  The fingers and the object close one chain: the motor's
+travel since a moment of the hold is taken up by the two fingers' contact
+deflections and the object's compression, and the force changes by the
+object's stiffness times that compression.  So
+
+``F(t) = F(t_ref) + k_obj [(m(t) - m_ref) - (c0(t) - c0_ref) - (c1(t) - c1_ref)]``
+
+with ``m`` the encoder, ``c0`` the contact deflection of the marker's finger
+(the marker's deflection over the share of it the beam model gives at the
+marker) and ``c1`` the other finger's, taken equal to ``c0``: nothing sees
+it.  ``k_obj`` comes from the loading, where the ICFN rose by
+``s = k_obj (1 - 2 rho / g)`` per millimetre of motor travel while the
+marker moved ``rho`` (``g`` the marker's share).
+
+Eq. 10's error during a hold is mostly the relaxing share of the finger
+without the marker (the RCFN reads the marker's finger); the chain's is the
+difference of the two fingers' creep.  The two are nearly independent, and
+a weighted mean of the two is better than either.  On the twin (``relax``,
+5 N, 40 °C, the estimate's mean absolute error over 100-280 s, seeds 0-23,
+from its logged frames): Eq. 10 alone 0.047 N, the chain alone 0.066 N,
+0.8 Eq. 10 + 0.2 chain 0.041 N; with the marker's share anywhere in
+0.58-0.63 (the twin's runs: 0.56-0.63) 0.040-0.041 N.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from relaxgrip.physics.beam import FingerParams, beam_grid, unit_profile_m_per_n
+
+__all__ = ["ChainParams", "ClosedChain", "marker_share"]
+
+NAN = math.nan
+
+
+def marker_share(marker_m: float, contact_m: float, temp_c: float,
+                 finger: FingerParams) -> float:
+    """The marker's deflection per unit of contact deflection, from the beam model.
+
+    Parameters
+    ----------
+    marker_m, contact_m : float
+        Positions of the marker and of the contact along the finger (m).
+    temp_c : float
+        The finger's temperature (°C), taken uniform.
+    finger : FingerParams
+        Finger constants.
+    """
+    z, _ = unit_profile_m_per_n(contact_m, temp_c, finger)
+    x = beam_grid(finger)
+    return float(np.interp(marker_m, x, z) / np.interp(contact_m, x, z))
+
+
+@dataclass(frozen=True)
+class ChainParams:
+    """How the chain's reading is formed and blended.
+
+    Attributes
+    ----------
+    weight : float
+        The chain's share of the blended estimate, in [0, 1]; 0 is Eq. 10
+        alone (the paper's).
+    ref_s : float
+        The chain counts from this hold time (s): before it the estimate is
+        Eq. 10's, and at it the chain starts from Eq. 10's mean over the
+        ``ref_window_s`` before.
+    ref_window_s : float
+        Length of that window (s).
+    marker_m, contact_m : float
+        Marker and contact positions along the finger (m) for the marker's
+        share of the contact deflection.
+    finger : FingerParams
+        Finger constants for the beam model.
+    min_compliant_share : float
+        Below this share of the loading's travel left for the object
+        (``1 - 2 rho / g``) the object's stiffness is not measurable (a
+        rigid object): no chain reading.
+    """
+
+    weight: float = 0.2
+    ref_s: float = 5.0
+    ref_window_s: float = 1.0
+    marker_m: float = 0.060
+    contact_m: float = 0.080
+    finger: FingerParams = field(default_factory=FingerParams)
+    min_compliant_share: float = 0.1
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.weight <= 1.0:
+            raise ValueError(f"chain weight must be in [0, 1], got {self.weight}")
+        if not (self.ref_s >= self.ref_window_s > 0):
+            raise ValueError("the chain's reference window must be > 0 s and end at or after it, "
+                             f"got {self.ref_window_s} s ending at {self.ref_s} s")
+        if not 0.0 < self.marker_m < self.contact_m <= self.finger.length_m:
+            raise ValueError(f"the marker ({self.marker_m} m) must sit between the root and the "
+                             f"contact ({self.contact_m} m) on the finger")
+        if not 0.0 < self.min_compliant_share < 1.0:
+            raise ValueError(f"least compliant share must be in (0, 1), got "
+                             f"{self.min_compliant_share}")
+
+
+class ClosedChain:
+    """One hold's chain reading, blended into the estimate it starts from.
+
+    Call :meth:`start` at the hold onset with the loading's slopes, then
+    :meth:`blend` every frame of the hold.  The chain counts from
+    ``params.ref_s`` of the hold, or from where :meth:`refer_from` says.
+    """
+
+    def __init__(self, params: ChainParams | None = None) -> None:
+        self.params = params if params is not None else ChainParams()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the hold."""
+        self.object_stiffness_n_per_mm = NAN
+        self.share = NAN
+        self.ref_s = self.params.ref_s
+        self._sums = [0.0, 0.0, 0.0]
+        self._n = 0
+        self._ref: tuple[float, float, float] | None = None
+        self._deflection_m = NAN
+        self.reading_n = NAN
+
+    def start(self, stiffness_n_per_mm: float, marker_per_mm_m: float, temp_c: float) -> None:
+        """The hold starts: the object's stiffness from the loading's slopes.
+
+        Parameters
+        ----------
+        stiffness_n_per_mm : float
+            The estimate's rise per millimetre of motor travel over the loading.
+        marker_per_mm_m : float
+            The marker's deflection per millimetre of motor travel (m/mm).
+        temp_c : float
+            The finger's temperature (°C) for the beam model; nan: no chain.
+        """
+        self.reset()
+        p = self.params
+        if p.weight == 0.0 or not math.isfinite(temp_c):
+            return
+        self.share = marker_share(p.marker_m, p.contact_m, temp_c, p.finger)
+        compliant = 1.0 - 2.0 * marker_per_mm_m * 1e3 / self.share
+        if compliant >= p.min_compliant_share and stiffness_n_per_mm > 0:
+            self.object_stiffness_n_per_mm = stiffness_n_per_mm / compliant
+
+    def refer_from(self, hold_s: float) -> None:
+        """Count from ``hold_s`` instead: the reference is the window that starts there."""
+        if self._ref is None:
+            self.ref_s = hold_s + self.params.ref_window_s
+            self._sums, self._n = [0.0, 0.0, 0.0], 0
+
+    def blend(self, hold_s: float, motor_mm: float, deflection_m: float | None,
+              estimate_n: float) -> float:
+        """The estimate with the chain's reading blended in (N).
+
+        Parameters
+        ----------
+        hold_s : float
+            Time since the onset (s).
+        motor_mm : float
+            Encoder (mm).
+        deflection_m : float or None
+            The marker's deflection (m); None when the marker is not seen
+            (the last one seen stands).
+        estimate_n : float
+            The estimate the chain starts from and is blended into (N).
+
+        ``reading_n`` keeps this frame's chain reading (N; nan if none).
+        """
+        if deflection_m is not None and math.isfinite(deflection_m):
+            self._deflection_m = deflection_m
+        p = self.params
+        self.reading_n = NAN
+        if not (math.isfinite(self.object_stiffness_n_per_mm) and math.isfinite(estimate_n)
+                and math.isfinite(self._deflection_m)):
+            return estimate_n
+        if self._ref is None:
+            if hold_s >= self.ref_s - p.ref_window_s:
+                self._sums[0] += estimate_n
+                self._sums[1] += motor_mm
+                self._sums[2] += self._deflection_m
+                self._n += 1
+            if hold_s < self.ref_s or self._n == 0:
+                return estimate_n
+            f_ref, m_ref, x_ref = (s / self._n for s in self._sums)
+            self._ref = (f_ref, m_ref, x_ref)
+        f_ref, m_ref, x_ref = self._ref
+        fingers_mm = 2.0 * (self._deflection_m - x_ref) * 1e3 / self.share
+        self.reading_n = f_ref + self.object_stiffness_n_per_mm * (motor_mm - m_ref - fingers_mm)
+        return (1.0 - p.weight) * estimate_n + p.weight * self.reading_n
