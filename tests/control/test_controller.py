@@ -326,3 +326,13 @@ def test_a_heater_fault_stops_the_grasp_with_the_heaters_off(models):
     truth = backend.twin.observe().truth
     assert truth is not None
     assert truth.finger_temps_c[0][2] < 70.0
+
+
+def test_a_stop_is_the_last_command_at_once(models):
+    """What a dashboard shows between a stop and the next period: the heaters already off."""
+    ctl = GraspController(TwinConfig().rig, make_estimator("icfn", models.icfn, models.rcfn))
+    ctl.command = Command(2.0, (1.0, 0.6), 1.0)  # heating and closing when the stop comes
+    ctl.stop(3.0)
+    assert ctl.command == Command()
+    assert ctl.command.heater_duty == (0.0, 0.0)
+    assert ctl.phase is GraspPhase.STOPPED

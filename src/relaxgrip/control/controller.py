@@ -296,10 +296,16 @@ class GraspController:
         self._enter(t_s, GraspPhase.RELEASE)
 
     def stop(self, t_s: float, reason: str = "operator") -> None:
-        """Stop the motor and switch the heaters off."""
+        """Stop the motor and switch the heaters off.
+
+        The last command becomes the stopped one at once (what a caller sends
+        the gripper now), not at the next :meth:`step`: a state shown between
+        the two had read the heaters on.
+        """
         self.temperature.set_temperature(None)
         self.log.event(t_s, EventKind.STOP, reason)
         self._enter(t_s, GraspPhase.STOPPED)
+        self.command = Command()
 
     # -- the loop ------------------------------------------------------------------------
 
