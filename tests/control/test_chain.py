@@ -19,9 +19,9 @@ def _share() -> float:
     return marker_share(0.060, 0.080, TEMP_C, FingerParams())
 
 
-def _started(weight: float = 0.2, k_obj: float = K_OBJ, ref_s: float = 5.0) -> ClosedChain:
+def _started(weight: float = 0.2, k_obj: float = K_OBJ) -> ClosedChain:
     """A chain started on a loading of two equal fingers and the object in series."""
-    chain = ClosedChain(ChainParams(weight=weight, ref_s=ref_s))
+    chain = ClosedChain(ChainParams(weight=weight))
     stiffness = 1.0 / (1.0 / k_obj + 2.0 / K_FINGER)  # N per mm of travel
     marker_per_mm = _share() * stiffness / K_FINGER * 1e-3  # m of marker per mm of travel
     chain.start(stiffness, marker_per_mm, TEMP_C)
@@ -121,20 +121,3 @@ def test_bad_parameters_are_refused(kwargs: dict[str, float]) -> None:
     with pytest.raises(ValueError, match=r"chain|marker|compliant"):
         ChainParams(**kwargs)  # type: ignore[arg-type]
 
-
-def test_a_chain_referred_later_counts_from_there() -> None:
-    """The observer's chain counts from the end of its share fit, not from ``ref_s``."""
-    chain = _started(weight=1.0, ref_s=math.inf)
-    rows = []
-    for t in np.arange(0.0, 60.0, 1.0 / 30.0):
-        if 29.99 < t < 30.01:
-            chain.refer_from(float(t))
-        c1 = 5.0 / K_FINGER + 0.3 * t / 60.0  # only the other finger creeps
-        motor = 100.0 + c1 - 5.0 / K_FINGER
-        rows.append((float(t), chain.blend(float(t), motor, _share() * 5.0 / K_FINGER * 1e-3,
-                                           5.0)))
-    before = [b for t, b in rows if t < 31.0]
-    assert before == [5.0] * len(before)  # nothing read before the window after 30 s
-    # Over 31-60 s the chain reads finger 1's creep since the window (30-31 s) as force.
-    t_end, last = rows[-1]
-    assert last - 5.0 == pytest.approx(K_OBJ * 0.3 * (t_end - 30.5) / 60.0, rel=2e-3)

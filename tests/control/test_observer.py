@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from relaxgrip.control.chain import ChainParams, ClosedChain
 from relaxgrip.control.observer import ObserverEstimator
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.profiles import (
@@ -78,7 +77,6 @@ def test_observer_tracks_a_continuous_prony_truth() -> None:
     est.reset = ObserverEstimator.reset.__get__(est)  # type: ignore[method-assign]
     est.icfn = type("Stub", (), {"reset": lambda self: None})()
     est.relax = None
-    est.chain = ClosedChain(ChainParams(weight=0.0))
     est.reset()
     got = []
     for t in frames:
@@ -222,7 +220,6 @@ def _stubbed(model: ObserverModel) -> ObserverEstimator:
     est.onset_window_s, est.share_fit_s, est.share_fit_temp_k = 0.6, 280.0, 1.0
     est.share_fit_motor_mm_s, est.share_bounds = 0.3, (0.5, 1.5)
     est.anchor_window_s = (10.0, 2.0)
-    est.chain = ClosedChain(ChainParams(weight=0.0))  # no encoder or marker here
     est.reset()
     return est
 

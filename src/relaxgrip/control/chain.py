@@ -108,8 +108,7 @@ class ClosedChain:
     """One hold's chain reading, blended into the estimate it starts from.
 
     Call :meth:`start` at the hold onset with the loading's slopes, then
-    :meth:`blend` every frame of the hold.  The chain counts from
-    ``params.ref_s`` of the hold, or from where :meth:`refer_from` says.
+    :meth:`blend` every frame of the hold.
     """
 
     def __init__(self, params: ChainParams | None = None) -> None:
@@ -120,7 +119,6 @@ class ClosedChain:
         """Forget the hold."""
         self.object_stiffness_n_per_mm = NAN
         self.share = NAN
-        self.ref_s = self.params.ref_s
         self._sums = [0.0, 0.0, 0.0]
         self._n = 0
         self._ref: tuple[float, float, float] | None = None
@@ -148,12 +146,6 @@ class ClosedChain:
         if compliant >= p.min_compliant_share and stiffness_n_per_mm > 0:
             self.object_stiffness_n_per_mm = stiffness_n_per_mm / compliant
 
-    def refer_from(self, hold_s: float) -> None:
-        """Count from ``hold_s`` instead: the reference is the window that starts there."""
-        if self._ref is None:
-            self.ref_s = hold_s + self.params.ref_window_s
-            self._sums, self._n = [0.0, 0.0, 0.0], 0
-
     def blend(self, hold_s: float, motor_mm: float, deflection_m: float | None,
               estimate_n: float) -> float:
         """The estimate with the chain's reading blended in (N).
@@ -180,12 +172,12 @@ class ClosedChain:
                 and math.isfinite(self._deflection_m)):
             return estimate_n
         if self._ref is None:
-            if hold_s >= self.ref_s - p.ref_window_s:
+            if hold_s >= p.ref_s - p.ref_window_s:
                 self._sums[0] += estimate_n
                 self._sums[1] += motor_mm
                 self._sums[2] += self._deflection_m
                 self._n += 1
-            if hold_s < self.ref_s or self._n == 0:
+            if hold_s < p.ref_s or self._n == 0:
                 return estimate_n
             f_ref, m_ref, x_ref = (s / self._n for s in self._sums)
             self._ref = (f_ref, m_ref, x_ref)

@@ -504,21 +504,13 @@ class RelaxEstimator:
         self.chain.reset()
         self.icfn.end_hold(t_s)
 
-    def loading_slopes(self) -> tuple[float, float, float]:
-        """What a :class:`~relaxgrip.control.chain.ClosedChain` starts from.
-
-        The closure stiffness (N/mm), the marker's deflection per millimetre of
-        travel (m/mm) and the loading's temperature (°C).
-        """
-        return (self.closure_stiffness_n_per_mm, float(self._pose_per_mm[0]),
-                self._loading_temp_c)
-
     def start_hold(self, t_s: float, motor_position_mm: float) -> None:
         """Fix the onset, its pose and the closure stiffness; start ``F_inst`` on the loading."""
         self._onset_t = t_s
         self._onset_motor = motor_position_mm
         self.closure_stiffness_n_per_mm, self._pose_per_mm = _closure_slopes(self._loading)
-        self.chain.start(*self.loading_slopes())
+        self.chain.start(self.closure_stiffness_n_per_mm, float(self._pose_per_mm[0]),
+                         self._loading_temp_c)
         before = [raw - self.closure_stiffness_n_per_mm * (m - motor_position_mm)
                   for t, m, raw, _ in self._loading if t >= t_s - self.onset_before_s]
         self._onset_sum, self._onset_n = float(sum(before)), len(before)
