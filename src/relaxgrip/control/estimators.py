@@ -56,7 +56,12 @@ again).
   ``F_inst``, finger temperature and hold time, so the controller holds the
   force those holds had, not the one its estimate reads.  What is left is
   each run's own offset: mostly the relaxing share of the finger without the
-  marker, which nothing the estimator reads identifies.
+  marker, which the marker does not see (the closed chain reads part of it).
+* From 5 s of the hold on, ``relax`` blends the closed chain's reading into
+  its (calibrated) estimate with weight 0.2 (:mod:`relaxgrip.control.chain`):
+  the motor's travel less both fingers' deflection, through the object's
+  stiffness measured on the loading.  Its error is the fingers' difference
+  in creep, nearly independent of Eq. 10's.
 * ``observer`` (:mod:`relaxgrip.control.observer`): Prony-series branch
   states in reduced time, driven by the measured deflection and temperature,
   for any displacement history and temperature path; started from ``relax``'s
@@ -480,8 +485,9 @@ class RelaxEstimator:
             return ForceEstimate(NAN, raw, self.f_onset_n, hold_s=hold)
         relaxed = self._k * -math.expm1(-hold / self._tau)  # Eq. 10
         force = self.f_onset_n - relaxed + added
-        calibration = NAN if self.bias is None else self.bias.at(self.f_onset_n, self._temp_c, hold)
+        calibration = NAN
         if self.bias is not None:
+            calibration = self.bias.at(self.f_onset_n, self._temp_c, hold)
             force -= calibration
         deflection = None if pose is None else float(pose[0])
         blended = self.chain.blend(hold, motor_position_mm, deflection, force)
