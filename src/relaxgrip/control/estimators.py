@@ -446,11 +446,12 @@ class RelaxEstimator:
         f = self.icfn.smoothed(raw, percept.t_s)
         pose = marker_pose(percept.marker)
         t = percept.t_s
+        # The fingers' temperature on an infrared frame: nan between frames and with no
+        # beam in view, when the last reading stands.
+        temp = NAN if percept.thermal is None else finger_temperature_c(percept.thermal)
         if self._onset_t is None:
-            if percept.thermal is not None:
-                temp = finger_temperature_c(percept.thermal)
-                if math.isfinite(temp):
-                    self._loading_temp_c = temp
+            if math.isfinite(temp):
+                self._loading_temp_c = temp
             if pose is not None:
                 self.features.observe(t, pose, motor_position_mm)
             if math.isfinite(raw) and pose is not None:
@@ -475,8 +476,7 @@ class RelaxEstimator:
         if not math.isfinite(self.f_onset_n):
             return ForceEstimate(NAN, raw, hold_s=hold)
         if percept.thermal is not None:
-            temp = finger_temperature_c(percept.thermal)
-            if math.isfinite(temp):  # no beam in view: the calibration keeps the last reading
+            if math.isfinite(temp):
                 self._temp_c = temp
             x = self.features.build(temp)
             if x is not None:
