@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from tests.clitools import run_main
@@ -55,7 +56,34 @@ def test_compare_json_is_one_object_with_every_hold(monkeypatch, capsys, tmp_pat
         assert hold.keys() >= KEYS
 
 
+def test_seeds_report_each_seed_and_the_mean_over_them(monkeypatch, capsys):
+    code, out, err = run_main(["hold", "--compare", "--seeds", "1,4", "--duration-s", "8",
+                               "--jobs", "2"], monkeypatch, capsys)
+    assert code == 0, err
+    assert "seeds 1,4 (2)" in out
+    assert "95 % CI" in out
+    assert "MAE reduction of relax vs icfn" in out
+    code, out, err = run_main(["hold", "--estimator", "relax", "--seeds", "1,4",
+                               "--duration-s", "8", "--jobs", "1", "--json"], monkeypatch, capsys)
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["seeds"] == [1, 4]
+    assert [r["seed"] for r in d["runs"]["relax"]] == [1, 4]
+    assert d["summary"]["relax"]["mae_n"]["mean"] == pytest.approx(
+        np.mean([r["mae_n"] for r in d["runs"]["relax"]]))
+    code, out, err = run_main(["hold", "--seed", "4", "--duration-s", "8", "--json"],
+                              monkeypatch, capsys)
+    assert json.loads(out)["mae_n"] == d["runs"]["relax"][1]["mae_n"]
+
+
 @pytest.mark.parametrize(("args", "message"), [
+    (["--seeds", "3-1"], "ascending"),
+    (["--seeds", "a"], "seeds must look like"),
+    (["--seeds", "1,1"], "repeat"),
+    (["--seeds", "1,2", "--seed", "3"], "give one of them"),
+    (["--seeds", "1,2", "--plot", "x.png"], "--seeds reports figures over seeds"),
+    (["--seeds", "1,2", "--record", "x.mcap"], "--seeds reports figures over seeds"),
+    (["--seeds", "1,2", "--budget"], "relaxgrip budget --seeds"),
     (["--target-n", "12"], "target force"),
     (["--target-n", "0"], "target force"),
     (["--temp-c", "90"], "safe range"),

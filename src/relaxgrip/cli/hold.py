@@ -6,13 +6,16 @@ import math
 import time
 from contextlib import nullcontext
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.table import Table
 
 from relaxgrip.cli._app import app, console, emit_json, err_console
 from relaxgrip.errors import InputError
+
+if TYPE_CHECKING:
+    from relaxgrip.experiments.hold_survey import HoldSurvey
 
 #: The paper's figures (§V-C): MAE, mean signed error, RMSE of the true force from 5 N.
 PAPER = {
@@ -37,7 +40,12 @@ def hold(
     target_n: Annotated[float, typer.Option("--target-n", help="Target force (N), 0-10.")] = 5.0,
     duration_s: Annotated[float, typer.Option("--duration-s", help="Hold length (s).")] = 280.0,
     temp_c: Annotated[float, typer.Option("--temp-c", help="Finger temperature (°C).")] = 40.0,
-    seed: Annotated[int, typer.Option("--seed", help="Twin seed.")] = 0,
+    seed: Annotated[int | None, typer.Option(
+        "--seed", help="Twin seed [default: 0].", show_default=False)] = None,
+    seeds: Annotated[str | None, typer.Option(
+        "--seeds", help="Run every one of these twin seeds (0-23, 3,5,8 or a mix) and report "
+                        "each figure's mean over them, with its 95 % interval.",
+        show_default=False)] = None,
     models: Annotated[Path | None, typer.Option(
         "--models", help="Model directory (default: the shipped models).", show_default=False)
     ] = None,
@@ -50,7 +58,8 @@ def hold(
     plot: Annotated[Path | None, typer.Option(
         "--plot", help=f"Figure file (.png/.pdf/.svg); --compare default: {DEFAULT_COMPARE_PLOT}.",
         show_default=False)] = None,
-    jobs: Annotated[int, typer.Option("--jobs", help="Parallel holds with --compare.")] = 2,
+    jobs: Annotated[int, typer.Option(
+        "--jobs", help="Parallel holds with --compare or --seeds.")] = 2,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     backend: Annotated[str, typer.Option(
         "--backend", help="twin, or emulator: the twin behind the MCU emulator over a pty "
@@ -89,7 +98,7 @@ def hold(
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
     from relaxgrip.plots.common import check_plot_path
-    from relaxgrip.validate import check_jobs, check_positive
+    from relaxgrip.validate import check_jobs, check_positive, parse_seeds
 
     # Everything is checked before anything starts.
     if estimator not in {k.value for k in EstimatorKind}:
@@ -100,8 +109,16 @@ def hold(
     check_target_n(target_n)
     check_hold_temp_c(temp_c)
     check_positive(duration_s, "--duration-s")
-    if seed < 0:
+    if seed is not None and seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
+    seed_list = None if seeds is None else parse_seeds(seeds)
+    if seed_list is not None:
+        if seed is not None:
+            raise InputError("--seed runs one seed and --seeds several: give one of them")
+        if record is not None or plot is not None or budget:
+            raise InputError("--seeds reports figures over seeds: --record, --plot and --budget "
+                             "are for one run (relaxgrip budget --seeds gives the budget over "
+                             "seeds)")
     check_jobs(jobs)
     if backend not in ("twin", "emulator"):
         raise InputError(f"--backend must be twin or emulator, got {backend!r}")
@@ -110,13 +127,14 @@ def hold(
                          "--estimator NAME and the profiles instead")
     if compare and backend != "twin":
         raise InputError("--compare runs on the twin backend only")
+    seed = 0 if seed is None else seed
     if budget and (compare or estimator != "relax" or backend != "twin"):
         raise InputError("--budget splits relax's Eq. 10 on the twin: use it with "
                          "--estimator relax on the twin backend, without --compare")
     if record is not None and compare:
         raise InputError("--record records one run: record each estimator with "
                          "--estimator NAME --record FILE instead of --compare")
-    if plot is None and compare:
+    if plot is None and compare and seed_list is None:
         plot = DEFAULT_COMPARE_PLOT
     if plot is not None:
         check_plot_path(plot)
@@ -127,6 +145,23 @@ def hold(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
     observer = None if observer_dir is None else load_observer(observer_dir)
     start = time.perf_counter()
+    if seed_list is not None:
+        from relaxgrip.experiments.hold_survey import survey_holds
+
+        names = ("fixed", "icfn", "relax", "observer") if compare else (estimator,)
+        given = {"temp_profile": temp_profile, "target_profile": target_profile,
+                 "disturbance": disturbance}
+        with console.status(f"{len(names) * len(seed_list)} holds …") if not json_out \
+                else nullcontext():
+            survey = survey_holds(names, seed_list, target_n, temp_c, duration_s, bundle,
+                                  observer, backend, temps, targets, push,
+                                  profile_text={k: v for k, v in given.items() if v is not None},
+                                  n_jobs=jobs)
+        if json_out:
+            emit_json(survey.to_dict())
+            return
+        _print_survey(survey, str(seeds), time.perf_counter() - start)
+        return
     if compare:
         with console.status("holding with fixed, icfn, relax and observer …") if not json_out \
                 else nullcontext():
@@ -187,6 +222,44 @@ def hold(
                       + f" = {parts['total_n']:+.3f} N")
     if figure is not None:
         console.print(f"figure: {figure}")
+
+
+def _print_survey(survey: HoldSurvey, seeds: str, seconds: float) -> None:
+    """Per seed each estimator's MAE, then each one's figures over the seeds."""
+    from relaxgrip.experiments.controlled_hold import steady_window_s
+
+    lo, hi = steady_window_s(survey.duration_s)
+    names = list(survey.runs)
+    scenario = "".join(f", {v}" for v in survey.profiles.values())
+    per_seed = Table(title=f"MAE of the true force from the target over {lo:g}–{hi:g} s (N)")
+    for col in ("seed", *names):
+        per_seed.add_column(col, justify="right")
+    for i, seed in enumerate(survey.seeds):
+        per_seed.add_row(str(seed), *(f"{survey.runs[n][i]['mae_n']:.3f}" for n in names))
+    console.print(per_seed)
+    table = Table(title=f"{survey.duration_s:g} s holds at {survey.target_n:g} N, "
+                        f"{survey.temp_c:g} °C{scenario}, seeds {seeds} ({len(survey.seeds)}): "
+                        "the MAE over seeds (N)",
+                  caption="95 % CI: the mean's interval from resampling the seeds; est − true: "
+                          "each run's mean estimate error, mean ± SD over seeds (N); band: the "
+                          "share of the hold the 95 % band covers the true force")
+    for col in ("estimator", "MAE", "95 % CI", "median", "SD", "est − true", "band"):
+        table.add_column(col, justify="left" if col == "estimator" else "right")
+    for name in names:
+        s = survey.summary(name)
+        mae, est = s["mae_n"], s["est_error_mean_n"]
+        cover = s.get("band_coverage")
+        table.add_row(name, f"{mae['mean']:.4f}", f"{mae['ci95'][0]:.3f}–{mae['ci95'][1]:.3f}",
+                      f"{mae['median']:.3f}", f"{mae['sd']:.3f}",
+                      f"{est['mean']:+.3f} ± {est['sd']:.3f}",
+                      "" if cover is None else f"{cover['mean']:.1%}")
+    console.print(table)
+    for key, r in survey.reductions().items():
+        paper = PAPER_REDUCTION.get(key)
+        ref = f" (paper {paper:.1%})" if paper is not None else ""
+        console.print(f"MAE reduction of relax {key.replace('_', ' ')}: {r['reduction']:.1%} "
+                      f"[{r['ci95'][0]:.1%}, {r['ci95'][1]:.1%}]{ref}")
+    console.print(f"{survey.twin_version}, {seconds:.1f} s")
 
 
 def _print_table(rows: dict[str, dict[str, Any]], reductions: dict[str, float],
