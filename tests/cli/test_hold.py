@@ -74,6 +74,11 @@ def test_seeds_report_each_seed_and_the_mean_over_them(monkeypatch, capsys):
     code, out, err = run_main(["hold", "--seed", "4", "--duration-s", "8", "--json"],
                               monkeypatch, capsys)
     assert json.loads(out)["mae_n"] == d["runs"]["relax"][1]["mae_n"]
+    # One seed has no spread: no interval, no NaN printed.
+    code, out, err = run_main(["hold", "--seeds", "4", "--duration-s", "8"], monkeypatch, capsys)
+    assert code == 0, err
+    assert f"{d['runs']['relax'][1]['mae_n']:.4f}" in out
+    assert "nan" not in out
 
 
 @pytest.mark.parametrize(("args", "message"), [

@@ -249,16 +249,20 @@ def _print_survey(survey: HoldSurvey, seeds: str, seconds: float) -> None:
         s = survey.summary(name)
         mae, est = s["mae_n"], s["est_error_mean_n"]
         cover = s.get("band_coverage")
-        table.add_row(name, f"{mae['mean']:.4f}", f"{mae['ci95'][0]:.3f}–{mae['ci95'][1]:.3f}",
-                      f"{mae['median']:.3f}", f"{mae['sd']:.3f}",
-                      f"{est['mean']:+.3f} ± {est['sd']:.3f}",
+        one = len(survey.seeds) == 1  # one seed has no spread and no interval
+        table.add_row(name, f"{mae['mean']:.4f}",
+                      "–" if one else f"{mae['ci95'][0]:.3f}–{mae['ci95'][1]:.3f}",
+                      f"{mae['median']:.3f}", "–" if one else f"{mae['sd']:.3f}",
+                      f"{est['mean']:+.3f}" + ("" if one else f" ± {est['sd']:.3f}"),
                       "" if cover is None else f"{cover['mean']:.1%}")
     console.print(table)
     for key, r in survey.reductions().items():
         paper = PAPER_REDUCTION.get(key)
         ref = f" (paper {paper:.1%})" if paper is not None else ""
-        console.print(f"MAE reduction of relax {key.replace('_', ' ')}: {r['reduction']:.1%} "
-                      f"[{r['ci95'][0]:.1%}, {r['ci95'][1]:.1%}]{ref}")
+        lo, hi = r["ci95"]
+        interval = f" [{lo:.1%}, {hi:.1%}]" if math.isfinite(lo) else ""
+        console.print(f"MAE reduction of relax {key.replace('_', ' ')}: {r['reduction']:.1%}"
+                      f"{interval}{ref}")
     console.print(f"{survey.twin_version}, {seconds:.1f} s")
 
 
