@@ -216,10 +216,11 @@ def calibrate_band_command(
         help="Observer directory (relaxgrip fit-observer); its band's scales are rewritten.",
         show_default=False)],
     seeds: Annotated[str, typer.Option(
-        "--seeds", help="Twin seeds: 12-47, 3,5,8 or a mix (take ones not used to check). "
+        "--seeds", help="Twin seeds: 3000-3035, 3,5,8 or a mix (take ones not used to check "
+                        "or to design with; the shipped band: 3000-3035). "
                         "Each run counts about once: 12 seeds leave the scale about ±20 % "
                         "unsure, 36 about ±13 % (the reported interval).")
-    ] = "12-47",
+    ] = "3000-3035",
     scenarios: Annotated[str, typer.Option(
         "--scenarios", help="Comma-separated: standard, ramp (40 -> 55 °C from 150 s), "
                             "step (5 -> 3 N at 150 s), push (2 N from 200 s).")

@@ -664,7 +664,7 @@ def fit_observer(data_dir: Path, out_dir: Path, icfn: ICFN | None = None) -> Obs
     ``relaxgrip fit-observer --data DIR --out DIR`` runs this; the shipped
     parameters came from ``relaxgrip dataset build --icfn-samples 0
     --rcfn-sequences 810 --seed 3``, their band scaled by ``relaxgrip
-    calibrate-band DIR --seeds 12-47`` (see the manifest's training record).
+    calibrate-band DIR --seeds 3000-3035`` (see the manifest's training record).
 
     Parameters
     ----------
