@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -219,6 +220,7 @@ def _stubbed(model: ObserverModel) -> ObserverEstimator:
     est.relax = _RelaxStub()  # type: ignore[assignment]
     est.onset_window_s, est.share_fit_s, est.share_fit_temp_k = 0.6, 280.0, 1.0
     est.share_fit_motor_mm_s, est.share_bounds = 0.3, (0.5, 1.5)
+    est.share_fit_deflection_rel, est.share_fit_settle_s = 0.02, 5.0
     est.anchor_window_s = (10.0, 2.0)
     est.reset()
     return est
@@ -247,7 +249,7 @@ def test_branch_share_is_fitted_to_eq10_while_it_holds_and_kept_after() -> None:
         truth = 5.0 * run.unit_force_m() / u_onset
         eq10 = truth + 0.5 * (temp - 40.0) / 15.0  # Eq. 10 drifts off as the finger heats
         got = est._with_share(ForceEstimate(eq10, math.nan), math.nan, float(t) - onset,
-                              est.unit_force_m(), 100.0)
+                              est.unit_force_m(), 100.0, d)
         if t > 130.0:
             errors_after.append(got.force_n - truth)
     assert est.share == pytest.approx(0.8, abs=0.01)
@@ -263,14 +265,38 @@ def test_a_moving_motor_ends_the_share_fit() -> None:
         est.advance(float(t), 1e-3, 40.0)
         motor = 100.0 if t < 10.0 else 100.0 - 2.0 * min(t - 10.0, 1.0)  # a new target at 10 s
         est._with_share(ForceEstimate(5.0, math.nan), math.nan, float(t), est.unit_force_m(),
-                        motor)
+                        motor, 1e-3)
         if i == 200:
             assert est._fitting
     assert not est._fitting
 
 
+def test_a_push_that_moves_the_marker_but_not_the_motor_ends_the_share_fit() -> None:
+    """The controller reading Eq. 10 barely moves the motor under a push, but the marker's
+    finger gives 5 % in a second: that ends the fit.  Creep of 1 % a second does not,
+    nor a faster one in the first seconds, while the hold settles."""
+    from relaxgrip.control.estimators import ForceEstimate
+
+    def run(deflection: Callable[[float], float]) -> float:
+        est = _stubbed(_model())
+        for t in np.arange(0.0, 30.0, 1.0 / 30.0):
+            d = deflection(float(t))
+            est.advance(float(t), d, 40.0)
+            est._with_share(ForceEstimate(5.0, math.nan), math.nan, float(t),
+                            est.unit_force_m(), 100.0, d)
+            if not est._fitting:
+                return float(t)
+        return math.inf
+
+    assert run(lambda t: 1e-3 * (1.0 + 0.01 * t)) == math.inf
+    assert run(lambda t: 1e-3 * (1.0 + 0.1 * -math.expm1(-t / 2.0))) == math.inf  # 5 %/s at 0
+    assert 20.0 < run(lambda t: 1e-3 * (1.0 - 0.05 * min(max(t - 20.0, 0.0), 1.0))) < 20.5
+
+
 @pytest.mark.parametrize("kwargs", [{"share_fit_s": -1.0}, {"share_fit_temp_k": 0.0},
                                     {"share_fit_motor_mm_s": 0.0}, {"share_bounds": (1.1, 1.5)},
+                                    {"share_fit_deflection_rel": 0.0},
+                                    {"share_fit_settle_s": -1.0},
                                     {"share_bounds": (0.0, 1.5)},
                                     {"anchor_window_s": (2.0, 10.0)}])
 def test_share_fit_settings_that_cannot_work_are_refused(kwargs: dict[str, object]) -> None:
@@ -296,7 +322,7 @@ def test_eq10_is_the_estimate_while_it_holds_and_the_observer_continues_from_it(
         eq10 = (5.05 * u / est._u_on if math.isfinite(est._u_on) else 5.05)
         eq10 += 0.01 * rng.standard_normal()
         motor = 100.0 if t < 20.0 else 100.0 - 2.0 * min(t - 20.0, 1.0)
-        got = est._with_share(ForceEstimate(eq10, math.nan), math.nan, float(t), u, motor)
+        got = est._with_share(ForceEstimate(eq10, math.nan), math.nan, float(t), u, motor, d)
         own = est.scale_n_per_m * (u - (est.share - 1.0) * est.relaxed_m())
         if est._fitting:
             assert got.force_n == eq10
@@ -343,9 +369,10 @@ def test_band_widens_after_the_fit_by_what_a_share_error_would_move_the_estimate
             continue
         u = est.unit_force_m()
         eq10 = 5.0 * u / est._u_on if math.isfinite(est._u_on) else 5.0  # share 1 fits
-        got = est._with_share(ForceEstimate(eq10, math.nan), math.nan, float(t) - 1.2, u, motor)
+        got = est._with_share(ForceEstimate(eq10, math.nan), math.nan, float(t) - 1.2, u, motor,
+                              d)
         ref = plain._with_share(ForceEstimate(eq10, math.nan), math.nan, float(t) - 1.2,
-                                plain.unit_force_m(), motor)
+                                plain.unit_force_m(), motor, d)
         assert got.force_n == ref.force_n
         assert ref.band_hi_n - ref.force_n == pytest.approx(no_spread.band_rel(t - 1.2) * 5.0)
         rows.append((t, est._fitting, got.force_n, got.band_hi_n - got.force_n,
