@@ -24,6 +24,7 @@ named ``a2b``: they map points given in frame ``a`` to frame ``b``):
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -329,17 +330,28 @@ class RgbCameraMount:
 
     @property
     def cam2finger(self) -> FloatArray:
-        """Camera frame to finger frame."""
-        # Looking along the finger: camera z = finger x, camera x = finger z.
-        along = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
-        # Turning towards the object (-z of the finger) is a rotation about the finger's y.
-        toe = rotation_y(math.radians(self.toe_in_deg))
-        return transform_from(toe @ along, self.position_m)
+        """Camera frame to finger frame (read-only: every frame's render and pose use it)."""
+        return _camera_mount(tuple(self.position_m), self.toe_in_deg)[0]
 
     @property
     def finger2cam(self) -> FloatArray:
-        """Finger frame to camera frame."""
-        return invert_transform(self.cam2finger)
+        """Finger frame to camera frame (read-only)."""
+        return _camera_mount(tuple(self.position_m), self.toe_in_deg)[1]
+
+
+@functools.lru_cache(maxsize=16)
+def _camera_mount(position_m: tuple[float, ...], toe_in_deg: float
+                  ) -> tuple[FloatArray, FloatArray]:
+    """The RGB camera's ``cam2finger`` and ``finger2cam`` for its mount, built once."""
+    # Looking along the finger: camera z = finger x, camera x = finger z.
+    along = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
+    # Turning towards the object (-z of the finger) is a rotation about the finger's y.
+    toe = rotation_y(math.radians(toe_in_deg))
+    cam2finger = transform_from(toe @ along, position_m)
+    finger2cam = invert_transform(cam2finger)
+    for m in (cam2finger, finger2cam):
+        m.flags.writeable = False
+    return cam2finger, finger2cam
 
 
 @dataclass(frozen=True)

@@ -44,6 +44,8 @@ _NOISE_PAD = 48
 _NOISE_BANKS = 3
 #: Sub-pixel bits for OpenCV's drawing functions.
 _SHIFT = 4
+#: A filled circle as OpenCV draws it: centre and radius on the sub-pixel grid, colour.
+_Circle = tuple[tuple[int, int], int, tuple[float, ...]]
 
 
 @dataclass(frozen=True)
@@ -93,8 +95,8 @@ class RgbRenderer:
         self._tint = tuple(np.float32(c) for c in _TAB_TINT)
         self._background = _background(self.intrinsics.shape)
         self._noise_pos, self._noise_neg = _noise_banks(self.intrinsics.shape, config.noise_dn)
-        self._scene_cache: tuple[tuple[RgbObject, ...], Image] | None = None
-        self._last_objects: tuple[RgbObject, ...] | None = None
+        self._scene_cache: tuple[tuple[_Circle, ...], Image] | None = None
+        self._last_circles: tuple[_Circle, ...] | None = None
 
     def marker_corners_px(self, marker2cam: FloatArray) -> FloatArray:
         """Image positions of the marker's four corners (OpenCV order), (4, 2)."""
@@ -140,39 +142,43 @@ class RgbRenderer:
     def _scene(self, objects: tuple[RgbObject, ...]) -> Image:
         """A new image of the background with ``objects`` drawn, far ones first.
 
-        Objects keep still through a hold at a fixed aperture: a scene seen in
-        two frames running is kept and copied from then on.
+        Objects keep still through a hold: a scene whose circles fall on the
+        same sixteenth of a pixel (OpenCV's sub-pixel grid, so the same pixels)
+        in two frames running is kept and copied from then on.  Through a hold
+        the controller's closure moves them by thousandths of a pixel a frame.
         """
+        circles = tuple(c for obj in sorted(objects, key=lambda o: -o.center_cam_m[2])
+                        for c in self._circles(obj))
         cached = self._scene_cache
-        if cached is not None and cached[0] == objects:
+        if cached is not None and cached[0] == circles:
             return cached[1].copy()
         img = self._background.copy()
-        for obj in sorted(objects, key=lambda o: -o.center_cam_m[2]):
-            self._draw_object(img, obj)
-        if objects == self._last_objects:
-            self._scene_cache = (objects, img.copy())
-        self._last_objects = objects
+        for centre, radius, colour in circles:
+            cv2.circle(img, centre, radius, colour, -1, cv2.LINE_AA, _SHIFT)
+        if circles == self._last_circles:
+            self._scene_cache = (circles, img.copy())
+        self._last_circles = circles
         return img
 
-    def _draw_object(self, img: Image, obj: RgbObject) -> None:
+    def _circles(self, obj: RgbObject) -> tuple[_Circle, ...]:
+        """The object's shaded disc as OpenCV circles on the sub-pixel grid (none if unseen)."""
         x, y, z = obj.center_cam_m
         if z <= obj.radius_m + 0.005:
-            return  # touching or behind the lens: nothing sensible to draw
+            return ()  # touching or behind the lens: nothing sensible to draw
         (u, v), = self.intrinsics.project([[x, y, z]])
         r_px = self.intrinsics.fx_px * obj.radius_m / math.sqrt(z * z - obj.radius_m**2)
         h, w = self.intrinsics.shape
         if r_px < 0.5 or u + r_px < 0 or u - r_px > w or v + r_px < 0 or v - r_px > h:
-            return
+            return ()
         base = tuple(0.75 * c for c in obj.color_rgb)
         lit = tuple(min(255.0, 1.05 * c + 10.0) for c in obj.color_rgb)
         scale = 1 << _SHIFT
 
-        def circle(cu: float, cv: float, radius: float, colour: tuple[float, ...]) -> None:
-            cv2.circle(img, (round(cu * scale), round(cv * scale)), max(1, round(radius * scale)),
-                       colour, -1, cv2.LINE_AA, _SHIFT)
+        def circle(cu: float, cv: float, radius: float, colour: tuple[float, ...]) -> _Circle:
+            return (round(cu * scale), round(cv * scale)), max(1, round(radius * scale)), colour
 
-        circle(u, v, r_px, base)
-        circle(u - 0.25 * r_px, v - 0.25 * r_px, 0.55 * r_px, lit)
+        return (circle(u, v, r_px, base),
+                circle(u - 0.25 * r_px, v - 0.25 * r_px, 0.55 * r_px, lit))
 
     def _draw_tab(self, img: Image, marker2cam: FloatArray) -> None:
         """Warp the marker tab onto ``img`` at ``supersample`` times the resolution.
