@@ -15,7 +15,12 @@ def test_seed_lists(text: str, seeds: list[int]) -> None:
     assert parse_seeds(text) == seeds
 
 
-@pytest.mark.parametrize("text", ["", "a-b", "3-1", "-2", "1,1", "2-4,3"])
+def test_ten_thousand_seeds_are_the_most() -> None:
+    assert len(parse_seeds("0-9999")) == 10_000
+
+
+@pytest.mark.parametrize("text", ["", "a-b", "3-1", "-2", "1,1", "2-4,3", "0-100000000",
+                                  "0-9999,20000"])
 def test_bad_seed_lists_are_refused(text: str) -> None:
     with pytest.raises(InputError, match="seed"):
         parse_seeds(text)

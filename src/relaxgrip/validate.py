@@ -55,6 +55,10 @@ def check_jobs(value: int, name: str = "--jobs") -> int:
     return value
 
 
+#: The most seeds one command takes: each is a run of minutes.
+MAX_SEEDS = 10_000
+
+
 def parse_seeds(text: str) -> list[int]:
     """Seeds from ``10-15``, ``3,5,8`` or a mix (``0-2,7``); non-negative, no repeats.
 
@@ -73,6 +77,8 @@ def parse_seeds(text: str) -> list[int]:
             raise InputError(f"seeds must look like 10-15 or 3,5,8, got {text!r}") from None
         if first < 0 or last < first:
             raise InputError(f"seed range {part.strip()!r} must be non-negative and ascending")
+        if len(seeds) + last - first + 1 > MAX_SEEDS:
+            raise InputError(f"at most {MAX_SEEDS} seeds (each is a run), got more in {text!r}")
         seeds.extend(range(first, last + 1))
     if len(set(seeds)) != len(seeds):
         raise InputError(f"seeds repeat in {text!r}")

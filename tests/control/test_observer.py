@@ -221,6 +221,7 @@ def _stubbed(model: ObserverModel) -> ObserverEstimator:
     est.onset_window_s, est.share_fit_s, est.share_fit_temp_k = 0.6, 280.0, 1.0
     est.share_fit_motor_mm_s, est.share_bounds = 0.3, (0.5, 1.5)
     est.share_fit_deflection_rel, est.share_fit_settle_s = 0.02, 5.0
+    est.share_fit_deflection_floor_m = 10e-6
     est.anchor_window_s = (10.0, 2.0)
     est.reset()
     return est
@@ -274,7 +275,8 @@ def test_a_moving_motor_ends_the_share_fit() -> None:
 def test_a_push_that_moves_the_marker_but_not_the_motor_ends_the_share_fit() -> None:
     """The controller reading Eq. 10 barely moves the motor under a push, but the marker's
     finger gives 5 % in a second: that ends the fit.  Creep of 1 % a second does not,
-    nor a faster one in the first seconds, while the hold settles."""
+    nor a faster one in the first seconds, while the hold settles, nor the marker's
+    noise on a light grip."""
     from relaxgrip.control.estimators import ForceEstimate
 
     def run(deflection: Callable[[float], float]) -> float:
@@ -290,12 +292,22 @@ def test_a_push_that_moves_the_marker_but_not_the_motor_ends_the_share_fit() -> 
 
     assert run(lambda t: 1e-3 * (1.0 + 0.01 * t)) == math.inf
     assert run(lambda t: 1e-3 * (1.0 + 0.1 * -math.expm1(-t / 2.0))) == math.inf  # 5 %/s at 0
-    assert 20.0 < run(lambda t: 1e-3 * (1.0 - 0.05 * min(max(t - 20.0, 0.0), 1.0))) < 20.5
+    assert 20.0 < run(lambda t: 1e-3 * (1.0 - 0.05 * min(max(t - 20.0, 0.0) / 0.2, 1.0))) < 20.5
+    # A light grip: 0.25 mm with 1 % of frame noise (two frames differ by 1.4 % SD);
+    # the averages over 0.2 s and the 10 µm floor keep it fitting, a 50 µm push does not.
+    noise = np.random.default_rng(3).standard_normal(900)
+
+    def light(t: float, push_m: float = 0.0) -> float:
+        return float(0.25e-3 * (1.0 + 0.01 * noise[round(t * 30.0)]) - push_m * (t >= 20.0))
+
+    assert run(light) == math.inf
+    assert 20.0 < run(lambda t: light(t, 50e-6)) < 20.5
 
 
 @pytest.mark.parametrize("kwargs", [{"share_fit_s": -1.0}, {"share_fit_temp_k": 0.0},
                                     {"share_fit_motor_mm_s": 0.0}, {"share_bounds": (1.1, 1.5)},
                                     {"share_fit_deflection_rel": 0.0},
+                                    {"share_fit_deflection_floor_m": -1e-6},
                                     {"share_fit_settle_s": -1.0},
                                     {"share_bounds": (0.0, 1.5)},
                                     {"anchor_window_s": (2.0, 10.0)}])

@@ -240,20 +240,20 @@ def _print_survey(survey: HoldSurvey, seeds: str, seconds: float) -> None:
     table = Table(title=f"{survey.duration_s:g} s holds at {survey.target_n:g} N, "
                         f"{survey.temp_c:g} °C{scenario}, seeds {seeds} ({len(survey.seeds)}): "
                         "the MAE over seeds (N)",
-                  caption="95 % CI: the mean's interval from resampling the seeds; est − true: "
+                  caption="95 % CI: the mean's Student-t interval over the seeds; est − true: "
                           "each run's mean estimate error, mean ± SD over seeds (N); band: the "
                           "share of the hold the 95 % band covers the true force")
     for col in ("estimator", "MAE", "95 % CI", "median", "SD", "est − true", "band"):
         table.add_column(col, justify="left" if col == "estimator" else "right")
     for name in names:
         s = survey.summary(name)
-        mae, est = s["mae_n"], s["est_error_mean_n"]
-        cover = s.get("band_coverage")
-        one = len(survey.seeds) == 1  # one seed has no spread and no interval
+        mae, est, cover = s["mae_n"], s.get("est_error_mean_n"), s.get("band_coverage")
+        spread = mae["n"] > 1  # one seed has no spread and no interval
         table.add_row(name, f"{mae['mean']:.4f}",
-                      "–" if one else f"{mae['ci95'][0]:.3f}–{mae['ci95'][1]:.3f}",
-                      f"{mae['median']:.3f}", "–" if one else f"{mae['sd']:.3f}",
-                      f"{est['mean']:+.3f}" + ("" if one else f" ± {est['sd']:.3f}"),
+                      f"{mae['ci95'][0]:.3f}–{mae['ci95'][1]:.3f}" if spread else "–",
+                      f"{mae['median']:.3f}", f"{mae['sd']:.3f}" if spread else "–",
+                      "–" if est is None else f"{est['mean']:+.3f}"
+                      + (f" ± {est['sd']:.3f}" if est["n"] > 1 else ""),
                       "" if cover is None else f"{cover['mean']:.1%}")
     console.print(table)
     for key, r in survey.reductions().items():
@@ -263,6 +263,9 @@ def _print_survey(survey: HoldSurvey, seeds: str, seconds: float) -> None:
         interval = f" [{lo:.1%}, {hi:.1%}]" if math.isfinite(lo) else ""
         console.print(f"MAE reduction of relax {key.replace('_', ' ')}: {r['reduction']:.1%}"
                       f"{interval}{ref}")
+    if survey.reductions():
+        console.print("(the reductions' 95 % intervals: BCa bootstrap, the seeds resampled in "
+                      "pairs)")
     console.print(f"{survey.twin_version}, {seconds:.1f} s")
 
 

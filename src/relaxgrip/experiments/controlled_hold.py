@@ -57,6 +57,8 @@ __all__ = [
     "HOLD_TEMP_RANGE_C",
     "HoldComparison",
     "HoldResult",
+    "check_backend",
+    "check_hold",
     "check_hold_temp_c",
     "compare_holds",
     "map_holds",
@@ -248,7 +250,7 @@ class HoldResult:
         }
 
 
-def _check(estimator: EstimatorKind | str, target_n: float, temp_c: float,
+def check_hold(estimator: EstimatorKind | str, target_n: float, temp_c: float,
            duration_s: float) -> EstimatorKind:
     """The estimator named, once every argument of a hold is checked."""
     try:
@@ -264,6 +266,21 @@ def _check(estimator: EstimatorKind | str, target_n: float, temp_c: float,
 
 #: Backends a hold runs on: the twin itself, or the twin behind the MCU emulator.
 HOLD_BACKENDS = ("twin", "emulator")
+
+
+def check_backend(backend: str, disturbance: Profile | None = None) -> str:
+    """``backend`` if a hold can run on it (a push on the object needs the twin itself).
+
+    Raises
+    ------
+    InputError
+        An unknown backend, or a disturbance asked of the emulator.
+    """
+    if backend not in HOLD_BACKENDS:
+        raise InputError(f"unknown backend {backend!r}; known: {', '.join(HOLD_BACKENDS)}")
+    if disturbance is not None and backend != "twin":
+        raise InputError("a disturbance (a push on the object) needs the twin backend")
+    return backend
 
 
 def _make_backend(backend: str, cfg: TwinConfig, seed: int, clock: VirtualClock) -> Gripper:
@@ -337,9 +354,8 @@ def run_hold(
         another estimator or backend; or the hold never started (no contact,
         target out of reach).
     """
-    kind = _check(estimator, target_n, temp_c, duration_s)
-    if backend not in HOLD_BACKENDS:
-        raise InputError(f"unknown backend {backend!r}; known: {', '.join(HOLD_BACKENDS)}")
+    kind = check_hold(estimator, target_n, temp_c, duration_s)
+    check_backend(backend, disturbance)
     if budget and (kind is not EstimatorKind.RELAX or backend != "twin"):
         raise InputError("an error budget splits relax's Eq. 10 on the twin: use --estimator "
                          "relax with the twin backend")
@@ -499,7 +515,7 @@ def compare_holds(
 ) -> HoldComparison:
     """Run every estimator on the same seed (in parallel with ``n_jobs`` > 1)."""
     for kind in estimators:
-        _check(kind, target_n, temp_c, duration_s)
+        check_hold(kind, target_n, temp_c, duration_s)
     bundle = models if models is not None else load_default_models()
     jobs = [(k, target_n, duration_s, temp_c, seed, bundle, observer) for k in estimators]
     results = map_holds(_run_one, jobs, n_jobs)

@@ -9,8 +9,8 @@ estimators on every seed, the same seeds for each (so the estimators are
 compared on the same draws), keeps each run's figures
 (:meth:`~relaxgrip.experiments.controlled_hold.HoldResult.metrics`) and
 summarises them: mean, median and SD over seeds, the mean's 95 % interval
-from resampling the seeds, and the MAE reduction of ``relax`` over the
-baselines with its interval from resampling the seeds in pairs.
+(Student's t), and the MAE reduction of ``relax`` over the baselines with
+its 95 % interval (BCa bootstrap, the seeds resampled in pairs).
 
 The seeds a design was tuned on flatter it: on the twin, ``relax`` held 5 N
 at 40 °C with a mean MAE of 0.037 N over seeds 0-47, on which many choices
@@ -27,11 +27,13 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.controlled_hold import (
-    HOLD_BACKENDS,
     PAPER_DURATION_S,
+    check_backend,
+    check_hold,
     map_holds,
     run_hold,
 )
@@ -39,44 +41,51 @@ from relaxgrip.experiments.profiles import Profile
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
 
-__all__ = ["SURVEY_FIGURES", "HoldSurvey", "bootstrap_interval", "survey_holds"]
+__all__ = ["SURVEY_FIGURES", "HoldSurvey", "mean_interval", "reduction_interval", "survey_holds"]
 
 FloatArray = NDArray[np.float64]
 
 #: The per-run figures summarised over seeds (``band_coverage`` only where a band is).
 SURVEY_FIGURES = ("mae_n", "rmse_n", "mean_signed_error_n", "est_error_mean_n",
                   "est_rmse_n", "band_coverage")
-#: Resamples of the seeds behind every interval; the resampling's own seed.
+#: Resamples of the seeds behind the reductions' intervals; the resampling's own seed.
 RESAMPLES = 2000
 _RESAMPLE_SEED = 0
 
 
-def bootstrap_interval(values: FloatArray, level: float = 0.95,
-                       resamples: int = RESAMPLES) -> tuple[float, float]:
-    """Percentile interval of the mean of ``values`` over resampled seeds.
+def mean_interval(values: FloatArray, level: float = 0.95) -> tuple[float, float]:
+    """Student's t interval of the mean of ``values`` (one value per seed).
 
     NaN, NaN for fewer than two values (one seed says nothing of the spread).
+    On MAE-like (folded normal) samples it covered the true mean 92 % of the
+    time with five seeds and 94 % with 24; a percentile bootstrap 82 % and
+    92 %.
     """
     values = np.asarray(values, dtype=float)
     if values.size < 2:
         return math.nan, math.nan
-    rng = np.random.default_rng(_RESAMPLE_SEED)
-    means = values[rng.integers(0, values.size, (resamples, values.size))].mean(axis=1)
-    tail = 50.0 * (1.0 - level)
-    lo, hi = np.percentile(means, [tail, 100.0 - tail])
-    return float(lo), float(hi)
+    half = (stats.t.ppf(0.5 + 0.5 * level, values.size - 1)
+            * values.std(ddof=1) / math.sqrt(values.size))
+    return float(values.mean() - half), float(values.mean() + half)
 
 
-def _reduction_interval(ours: FloatArray, base: FloatArray, level: float = 0.95,
-                        resamples: int = RESAMPLES) -> tuple[float, float]:
-    """Interval of ``1 - mean(ours) / mean(base)`` with the seeds resampled in pairs."""
-    if ours.size < 2:
+def _reduction(ours: FloatArray, base: FloatArray, axis: int = -1) -> FloatArray:
+    reduction: FloatArray = 1.0 - np.mean(ours, axis=axis) / np.mean(base, axis=axis)
+    return reduction
+
+
+def reduction_interval(ours: FloatArray, base: FloatArray,
+                       level: float = 0.95) -> tuple[float, float]:
+    """Interval of ``1 - mean(ours) / mean(base)``: BCa bootstrap, the seeds resampled in pairs.
+
+    NaN, NaN for fewer than three seeds or arrays of different lengths.
+    """
+    if ours.size < 3 or ours.size != base.size:
         return math.nan, math.nan
-    rng = np.random.default_rng(_RESAMPLE_SEED)
-    pick = rng.integers(0, ours.size, (resamples, ours.size))
-    ratios = 1.0 - ours[pick].mean(axis=1) / base[pick].mean(axis=1)
-    tail = 50.0 * (1.0 - level)
-    lo, hi = np.percentile(ratios, [tail, 100.0 - tail])
+    result = stats.bootstrap((ours, base), _reduction, paired=True, vectorized=True,
+                             confidence_level=level, n_resamples=RESAMPLES, method="BCa",
+                             random_state=_RESAMPLE_SEED)
+    lo, hi = result.confidence_interval
     return float(lo), float(hi)
 
 
@@ -111,7 +120,8 @@ class HoldSurvey:
         return np.array([float(r.get(figure, math.nan)) for r in self.runs[estimator]])
 
     def summary(self, estimator: str) -> dict[str, dict[str, Any]]:
-        """Per figure: mean, median, SD over seeds and the mean's 95 % interval."""
+        """Per figure: over the seeds that have it (``n``), mean, median, SD, range and
+        the mean's 95 % interval; a figure no run has is left out."""
         out: dict[str, dict[str, Any]] = {}
         for figure in SURVEY_FIGURES:
             values = self.column(estimator, figure)
@@ -119,10 +129,11 @@ class HoldSurvey:
             if not values.size:
                 continue
             out[figure] = {
+                "n": int(values.size),
                 "mean": float(values.mean()), "median": float(np.median(values)),
                 "sd": float(values.std(ddof=1)) if values.size > 1 else math.nan,
                 "min": float(values.min()), "max": float(values.max()),
-                "ci95": list(bootstrap_interval(values)),
+                "ci95": list(mean_interval(values)),
             }
         return out
 
@@ -136,7 +147,7 @@ class HoldSurvey:
             if name in self.runs:
                 base = self.column(name, "mae_n")
                 out[f"vs_{name}"] = {"reduction": float(1.0 - ours.mean() / base.mean()),
-                                     "ci95": list(_reduction_interval(ours, base))}
+                                     "ci95": list(reduction_interval(ours, base))}
         return out
 
     def to_dict(self) -> dict[str, Any]:
@@ -197,20 +208,15 @@ def survey_holds(estimators: Sequence[str], seeds: Sequence[int], target_n: floa
         backend; a condition :func:`run_hold` refuses is refused by the first
         hold.
     """
-    from relaxgrip.control import EstimatorKind
-
     if not estimators:
         raise InputError("a hold survey needs at least one estimator")
-    unknown = [e for e in estimators if e not in {k.value for k in EstimatorKind}]
-    if unknown:
-        raise InputError(f"unknown estimator {unknown[0]!r}; known: "
-                         f"{', '.join(k.value for k in EstimatorKind)}")
+    for est in estimators:
+        check_hold(est, target_n, temp_c, duration_s)
     if not seeds:
         raise InputError("a hold survey needs at least one seed")
     if min(seeds) < 0 or len(set(seeds)) != len(seeds):
         raise InputError("seeds must be non-negative and each given once")
-    if backend not in HOLD_BACKENDS:
-        raise InputError(f"unknown backend {backend!r}; known: {', '.join(HOLD_BACKENDS)}")
+    check_backend(backend, disturbance)
     profiles = (temp_profile, target_profile, disturbance)
     jobs: list[_Job] = [(est, int(s), target_n, duration_s, temp_c, models, observer, backend,
                          profiles) for est in estimators for s in seeds]
