@@ -436,3 +436,17 @@ def test_drift_scale_is_its_own_and_old_files_keep_one_scale(tmp_path: Path) -> 
                 {"band_scale": "wide"}):
         with pytest.raises(ValueError, match="band_scale must be > 0 and drift_scale >= 0"):
             ObserverModel.from_arrays(arrays, {**params, **bad})
+
+
+def test_in_a_hold_the_push_ends_the_share_fit_when_it_moves_the_marker() -> None:
+    """Through the whole loop: the frames' marker pose reaches the share fit, which ends
+    (the observer's ``chain_n`` stops) within a tenth of a second of a 2 N push at 12 s,
+    where the motor alone would end it 0.17 s after."""
+    from relaxgrip.experiments.controlled_hold import run_hold
+    from relaxgrip.experiments.profiles import parse_disturbance
+
+    hold = run_hold("observer", 5.0, 20.0, 40.0, seed=2014,
+                    disturbance=parse_disturbance("push:2:12"))
+    fitting = hold.t_s[np.isfinite(hold.series("chain_n"))]
+    assert fitting.min() == pytest.approx(5.0, abs=0.05)  # the chain's reading starts at 5 s
+    assert 12.0 < fitting.max() < 12.1
