@@ -251,7 +251,7 @@ class HoldResult:
 
 
 def check_hold(estimator: EstimatorKind | str, target_n: float, temp_c: float,
-           duration_s: float) -> EstimatorKind:
+               duration_s: float) -> EstimatorKind:
     """The estimator named, once every argument of a hold is checked."""
     try:
         kind = EstimatorKind(estimator)
