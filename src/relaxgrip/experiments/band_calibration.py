@@ -40,7 +40,8 @@ standard hold 0.037 against 0.061-0.067 N); the band calibrated on seeds
 12-47 covered fresh seeds 3000-3035's standard hold 83.7 % of the time and
 their ramp 83.4 %.  The shipped band is calibrated on seeds 3000-3035
 (``band_scale`` 0.254, ``drift_scale`` 1.09) and covers seeds 2000-2023's
-standard hold, ramp, step and push 96.0 / 98.5 / 99.1 / 94.5 % of the time.
+standard hold, ramp, step and push 96.0 / 98.5 / 99.1 / 97.0 % of the time
+(the push with the observer's push rule; 94.5 % before it).
 
 A hold's samples are not independent: most of a closed-loop error is the
 run's offset from its onset, so each run counts about once, and a scale is
