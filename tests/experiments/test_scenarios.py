@@ -80,7 +80,7 @@ def test_a_push_on_the_emulator_is_refused_before_it_opens() -> None:
         return len(os.listdir("/proc/self/fd"))
 
     threads, fds = {t.name for t in threading.enumerate()}, open_fds()
-    with pytest.raises(InputError, match="a disturbance .* needs the twin backend"):
+    with pytest.raises(InputError, match=r"a disturbance .* needs the twin backend"):
         run_hold("relax", duration_s=10.0, backend="emulator",
                  disturbance=parse_disturbance("push:1:5"))
     assert {t.name for t in threading.enumerate()} == threads
