@@ -256,14 +256,15 @@ def _print_survey(survey: HoldSurvey, seeds: str, seconds: float) -> None:
                       + (f" ± {est['sd']:.3f}" if est["n"] > 1 else ""),
                       "" if cover is None else f"{cover['mean']:.1%}")
     console.print(table)
-    for key, r in survey.reductions().items():
+    reductions = survey.reductions()  # a bootstrap each: computed once
+    for key, r in reductions.items():
         paper = PAPER_REDUCTION.get(key)
         ref = f" (paper {paper:.1%})" if paper is not None else ""
         lo, hi = r["ci95"]
         interval = f" [{lo:.1%}, {hi:.1%}]" if math.isfinite(lo) else ""
         console.print(f"MAE reduction of relax {key.replace('_', ' ')}: {r['reduction']:.1%}"
                       f"{interval}{ref}")
-    if survey.reductions():
+    if reductions:
         console.print("(the reductions' 95 % intervals: BCa bootstrap, the seeds resampled in "
                       "pairs)")
     console.print(f"{survey.twin_version}, {seconds:.1f} s")
