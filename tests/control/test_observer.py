@@ -210,6 +210,9 @@ class _RelaxStub:
     def reset(self) -> None:
         pass
 
+    def start_hold(self, t_s: float, motor_position_mm: float) -> None:
+        pass
+
 
 def _stubbed(model: ObserverModel) -> ObserverEstimator:
     """An observer with the default share-fit settings and a stub ``relax`` (F_inst 5 N)."""
@@ -270,6 +273,30 @@ def test_a_moving_motor_ends_the_share_fit() -> None:
         if i == 200:
             assert est._fitting
     assert not est._fitting
+
+
+def test_a_new_hold_fits_its_share_anew() -> None:
+    """A hold that starts again (without a new grasp) forgets the last hold's fit, its end
+    and the motor it saw: the new fit runs while the motor stays at its new place."""
+    from relaxgrip.control.estimators import ForceEstimate
+
+    est = _stubbed(_model())
+    est.start_hold(0.0, 100.0)
+    for t in np.arange(0.0, 12.0, 1.0 / 30.0):
+        est.advance(float(t), 1e-3, 40.0)
+        motor = 100.0 - 2.0 * min(max(t - 10.0, 0.0), 1.0)
+        est._with_share(ForceEstimate(5.0, math.nan), math.nan, float(t), est.unit_force_m(),
+                        motor, 1e-3)
+    assert not est._fitting
+    est.start_hold(12.0, 98.0)
+    assert est._fitting
+    assert est.share == 1.0
+    assert not est._offsets
+    for t in np.arange(12.0, 20.0, 1.0 / 30.0):
+        est.advance(float(t), 1e-3, 40.0)
+        est._with_share(ForceEstimate(5.0, math.nan), math.nan, float(t) - 12.0,
+                        est.unit_force_m(), 98.0, 1e-3)
+    assert est._fitting
 
 
 def test_a_push_that_moves_the_marker_but_not_the_motor_ends_the_share_fit() -> None:

@@ -195,6 +195,10 @@ class ObserverEstimator:
         self.f_onset_n = NAN
         if self.relax is not None:
             self.relax.reset()
+        self._reset_hold()
+
+    def _reset_hold(self) -> None:
+        """Forget the hold: the share fit and its windows start again (the branches go on)."""
         self.share = 1.0
         self._fitting = True
         self._fit_ab = self._fit_aa = 0.0
@@ -400,5 +404,6 @@ class ObserverEstimator:
         self._onset_t = t_s
         self._sum_f = self._sum_u = 0.0
         self.scale_n_per_m = self.f_onset_n = NAN
+        self._reset_hold()
         if self.relax is not None:
             self.relax.start_hold(t_s, motor_position_mm)

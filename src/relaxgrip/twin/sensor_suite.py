@@ -101,7 +101,6 @@ class SensorSuite:
         self._ir = None if config.ir is None else IrRenderer(rig, config.ir, seed, config.unit)
         self._rgb_stream = None if config.rgb is None else _Stream(rig.rgb.rate_hz, t0_s)
         self._ir_stream = None if config.ir is None else _Stream(rig.ir.rate_hz, t0_s)
-        self._finger2cam_by_aperture: tuple[float, FloatArray] | None = None
         self._force_rng = np.random.default_rng([seed, 20])
         self._noise_pool: list[float] = []  # standard normals, drawn 1024 at a time
         self.force_sensor = config.force_sensor
