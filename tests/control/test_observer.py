@@ -287,7 +287,8 @@ def test_a_new_hold_fits_its_share_anew() -> None:
         motor = 100.0 - 2.0 * min(max(t - 10.0, 0.0), 1.0)
         est._with_share(ForceEstimate(5.0, math.nan), math.nan, float(t), est.unit_force_m(),
                         motor, 1e-3)
-    assert not est._fitting
+    first_fitting = est._fitting
+    assert not first_fitting
     est.start_hold(12.0, 98.0)
     assert est._fitting
     assert est.share == 1.0
