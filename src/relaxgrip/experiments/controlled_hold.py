@@ -430,8 +430,10 @@ def _scenario(backend: Gripper, temp: Profile | None, target: Profile | None,
     """The loop's per-step hook that applies the profiles at their hold times."""
     if temp is None and target is None and push is None:
         return None
-    if push is not None and not isinstance(backend, GripperTwin):
-        raise InputError("a disturbance needs the twin backend")
+    pushed: GripperTwin | None = None
+    if push is not None:
+        assert isinstance(backend, GripperTwin), "check_backend refuses a push off the twin"
+        pushed = backend
 
     def step(obs: Observation, controller: GraspController) -> None:
         hold_s = controller.estimate.hold_s
@@ -445,9 +447,8 @@ def _scenario(backend: Gripper, temp: Profile | None, target: Profile | None,
             value = target.value_at(hold_s, target_n)
             if value != controller.plan.target_n:
                 controller.set_target(value)
-        if push is not None:
-            assert isinstance(backend, GripperTwin)
-            backend.set_external_force(push.value_at(hold_s, 0.0))
+        if push is not None and pushed is not None:
+            pushed.set_external_force(push.value_at(hold_s, 0.0))
 
     return step
 
