@@ -161,8 +161,70 @@ def test_the_unrelaxed_icfn_and_its_branch_parameters_round_trip(
     assert not (tmp_path / "without" / "icfn_unrelaxed.npz").exists()
 
 
+#: An ensemble on the pose and the warmest beams, as the shipped one reads.
+_SUBSET = (*ICFN_SCHEMA.names[:9], "f0_temp_max_c", "f1_temp_max_c")
+
+
+def _subset_pair() -> tuple[ICFN, ...]:
+    rng = np.random.default_rng(2)
+    X = rng.normal(size=(120, len(_SUBSET)))
+    return tuple(ICFN(hidden_layer_sizes=(4,), learning_rate_init=1e-2, max_iter=100,
+                      random_state=seed).fit(X, X[:, 0] + X[:, -1]) for seed in (0, 1))
+
+
+def test_an_ensemble_on_some_features_reads_them_from_the_whole_vector(
+        tmp_path: Path, fitted: tuple[ICFN, ICFN, RCFN]) -> None:
+    icfn, _, rcfn = fitted
+    members = _subset_pair()
+    subset = UnrelaxedIcfn(members, _model(), _SUBSET)
+    save_models(tmp_path, icfn, rcfn, icfn_feature_schema=ICFN_SCHEMA,
+                rcfn_feature_schema=RCFN_SCHEMA, twin_version=TWIN_VERSION,
+                training={"test": True}, unrelaxed=subset)
+    assert json.loads((tmp_path / "manifest.json").read_text())[
+        "icfn_unrelaxed"]["features"] == list(_SUBSET)
+    loaded = load_models(tmp_path).unrelaxed
+    assert loaded is not None
+    assert loaded.features == _SUBSET
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=len(ICFN_SCHEMA))
+    picked = x[[ICFN_SCHEMA.index(f) for f in _SUBSET]]
+    want = 0.5 * (members[0].predict_one(picked) + members[1].predict_one(picked))
+    assert loaded.predict_one(x) == pytest.approx(want)
+    # Only the named features count: the thermal ones the ensemble leaves out do not.
+    other = x.copy()
+    other[ICFN_SCHEMA.index("f0_beam4_c")] += 5.0
+    assert loaded.predict_one(other) == loaded.predict_one(x)
+    np.testing.assert_allclose(loaded.predict(np.stack([x, other])), [want, want])
+
+
+def test_a_directory_saved_before_the_features_were_named_reads_them_all(
+        tmp_path: Path, fitted: tuple[ICFN, ICFN, RCFN]) -> None:
+    _save(tmp_path, fitted)
+    manifest_path = tmp_path / "manifest.json"
+    manifest = json.loads(manifest_path.read_text())
+    del manifest["icfn_unrelaxed"]["features"]
+    manifest_path.write_text(json.dumps(manifest))
+    loaded = load_models(tmp_path).unrelaxed
+    assert loaded is not None
+    assert loaded.features == ICFN_SCHEMA.names
+
+
+def test_an_ensemble_names_known_features_in_the_schemas_order(
+        fitted: tuple[ICFN, ICFN, RCFN]) -> None:
+    members = _subset_pair()
+    with pytest.raises(ValueError, match="does not have: f0_colour"):
+        UnrelaxedIcfn(members, _model(), (*_SUBSET[:-1], "f0_colour"))
+    with pytest.raises(ValueError, match="schema's order"):
+        UnrelaxedIcfn(members, _model(), tuple(reversed(_SUBSET)))
+    with pytest.raises(ValueError, match="read 11 features but it names 9"):
+        UnrelaxedIcfn(members, _model(), _SUBSET[:9])
+    with pytest.raises(ValueError, match="read 29 features but it names 11"):
+        UnrelaxedIcfn((fitted[1],), _model(), _SUBSET)
+
+
 @pytest.mark.parametrize("damage", ["drop_history", "drop_file", "corrupt", "schema",
-                                    "members", "member_arrays"])
+                                    "members", "member_arrays", "features_unknown",
+                                    "features_count", "features_type"])
 def test_a_damaged_unrelaxed_section_is_refused_in_one_line(
         tmp_path: Path, fitted: tuple[ICFN, ICFN, RCFN], damage: str) -> None:
     _save(tmp_path, fitted)
@@ -178,6 +240,12 @@ def test_a_damaged_unrelaxed_section_is_refused_in_one_line(
         manifest["icfn_unrelaxed"]["feature_schema"]["version"] = "other"
     elif damage == "members":
         manifest["icfn_unrelaxed"]["params"] = {"members": "none"}
+    elif damage == "features_unknown":
+        manifest["icfn_unrelaxed"]["features"][0] = "marker_size_px"
+    elif damage == "features_count":  # the members read all 29
+        manifest["icfn_unrelaxed"]["features"] = list(_SUBSET)
+    elif damage == "features_type":
+        manifest["icfn_unrelaxed"]["features"] = "pose"
     else:  # a third member the file has no arrays for
         members = manifest["icfn_unrelaxed"]["params"]["members"]
         members.append(members[0])
@@ -266,10 +334,22 @@ def test_training_leaves_out_rows_that_retain_little_of_their_unrelaxed_force(
     data = SimpleNamespace(icfn=pd.concat(frames, ignore_index=True))
     shares = retained_shares(data.icfn, _model())
     assert shares.min() < training.MIN_RETAINED_SHARE  # the unloading
-    unrelaxed, record = training._fit_unrelaxed(data, _model(), 0)  # type: ignore[arg-type]
+    unrelaxed, record = training._fit_unrelaxed(
+        data, _model(), 0, ICFN_SCHEMA.names)  # type: ignore[arg-type]
     assert len(unrelaxed.members) == 2
     assert record["rows_left_out"] == int((shares < training.MIN_RETAINED_SHARE).sum()) > 0
     assert record["train_rows"] + record["val_rows"] + record["rows_left_out"] == len(data.icfn)
+    # On a subset of the features the members read those alone, and the record names them.
+    pose = ICFN_SCHEMA.names[:9]
+    subset, record = training._fit_unrelaxed(data, _model(), 0, pose)  # type: ignore[arg-type]
+    assert subset.features == pose
+    assert record["features"] == list(pose)
+    assert all(m.n_features_in_ == 9 for m in subset.members)
+    x = _features(1e-3)
+    assert subset.predict_one(x) == pytest.approx(
+        np.mean([m.predict_one(x[:9]) for m in subset.members]))
+    with pytest.raises(InputError, match="marker_size_px"):
+        training._fit_unrelaxed(data, _model(), 0, ("marker_size_px",))  # type: ignore[arg-type]
     data.icfn["split"] = "test"
     with pytest.raises(InputError, match="--no-unrelaxed"):
-        training._fit_unrelaxed(data, _model(), 0)  # type: ignore[arg-type]
+        training._fit_unrelaxed(data, _model(), 0, pose)  # type: ignore[arg-type]

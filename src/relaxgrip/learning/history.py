@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -39,8 +39,8 @@ from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.perception.features import ICFN_SCHEMA
 from relaxgrip.physics.viscoelastic import branch_update
 
-__all__ = ["CONTACT_DEFLECTION_M", "LoadingHistory", "UnrelaxedIcfn", "features_deflection_m",
-           "features_temp_c", "retained_shares"]
+__all__ = ["CONTACT_DEFLECTION_M", "UNRELAXED_FEATURES", "LoadingHistory", "UnrelaxedIcfn",
+           "features_deflection_m", "features_temp_c", "retained_shares"]
 
 FloatArray = NDArray[np.float64]
 #: Marker deflection (m) from which the branches load: the controller's contact threshold.
@@ -205,6 +205,22 @@ def retained_shares(rows: pd.DataFrame, model: ObserverModel,
     return shares
 
 
+#: What the unrelaxed ICFN reads by default: the marker's pose and each finger's warmest
+#: infrared beam.  The other thermal features see the object: it covers the fingers'
+#: distal beams in the infrared image, more as they close around it, and a network on
+#: all 29 features learns that coverage as a cue of how far the grasp has closed.  At a
+#: hold onset the cue reads what the run's grasp and object happen to show.  On the twin
+#: (5 N, 40 °C, ``F_inst`` less the true force over the first 0.6 s of the hold, fresh
+#: seeds 4000-4035) the 29-feature ensemble read +0.072 N (SD 0.055 N), its error
+#: correlating -0.64 with the infrared beam under the ball; this one +0.022 N (SD
+#: 0.043 N).  With the ball at 15, 25 and 35 °C instead of the room's (seeds
+#: 4000-4011) the 29-feature reading moved by -0.008, +0.075 and +0.071 N on average
+#: (SD 0.090, 0.073, 0.031 N), this one's by +0.013, +0.019 and +0.009 N (SD 0.039,
+#: 0.054, 0.040 N).  The warmest beam is one the object leaves clear.
+UNRELAXED_FEATURES: tuple[str, ...] = (
+    *ICFN_SCHEMA.names[:9], "f0_temp_max_c", "f1_temp_max_c")
+
+
 @dataclass(frozen=True)
 class UnrelaxedIcfn:
     """ICFNs trained on unrelaxed forces, with the branch parameters their labels used.
@@ -221,16 +237,39 @@ class UnrelaxedIcfn:
         Each fitted on each sample's force over its retained share.
     model : ObserverModel
         The branch parameters of those shares; run time must use the same.
+    features : tuple of str
+        The ICFN features the members read, in the order of
+        :data:`relaxgrip.perception.features.ICFN_SCHEMA` (all of them by
+        default).  :meth:`predict_one` and :meth:`predict` take whole ICFN
+        feature vectors and pick these.
     """
 
     members: tuple[ICFN, ...]
     model: ObserverModel
+    features: tuple[str, ...] = ICFN_SCHEMA.names
+    _columns: slice | NDArray[np.intp] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not self.members:
             raise ValueError("an unrelaxed ICFN needs at least one member")
         if len({m.n_features_in_ for m in self.members}) != 1:
             raise ValueError("the unrelaxed ICFN's members read different feature counts")
+        names = ICFN_SCHEMA.names
+        unknown = [f for f in self.features if f not in names]
+        if unknown:
+            raise ValueError(f"the unrelaxed ICFN reads features the ICFN schema does not "
+                             f"have: {', '.join(unknown)}")
+        columns = [names.index(f) for f in self.features]
+        if columns != sorted(set(columns)):
+            raise ValueError("the unrelaxed ICFN's features must be distinct and in the "
+                             "ICFN schema's order")
+        if self.members[0].n_features_in_ != len(columns):
+            raise ValueError(f"the unrelaxed ICFN's members read "
+                             f"{self.members[0].n_features_in_} features but it names "
+                             f"{len(columns)}")
+        # A slice where the features are the whole schema: no copy per frame.
+        every = len(columns) == len(names)
+        object.__setattr__(self, "_columns", slice(None) if every else np.array(columns))
 
     @property
     def n_features_in_(self) -> int:
@@ -238,10 +277,12 @@ class UnrelaxedIcfn:
         return int(self.members[0].n_features_in_)
 
     def predict_one(self, x: FloatArray) -> float:
-        """The members' mean unrelaxed force on one feature vector (N)."""
-        return sum(m.predict_one(x) for m in self.members) / len(self.members)
+        """The members' mean unrelaxed force on one ICFN feature vector (N)."""
+        picked = np.asarray(x)[self._columns]
+        return sum(m.predict_one(picked) for m in self.members) / len(self.members)
 
     def predict(self, X: ArrayLike) -> FloatArray:
-        """The members' mean unrelaxed force on each row (N)."""
-        mean: FloatArray = np.mean([m.predict(X) for m in self.members], axis=0)
+        """The members' mean unrelaxed force on each row of ICFN features (N)."""
+        picked = np.asarray(X)[:, self._columns]
+        mean: FloatArray = np.mean([m.predict(picked) for m in self.members], axis=0)
         return mean

@@ -176,8 +176,9 @@ def save_models(
         seeds, selection tables (NumPy scalars and arrays are converted; NaN
         and infinity are not allowed).
     unrelaxed : UnrelaxedIcfn, optional
-        The ICFN on unrelaxed forces (same feature schema as the ICFN) and its
-        branch parameters, saved beside them.
+        The ICFN on unrelaxed forces (reading the ICFN's feature vector, all of
+        it or the features it names) and its branch parameters, saved beside
+        them.
 
     Returns
     -------
@@ -210,10 +211,10 @@ def save_models(
     extra: list[tuple[str, bytes]] = []
     sections: dict[str, Any] = {}
     if unrelaxed is not None:
-        if unrelaxed.n_features_in_ != icfn.n_features_in_:
-            raise ValueError(
-                f"the unrelaxed ICFN was fitted on {unrelaxed.n_features_in_} features "
-                f"but the ICFN on {icfn.n_features_in_}")
+        missing = [f for f in unrelaxed.features if f not in icfn_feature_schema.names]
+        if missing:
+            raise ValueError(f"the unrelaxed ICFN reads features the ICFN schema does not "
+                             f"have: {', '.join(missing)}")
         unrelaxed_data = npz_bytes({f"member{i}/{name}": value
                                     for i, member in enumerate(unrelaxed.members)
                                     for name, value in member.to_arrays().items()})
@@ -222,6 +223,7 @@ def save_models(
             "icfn_unrelaxed": {"estimator": "ICFN ensemble", "params": {
                 "members": [member.get_params() for member in unrelaxed.members]},
                                "feature_schema": icfn_feature_schema.to_dict(),
+                               "features": list(unrelaxed.features),
                                **file_entry(UNRELAXED_FILE, unrelaxed_data)},
             "history": {"estimator": "ObserverModel", "params": unrelaxed.model.get_params(),
                         **file_entry(HISTORY_FILE, history_data)},
@@ -393,7 +395,7 @@ def load_models(
             f"the manifest names {n_rcfn}"
         )
     return ModelBundle(icfn=icfn, rcfn=rcfn, manifest=manifest,
-                       unrelaxed=_load_unrelaxed(directory, manifest, n_icfn),
+                       unrelaxed=_load_unrelaxed(directory, manifest),
                        hold_bias=_load_hold_bias(manifest_path, manifest))
 
 
@@ -466,11 +468,25 @@ def set_hold_bias(directory: Path, bias: HoldBias, record: Mapping[str, Any],
     return path
 
 
-def _load_unrelaxed(directory: Path, manifest: Mapping[str, Any],
-                    n_features: int) -> UnrelaxedIcfn | None:
-    """The unrelaxed ICFN and its branch parameters, when the manifest names them."""
+def _load_unrelaxed(directory: Path, manifest: Mapping[str, Any]) -> UnrelaxedIcfn | None:
+    """The unrelaxed ICFN and its branch parameters, when the manifest names them.
+
+    It reads the ICFN features its section names under ``features``; a
+    directory saved before the section named them read all of them.
+    """
     if "icfn_unrelaxed" not in manifest:
         return None
+    schema = manifest["icfn"]["feature_schema"]["names"]
+    features = manifest["icfn_unrelaxed"].get("features", schema)
+    if not (isinstance(features, list) and features
+            and all(isinstance(f, str) for f in features)):
+        raise ModelFileError(f"{directory / MANIFEST_NAME}: manifest 'icfn_unrelaxed.features' "
+                             "is not a list of feature names")
+    unknown = [f for f in features if f not in schema]
+    if unknown:
+        raise ModelFileError(f"{directory / MANIFEST_NAME}: the unrelaxed ICFN reads features "
+                             f"the ICFN schema does not have: {', '.join(unknown)}")
+    n_features = len(features)
     path, arrays = read_npz_entry(directory, manifest["icfn_unrelaxed"], ModelFileError)
     params = manifest["icfn_unrelaxed"]["params"].get("members")
     if not (isinstance(params, list) and params and all(isinstance(p, dict) for p in params)):
@@ -487,12 +503,15 @@ def _load_unrelaxed(directory: Path, manifest: Mapping[str, Any],
             raise ModelFileError(f"{path}: member {i}: {one_line(exc)}") from exc
         if member.n_features_in_ != n_features:
             raise ModelFileError(f"{path}: array shape wrong: member {i} reads "
-                                 f"{member.n_features_in_} features, the manifest's schema "
-                                 f"has {n_features}")
+                                 f"{member.n_features_in_} features, the manifest names "
+                                 f"{n_features}")
         members.append(member)
     path, arrays = read_npz_entry(directory, manifest["history"], ModelFileError)
     try:
         model = ObserverModel.from_arrays(arrays, manifest["history"]["params"])
     except (TypeError, ValueError) as exc:
         raise ModelFileError(f"{path}: {one_line(exc)}") from exc
-    return UnrelaxedIcfn(tuple(members), model)
+    try:
+        return UnrelaxedIcfn(tuple(members), model, tuple(features))
+    except ValueError as exc:
+        raise ModelFileError(f"{directory / MANIFEST_NAME}: {one_line(exc)}") from exc

@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -14,7 +15,12 @@ import numpy as np
 
 from relaxgrip.errors import InputError
 from relaxgrip.learning.datastore import Dataset
-from relaxgrip.learning.history import UnrelaxedIcfn, features_deflection_m, retained_shares
+from relaxgrip.learning.history import (
+    UNRELAXED_FEATURES,
+    UnrelaxedIcfn,
+    features_deflection_m,
+    retained_shares,
+)
 from relaxgrip.learning.icfn import ICFN, select_icfn
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN, select_rcfn
@@ -71,7 +77,8 @@ def _fingerprint(data: Dataset) -> str:
 
 
 def train_models(data: Dataset, random_state: int = 0,
-                 history: ObserverModel | None = None) -> TrainedModels:
+                 history: ObserverModel | None = None,
+                 unrelaxed_features: Sequence[str] = UNRELAXED_FEATURES) -> TrainedModels:
     """Fit both models on the training split and select them on the validation split.
 
     With ``history`` (branch parameters, normally the shipped observer's), a
@@ -79,8 +86,10 @@ def train_models(data: Dataset, random_state: int = 0,
     retained share (:func:`relaxgrip.learning.history.retained_shares`): the
     force the finger would carry had it not relaxed while closing, which
     ``relax`` and ``observer`` read at run time times the share their
-    loading history retains.  The first ICFN stays the paper's, for the
-    baselines.
+    loading history retains.  It reads ``unrelaxed_features`` of the ICFN's
+    (by default the pose and each finger's warmest beam:
+    :data:`relaxgrip.learning.history.UNRELAXED_FEATURES`).  The first ICFN
+    stays the paper's, on every feature, for the baselines.
 
     Raises
     ------
@@ -103,7 +112,7 @@ def train_models(data: Dataset, random_state: int = 0,
     rcfn_s = time.perf_counter() - start - icfn_s
     val = icfn.predict(x_val) - y_val
     unrelaxed, unrelaxed_record = (None, None) if history is None else _fit_unrelaxed(
-        data, history, random_state)
+        data, history, random_state, tuple(unrelaxed_features))
     training = {
         "dataset": {"fingerprint": _fingerprint(data), "seed": data.manifest["spec"]["seed"],
                     "twin_version": data.manifest["twin_version"],
@@ -120,18 +129,22 @@ def train_models(data: Dataset, random_state: int = 0,
     return TrainedModels(icfn, rcfn, icfn_table, rcfn_table, training, unrelaxed)
 
 
-def _fit_unrelaxed(data: Dataset, history: ObserverModel, random_state: int
-                   ) -> tuple[UnrelaxedIcfn, dict[str, Any]]:
+def _fit_unrelaxed(data: Dataset, history: ObserverModel, random_state: int,
+                   features: tuple[str, ...]) -> tuple[UnrelaxedIcfn, dict[str, Any]]:
     """The ICFN on unrelaxed forces and its training record.
 
     The hyperparameters are selected like the paper's ICFN's (seed
     ``random_state``); the other members are the selected network refitted with
     the next seeds.
     """
+    unknown = [f for f in features if f not in ICFN_SCHEMA.names]
+    if unknown or not features:
+        raise InputError("the unrelaxed ICFN must read some of the ICFN's features, got "
+                         f"{', '.join(unknown) or 'none'}")
     start = time.perf_counter()
     rows = data.icfn
     shares = retained_shares(rows, history)
-    x = rows[list(ICFN_SCHEMA.names)].to_numpy(np.float64)
+    x = rows[list(features)].to_numpy(np.float64)
     y = rows["force_n"].to_numpy(np.float64) / shares
     split = rows["split"].to_numpy()
     # Where the finger retains little of its unrelaxed force (unloading after a long
@@ -147,12 +160,14 @@ def _fit_unrelaxed(data: Dataset, history: ObserverModel, random_state: int
     for seed in range(random_state + 1, random_state + UNRELAXED_MEMBERS):
         members.append(ICFN(**{**first.get_params(), "random_state": seed}).fit(
             x[train], y[train]))
-    unrelaxed = UnrelaxedIcfn(tuple(members), history)
-    contact = features_deflection_m(x) > 0
+    unrelaxed = UnrelaxedIcfn(tuple(members), history, features)
+    every = rows[list(ICFN_SCHEMA.names)].to_numpy(np.float64)
+    contact = features_deflection_m(every) > 0
     record = {
         "train_rows": int(train.sum()), "val_rows": int(val.sum()), "members": len(members),
         "rows_left_out": int((~kept).sum()),
-        "val_mae_n": float(np.mean(np.abs(unrelaxed.predict(x[val]) - y[val]))),
+        "features": list(features),
+        "val_mae_n": float(np.mean(np.abs(unrelaxed.predict(every[val]) - y[val]))),
         "member_val_mae_n": [float(np.mean(np.abs(m.predict(x[val]) - y[val])))
                              for m in members],
         "retained_share_percentiles": dict(zip(
