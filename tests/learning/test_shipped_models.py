@@ -10,6 +10,7 @@ from relaxgrip.learning.build import build_dataset
 from relaxgrip.learning.datasets import ICFN_SAMPLES, DatasetSpec
 from relaxgrip.learning.datastore import load_dataset
 from relaxgrip.learning.evaluation import evaluate
+from relaxgrip.learning.history import UNRELAXED_FEATURES
 from relaxgrip.learning.observer import load_default_observer
 from relaxgrip.learning.training import (
     UNRELAXED_MEMBERS,
@@ -33,6 +34,9 @@ def test_shipped_models_read_the_loading_history_with_the_shipped_observers_bran
     bundle = load_default_models()
     assert bundle.unrelaxed is not None
     assert len(bundle.unrelaxed.members) == UNRELAXED_MEMBERS
+    # As relaxgrip train fits it: the pose and the warmest beams, which the object leaves clear.
+    assert bundle.unrelaxed.features == UNRELAXED_FEATURES
+    assert bundle.manifest["icfn_unrelaxed"]["features"] == list(UNRELAXED_FEATURES)
     observer = load_default_observer()
     for temp_c in (25.0, 40.0, 58.0):
         got_e, got_i, got_tau = bundle.unrelaxed.model.parameters(temp_c)

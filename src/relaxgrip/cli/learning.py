@@ -115,9 +115,9 @@ def train(
                       f"{row['val_rmse_n']:.3f}")
     console.print(table)
     if (record := trained.training.get("icfn_unrelaxed")) is not None:
-        console.print(f"unrelaxed ICFN (relax, observer): val MAE {record['val_mae_n']:.3f} N "
-                      f"of unrelaxed force, retained share median "
-                      f"{record['retained_share_percentiles']['p50']:.3f}")
+        console.print(f"unrelaxed ICFN (relax, observer) on {len(record['features'])} features: "
+                      f"val MAE {record['val_mae_n']:.3f} N of unrelaxed force, retained share "
+                      f"median {record['retained_share_percentiles']['p50']:.3f}")
     console.print(f"models written to {out}; relax's closed-loop error is not calibrated: "
                   f"relaxgrip calibrate-hold {out} measures it (288 holds, about 40 min on 2 "
                   "cores)")
