@@ -380,6 +380,36 @@ def test_eq10_is_the_estimate_while_it_holds_and_the_observer_continues_from_it(
     assert after[0] == pytest.approx(float(np.mean(window)), abs=1e-12)
 
 
+def test_after_the_fit_the_calibration_of_its_last_frame_stays() -> None:
+    """relax's calibration moves with the temperature and time it reads (here 0.01 N a
+    second); the observer takes it off while Eq. 10 is the estimate, and after the fit
+    keeps what it took off on the fit's last frame: the table describes holds started
+    at a temperature, not the observer after a ramp."""
+    from relaxgrip.control.estimators import ForceEstimate
+
+    est = _stubbed(_model())
+    last_calibration = math.nan
+    after: list[tuple[float, float]] = []
+    for t in np.arange(0.0, 40.0, 1.0 / 30.0):
+        est.advance(float(t), 1e-3, 40.0)
+        u = est.unit_force_m()
+        eq10 = 5.0 * u / est._u_on if math.isfinite(est._u_on) else 5.0
+        calibration = 0.05 + 0.01 * float(t)
+        motor = 100.0 if t < 20.0 else 100.0 - 2.0 * min(t - 20.0, 1.0)
+        got = est._with_share(ForceEstimate(eq10 - calibration, math.nan,
+                                            calibration_n=calibration),
+                              math.nan, float(t), u, motor, 1e-3)
+        if est._fitting:
+            assert got.force_n == pytest.approx(eq10 - calibration)
+            last_calibration = calibration
+            continue
+        own = est.scale_n_per_m * (u - (est.share - 1.0) * est.relaxed_m())
+        after.append((got.calibration_n, got.force_n - own))
+    assert len(after) > 100
+    assert {c for c, _ in after} == {last_calibration}
+    assert np.ptp([d for _, d in after]) == pytest.approx(0.0, abs=1e-12)
+
+
 def test_band_widens_after_the_fit_by_what_a_share_error_would_move_the_estimate() -> None:
     """Spread 0.1 of the relaxing share: after the fit ends (a new target at 20 s) and a
     40 -> 55 °C ramp relaxes the branches, the band grows by z_0.975 times the drift

@@ -31,7 +31,7 @@ def test_the_parts_add_up_to_the_mean_estimate_error(budgeted) -> None:
     parts = budgeted.error_budget()
     # The shipped models are calibrated: the calibration taken off is a part of its own,
     # and so is what the closed chain's reading added (from 5 s of the hold on).
-    assert parts["calibration_n"] < 0.0
+    assert parts["calibration_n"] != 0.0
     assert parts["chain_n"] != 0.0
     assert list(parts) == ["onset_n", "relaxation_n", "closure_n", "calibration_n", "chain_n",
                            "total_n"]
