@@ -482,10 +482,6 @@ def _load_unrelaxed(directory: Path, manifest: Mapping[str, Any]) -> UnrelaxedIc
             and all(isinstance(f, str) for f in features)):
         raise ModelFileError(f"{directory / MANIFEST_NAME}: manifest 'icfn_unrelaxed.features' "
                              "is not a list of feature names")
-    unknown = [f for f in features if f not in schema]
-    if unknown:
-        raise ModelFileError(f"{directory / MANIFEST_NAME}: the unrelaxed ICFN reads features "
-                             f"the ICFN schema does not have: {', '.join(unknown)}")
     n_features = len(features)
     path, arrays = read_npz_entry(directory, manifest["icfn_unrelaxed"], ModelFileError)
     params = manifest["icfn_unrelaxed"]["params"].get("members")
