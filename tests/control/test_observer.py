@@ -347,14 +347,15 @@ def test_share_fit_settings_that_cannot_work_are_refused(kwargs: dict[str, objec
 def test_eq10_is_the_estimate_while_it_holds_and_the_observer_continues_from_it() -> None:
     """Eq. 10 0.05 N off the model's force, and noisy: the estimate is Eq. 10 during the fit;
     after a new target moves the motor the observer carries Eq. 10's mean offset from it
-    over 2-10 s before the fit ended, so the estimate does not jump."""
+    over 2-10 s before the fit ended, in proportion to its own force, so the estimate
+    does not jump."""
     from relaxgrip.control.estimators import ForceEstimate
 
     est = _stubbed(_model())
     rng = np.random.default_rng(0)
     offsets: list[tuple[float, float]] = []
     after: list[float] = []
-    last = end = math.nan
+    last = end = own_end = math.nan
     for t in np.arange(0.0, 40.0, 1.0 / 30.0):
         d = 1e-3 if t < 20.0 else 1e-3 - 1e-4 * min(t - 20.0, 1.0)
         est.advance(float(t), d, 40.0)
@@ -370,44 +371,51 @@ def test_eq10_is_the_estimate_while_it_holds_and_the_observer_continues_from_it(
             last = got.force_n
             continue
         if math.isnan(end):
-            end = float(t)
+            end, own_end = float(t), own
             assert got.force_n == pytest.approx(last, abs=0.03)
-        after.append(got.force_n - own)
+        after.append((got.force_n - own) * own_end / own)
     assert 20.0 < end < 21.0
     assert len(after) > 100
-    assert np.ptp(after) == 0.0
+    assert np.ptp(after) == pytest.approx(0.0, abs=1e-12)
     window = [o for h, o in offsets if end - 10.0 <= h <= end - 2.0]
     assert after[0] == pytest.approx(float(np.mean(window)), abs=1e-12)
 
 
-def test_after_the_fit_the_calibration_of_its_last_frame_stays() -> None:
+def test_after_the_fit_its_offset_and_calibration_carry_in_proportion_to_the_force() -> None:
     """relax's calibration moves with the temperature and time it reads (here 0.01 N a
-    second); the observer takes it off while Eq. 10 is the estimate, and after the fit
-    keeps what it took off on the fit's last frame: the table describes holds started
-    at a temperature, not the observer after a ramp."""
+    second); the observer takes it off while Eq. 10 is the estimate.  After the fit (the
+    motor moves at 20 s and the marker's deflection falls to 0.6 of itself, as a new
+    target does) it carries the calibration and Eq. 10's offset of the fit's last frame
+    in proportion to its own force: the table describes holds started at a temperature
+    and force, not the observer after a ramp or a step."""
     from relaxgrip.control.estimators import ForceEstimate
 
     est = _stubbed(_model())
-    last_calibration = math.nan
-    after: list[tuple[float, float]] = []
+    last_calibration = last_estimate = math.nan
+    after: list[tuple[float, float, float]] = []
     for t in np.arange(0.0, 40.0, 1.0 / 30.0):
-        est.advance(float(t), 1e-3, 40.0)
+        d = 1e-3 * (1.0 - 0.4 * min(max(t - 20.5, 0.0), 1.0))
+        est.advance(float(t), d, 40.0)
         u = est.unit_force_m()
         eq10 = 5.0 * u / est._u_on if math.isfinite(est._u_on) else 5.0
         calibration = 0.05 + 0.01 * float(t)
         motor = 100.0 if t < 20.0 else 100.0 - 2.0 * min(t - 20.0, 1.0)
-        got = est._with_share(ForceEstimate(eq10 - calibration, math.nan,
+        got = est._with_share(ForceEstimate(eq10 + 0.02 - calibration, math.nan,
                                             calibration_n=calibration),
-                              math.nan, float(t), u, motor, 1e-3)
+                              math.nan, float(t), u, motor, d)
         if est._fitting:
-            assert got.force_n == pytest.approx(eq10 - calibration)
-            last_calibration = calibration
+            assert got.force_n == pytest.approx(eq10 + 0.02 - calibration)
+            last_calibration, last_estimate = calibration, got.force_n
             continue
         own = est.scale_n_per_m * (u - (est.share - 1.0) * est.relaxed_m())
-        after.append((got.calibration_n, got.force_n - own))
+        after.append((own, got.calibration_n, got.force_n))
     assert len(after) > 100
-    assert {c for c, _ in after} == {last_calibration}
-    assert np.ptp([d for _, d in after]) == pytest.approx(0.0, abs=1e-12)
+    owns, calibrations, forces = (np.array(c) for c in zip(*after, strict=True))
+    assert calibrations[0] == pytest.approx(last_calibration, rel=1e-3)
+    assert np.ptp(calibrations / owns) == pytest.approx(0.0, abs=1e-12)
+    assert np.ptp(forces / owns) == pytest.approx(0.0, abs=1e-12)
+    assert calibrations[-1] < 0.7 * last_calibration  # the force fell to about 0.6
+    assert forces[0] == pytest.approx(last_estimate, abs=0.01)  # no jump when it takes over
 
 
 def test_band_widens_after_the_fit_by_what_a_share_error_would_move_the_estimate() -> None:

@@ -14,7 +14,10 @@ estimator, and steps the grasp phases:
 * **Hold**: entered when the estimate reaches the target; the motor stops for
   a settling time (its lag), then the estimator's hold starts (Eq. 8's onset)
   and the PID regulates the estimate, or, for the fixed baseline, the
-  aperture is held.
+  aperture is held.  A new target during the hold is fed forward: the motor
+  moves at up to 10 mm/s by most of the travel the loading's stiffness says
+  it needs while the PID, capped at 3 mm/s for regulation, follows the force
+  that travel has reached and takes up the rest.
 * **Lift** / **Sustain**: the arm lifts and waits with the force held.
 * **Release**: the motor opens until the marker is back at rest.
 
@@ -148,6 +151,19 @@ class ForceControlConfig:
         Window of the slip test (s).
     stroke_mm : float
         Motor travel available (mm).
+    target_move_mm_s : float
+        A new target during the hold moves the motor at up to this speed by
+        ``target_move_share`` of the travel the loading's stiffness says it
+        needs (feed-forward), while the PID follows the force that travel has
+        reached so far (mm/s; 0: the PID alone, within its output limit).
+    target_move_share : float
+        That share, in (0, 1]: a quick move meets a stiffer chain than the
+        loading did, which relaxed as it closed, and the PID takes up the
+        rest from the near side.
+    loading_share : float
+        The loading's stiffness is fitted over the frames whose estimate is
+        above this share of the estimate at the hold (motor travel against
+        estimate, least squares).
     """
 
     gains: PIDGains = field(default_factory=lambda: PIDGains(
@@ -166,6 +182,17 @@ class ForceControlConfig:
     slip_drop_rel: float = 0.3
     slip_window_s: float = 0.5
     stroke_mm: float = 148.0
+    target_move_mm_s: float = 10.0
+    target_move_share: float = 0.9
+    loading_share: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.target_move_mm_s) and self.target_move_mm_s >= 0):
+            raise ValueError(f"target move speed must be >= 0 mm/s, got {self.target_move_mm_s}")
+        if not 0.0 < self.target_move_share <= 1.0:
+            raise ValueError(f"target move share must be in (0, 1], got {self.target_move_share}")
+        if not 0.0 <= self.loading_share < 1.0:
+            raise ValueError(f"loading share must be in [0, 1), got {self.loading_share}")
 
 
 #: Phases in which an object may stand between the infrared camera and the fingertips.
@@ -219,6 +246,10 @@ class GraspController:
         self._lift_start_mm = 0.0
         self._recent: list[tuple[float, float]] = []
         self._temp_status = TemperatureStatus.OFF
+        self._loading: list[tuple[float, float]] = []  # (motor mm, estimate N) while closing
+        self._stiffness_n_per_mm = math.nan
+        self._regulated_n = math.nan  # the target the hold has moved to
+        self._move_mm = 0.0  # feed-forward travel still to go
 
     # -- operator requests ---------------------------------------------------------------
 
@@ -447,6 +478,7 @@ class GraspController:
                     self._enter(t, GraspPhase.RELEASE)
                     return 0.0, 0.0
                 return cfg.approach_mm_s, 0.0
+            self._loading.append((motor, est.force_n))
             if est.force_n >= target * (1.0 - cfg.hold_tolerance_rel) or motor >= cfg.stroke_mm:
                 if motor >= cfg.stroke_mm:
                     self.log.event(t, EventKind.STROKE_END, f"estimate {est.force_n:.2f} N")
@@ -461,9 +493,12 @@ class GraspController:
             self._hold_started = True
             self.estimator.start_hold(t, motor)
             self.pid.reset(0.0)
+            self._stiffness_n_per_mm = _loading_stiffness(self._loading, est.force_n,
+                                                          cfg.loading_share)
+            self._regulated_n, self._move_mm = target, 0.0
             self.log.event(t, EventKind.HOLD_ONSET, f"estimate {est.force_n:.3f} N")
             return 0.0, 0.0
-        velocity = (self.pid.update(target, est.force_n, dt)
+        velocity = (self._regulate(target, est.force_n, dt)
                     if self.estimator.regulates_hold else 0.0)
         if motor >= cfg.stroke_mm:
             velocity = min(velocity, 0.0)
@@ -482,6 +517,31 @@ class GraspController:
             if t - self._phase_t >= self.plan.sustain_s:
                 self._finish(t)
         return velocity, arm
+
+    def _regulate(self, target: float, force_n: float, dt: float) -> float:
+        """The hold's motor velocity: the PID, and a new target's feed-forward move.
+
+        A new target queues the travel the loading's stiffness says it needs;
+        the motor covers it at up to ``target_move_mm_s`` while the PID
+        regulates to the force that travel has reached (the new target less
+        the stiffness times what is left), so it neither fights the move nor
+        winds up on the step.  What the stiffness gets wrong the PID takes up.
+        """
+        cfg = self.config
+        k = self._stiffness_n_per_mm
+        if target != self._regulated_n:
+            if cfg.target_move_mm_s > 0 and math.isfinite(k) and math.isfinite(self._regulated_n):
+                self._move_mm += cfg.target_move_share * (target - self._regulated_n) / k
+            self._regulated_n = target
+        feed = 0.0
+        if self._move_mm != 0.0:
+            step = cfg.target_move_mm_s * dt
+            done = min(max(self._move_mm, -step), step)
+            self._move_mm -= done
+            feed = done / dt
+        reference = (target - k * self._move_mm / cfg.target_move_share if self._move_mm != 0.0
+                     else target)
+        return feed + self.pid.update(reference, force_n, dt)
 
     def _open(self, t: float, percept: Percept) -> tuple[float, float]:
         zeroed = percept.marker.status is TrackStatus.TRACKING
@@ -521,3 +581,23 @@ class GraspController:
             self.log.event(t, EventKind.SLIP, f"estimate fell {peak - est.force_n:.2f} N "
                            f"in {self.config.slip_window_s:g} s")
             self._recent.clear()
+
+
+def _loading_stiffness(loading: list[tuple[float, float]], hold_n: float,
+                       share: float) -> float:
+    """The estimate's rise per millimetre of motor travel over the loading's top (N/mm).
+
+    A least-squares line through the closing frames whose estimate is above
+    ``share`` of ``hold_n``; nan if fewer than three, or a slope that is not
+    positive (nothing to feed forward with).
+    """
+    top = [(m, f) for m, f in loading if math.isfinite(f) and f >= share * hold_n]
+    if len(top) < 3:
+        return math.nan
+    m_mean = sum(m for m, _ in top) / len(top)
+    f_mean = sum(f for _, f in top) / len(top)
+    mm = sum((m - m_mean) ** 2 for m, _ in top)
+    if mm <= 0:
+        return math.nan
+    slope = sum((m - m_mean) * (f - f_mean) for m, f in top) / mm
+    return slope if slope > 0 else math.nan

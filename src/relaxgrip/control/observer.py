@@ -47,7 +47,13 @@ it takes over.  On the twin (uncovered-beam temperature, seeds 0-5) the
 step went from 0.058 to 0.053 N mean MAE, the ramp from 0.113 to 0.105 N;
 the standard hold is ``relax``'s.  That estimate is ``relax``'s whole,
 the closed chain's reading blended in (:mod:`relaxgrip.control.chain`);
-the share is fitted to Eq. 10 without it.  A chain of the observer's own,
+the share is fitted to Eq. 10 without it.  What the observer carries from
+Eq. 10 (that offset and the calibration of the fit's last frame) it carries
+in proportion to its own force, as the linear model it is: after a 5 -> 3 N
+step a constant offset had left the estimate 0.04 N higher than before the
+step on average, in proportion 0.006 N (seeds 3000-3011, whose MAE went from
+0.066 to 0.061 N; with the controller's feed-forward on a new target, 0.050 N).
+A chain of the observer's own,
 counted from the fit's end and blended in at 0.3, held the ramp worse
 (0.085 against 0.072 N, seeds 2000-2023) and was not kept.
 
@@ -130,7 +136,8 @@ class ObserverEstimator:
         beat the model it is fitted to where that model holds); when it ends,
         the observer continues from Eq. 10's last value: its own estimate plus
         Eq. 10's mean offset from it between ``anchor_window_s[0]`` and
-        ``anchor_window_s[1]`` seconds before the end.
+        ``anchor_window_s[1]`` seconds before the end, scaled from then on by
+        its own force over its force at the end.
     unrelaxed : UnrelaxedIcfn, optional
         Read the force from the loading history, as ``relax`` does
         (:class:`relaxgrip.control.estimators.IcfnEstimator`).
@@ -138,7 +145,8 @@ class ObserverEstimator:
         ``relax``'s calibrated closed-loop error (at ``F_inst``, the
         temperature as read and the hold time), taken off the observer's
         estimate: while Eq. 10 is the estimate it is calibrated ``relax``'s;
-        after the share fit, the value of the fit's last frame stays.  The
+        after the share fit, the value of the fit's last frame stays, scaled
+        with the observer's force as the offset is.  The
         table was measured on holds at one temperature from their onset, so
         after a ramp its entry at the new temperature says what such a hold
         is off by, not the observer (seeds 4000-4035, 40 -> 55 °C from
@@ -212,7 +220,7 @@ class ObserverEstimator:
         self._motor: deque[tuple[float, float]] = deque()
         self._deflection: deque[tuple[float, float]] = deque()
         self._offsets: deque[tuple[float, float]] = deque()
-        self._offset_n = self._r_end = NAN
+        self._offset_n = self._r_end = self._est_end = NAN
         self._calibration_n = 0.0
 
     def _anchor_offset(self, hold: float) -> float:
@@ -381,10 +389,14 @@ class ObserverEstimator:
             if math.isnan(self._offset_n):
                 self._offset_n = self._anchor_offset(hold)
                 self._r_end = r
-            est += self._offset_n
-            # What Eq. 10 was off by when the observer took over: the table's later
-            # times and other temperatures describe Eq. 10's holds, not the observer's.
-            calibration = self._calibration_n
+                self._est_end = est
+            # The offset from Eq. 10 and the calibration when the observer took over,
+            # carried in proportion to the force: the observer is linear, and the
+            # table's later times and other temperatures describe Eq. 10's holds,
+            # not the observer's.
+            ratio = est / self._est_end if self._est_end > 0 else 1.0
+            est += self._offset_n * ratio
+            calibration = self._calibration_n * ratio
         est -= calibration
         drift = 0.0
         if math.isfinite(self._r_end):
