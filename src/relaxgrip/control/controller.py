@@ -31,8 +31,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from relaxgrip.backend import Command, Observation
-from relaxgrip.control.estimators import ForceEstimate, ForceEstimator
+from relaxgrip.control.estimators import (
+    SLOPE_FORCE_SHARE,
+    ForceEstimate,
+    ForceEstimator,
+    travel_slope,
+)
 from relaxgrip.control.phases import EventKind, GraspPhase, PhaseLog
 from relaxgrip.control.pid import PID, PIDGains
 from relaxgrip.control.temperature import (
@@ -184,7 +191,7 @@ class ForceControlConfig:
     stroke_mm: float = 148.0
     target_move_mm_s: float = 10.0
     target_move_share: float = 0.9
-    loading_share: float = 0.5
+    loading_share: float = SLOPE_FORCE_SHARE
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.target_move_mm_s) and self.target_move_mm_s >= 0):
@@ -588,16 +595,13 @@ def _loading_stiffness(loading: list[tuple[float, float]], hold_n: float,
     """The estimate's rise per millimetre of motor travel over the loading's top (N/mm).
 
     A least-squares line through the closing frames whose estimate is above
-    ``share`` of ``hold_n``; nan if fewer than three, or a slope that is not
-    positive (nothing to feed forward with).
+    ``share`` of ``hold_n`` (:func:`~relaxgrip.control.estimators.travel_slope`,
+    as ``relax`` measures its closure stiffness); nan if fewer than three,
+    under 1 µm of travel, or a slope that is not positive (nothing to feed
+    forward with).
     """
-    top = [(m, f) for m, f in loading if math.isfinite(f) and f >= share * hold_n]
+    top = np.array([(m, f) for m, f in loading if math.isfinite(f) and f >= share * hold_n])
     if len(top) < 3:
         return math.nan
-    m_mean = sum(m for m, _ in top) / len(top)
-    f_mean = sum(f for _, f in top) / len(top)
-    mm = sum((m - m_mean) ** 2 for m, _ in top)
-    if mm <= 0:
-        return math.nan
-    slope = sum((m - m_mean) * (f - f_mean) for m, f in top) / mm
-    return slope if slope > 0 else math.nan
+    slope = travel_slope(top[:, 0], top[:, 1])
+    return float(slope) if slope is not None and float(slope) > 0 else math.nan

@@ -105,11 +105,12 @@ __all__ = [
     "RelaxEstimator",
     "bundle_estimator",
     "make_estimator",
+    "travel_slope",
 ]
 
 NAN = math.nan
 #: The closure slopes are measured where the loading estimate is above this share of its end.
-_SLOPE_FORCE_SHARE = 0.5
+SLOPE_FORCE_SHARE = 0.5
 FloatArray = NDArray[np.float64]
 
 
@@ -542,16 +543,29 @@ def _closure_slopes(
     m = np.array([row[1] for row in loading])
     f = np.array([row[2] for row in loading])
     poses = np.array([row[3] for row in loading])
-    upper = f >= _SLOPE_FORCE_SHARE * float(np.median(f[-5:]))
+    upper = f >= SLOPE_FORCE_SHARE * float(np.median(f[-5:]))
     if np.count_nonzero(upper) >= 3:
         m, f, poses = m[upper], f[upper], poses[upper]
-    spread = m - m.mean()
-    denom = float(spread @ spread)
-    if denom < 1e-6:  # under 1 µm of travel: no slope to measure
+    stiffness = travel_slope(m, f)
+    if stiffness is None:
         return 0.0, np.zeros(6)
-    stiffness = max(0.0, float(spread @ (f - f.mean())) / denom)
-    pose_slope: FloatArray = spread @ (poses - poses.mean(axis=0)) / denom
-    return stiffness, pose_slope
+    pose_slope = travel_slope(m, poses)
+    assert pose_slope is not None  # the same travel
+    return max(0.0, float(stiffness)), np.asarray(pose_slope)
+
+
+def travel_slope(motor_mm: FloatArray, values: FloatArray) -> FloatArray | float | None:
+    """Least-squares slope of ``values`` (one row per frame) over motor travel (per mm).
+
+    A float for one value per frame, an array for several; None under 1 µm
+    of travel, where there is no slope to measure.
+    """
+    spread = motor_mm - motor_mm.mean()
+    denom = float(spread @ spread)
+    if denom < 1e-6:
+        return None
+    slope: FloatArray | float = spread @ (values - values.mean(axis=0)) / denom
+    return slope
 
 
 def make_estimator(kind: EstimatorKind | str, icfn: ICFN, rcfn: RCFN,
