@@ -40,6 +40,9 @@ def test_compare_prints_the_table_and_draws_the_figure(monkeypatch, capsys, tmp_
     assert code == 0, err
     for name in ("fixed", "icfn", "relax", "observer"):
         assert name in out
+    assert "estimator" in out  # whole in an 80-column console: the figures wrap instead
+    assert "3.571" in out  # the window starts at 100/280 of 10 s, rounded
+    assert "3.57143" not in out
     assert "MAE reduction of relax vs fixed" in out
     assert "vs icfn" in out
     assert (tmp_path / "relaxgrip-hold.png").stat().st_size > 10_000

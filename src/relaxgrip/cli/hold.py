@@ -212,7 +212,7 @@ def hold(
     if budget:
         parts = result.error_budget()
         lo, hi = result.window
-        console.print(f"error budget, estimate − true force over {lo:g}–{hi:g} s: onset "
+        console.print(f"error budget, estimate − true force over {lo:.4g}–{hi:.4g} s: onset "
                       f"{parts['onset_n']:+.3f} N, Eq. 10 relaxation "
                       f"{parts['relaxation_n']:+.3f} N, added closure {parts['closure_n']:+.3f} N"
                       + (f", calibration {parts['calibration_n']:+.3f} N"
@@ -231,7 +231,7 @@ def _print_survey(survey: HoldSurvey, seeds: str, seconds: float) -> None:
     lo, hi = steady_window_s(survey.duration_s)
     names = list(survey.runs)
     scenario = "".join(f", {v}" for v in survey.profiles.values())
-    per_seed = Table(title=f"MAE of the true force from the target over {lo:g}–{hi:g} s (N)")
+    per_seed = Table(title=f"MAE of the true force from the target over {lo:.4g}–{hi:.4g} s (N)")
     for col in ("seed", *names):
         per_seed.add_column(col, justify="right")
     for i, seed in enumerate(survey.seeds):
@@ -244,7 +244,10 @@ def _print_survey(survey: HoldSurvey, seeds: str, seconds: float) -> None:
                           "each run's mean estimate error, mean ± SD over seeds (N); band: the "
                           "share of the hold the 95 % band covers the true force")
     for col in ("estimator", "MAE", "95 % CI", "median", "SD", "est − true", "band"):
-        table.add_column(col, justify="left" if col == "estimator" else "right")
+        if col == "estimator":  # names whole; the figures wrap in a narrow terminal
+            table.add_column(col, no_wrap=True, min_width=len("observer"))
+        else:
+            table.add_column(col, justify="right")
     for name in names:
         s = survey.summary(name)
         mae, est, cover = s["mae_n"], s.get("est_error_mean_n"), s.get("band_coverage")
@@ -275,10 +278,13 @@ def _print_table(rows: dict[str, dict[str, Any]], reductions: dict[str, float],
     lo, hi = first["window_s"]
     table = Table(title=f"{first['duration_s']:g} s hold at {first['target_n']:g} N, "
                         f"{first['temp_c']:g} °C, seed {first['seed']}: true force − target over "
-                        f"{lo:g}–{hi:g} s (paper in brackets)")
+                        f"{lo:.4g}–{hi:.4g} s (paper in brackets)")
     for col in ("estimator", "MAE (N)", "mean (N)", "median (N)", "RMSE (N)", "IQR (N)",
                 "estimate − true: mean / RMSE (N)"):
-        table.add_column(col, justify="left" if col == "estimator" else "right")
+        if col == "estimator":  # names whole; the figures wrap in a narrow terminal
+            table.add_column(col, no_wrap=True, min_width=len("observer"))
+        else:
+            table.add_column(col, justify="right")
     for name, d in rows.items():
         q25, q75 = d["iqr_n"]
         table.add_row(

@@ -21,6 +21,8 @@ _TITLES = {"fixed": "without holding control (fixed)",
            "observer": "viscoelastic observer (observer)"}
 _COLORS = {"fixed": "tab:gray", "icfn": "tab:red", "relax": "tab:green",
            "observer": "tab:purple"}
+#: The observer is ``relax``'s estimate through a standard hold: dashed, so both show.
+_LINESTYLES = {"observer": (0, (4, 3))}
 
 
 def _thin(t: np.ndarray, every_s: float = 0.2) -> np.ndarray:
@@ -65,7 +67,7 @@ def plot_hold_comparison(comparison: HoldComparison, path: str | Path) -> Path:
     for name, hold in holds.items():
         idx = _thin(hold.t_s)
         ax_err.plot(hold.t_s[idx], (hold.estimate_n - hold.truth_n)[idx], lw=1.0,
-                    color=_COLORS.get(name), label=name)
+                    color=_COLORS.get(name), ls=_LINESTYLES.get(name, "-"), label=name)
     ax_err.axhline(0.0, color="k", lw=0.6)
     ax_err.set_xlabel("time since hold onset (s)")
     ax_err.set_ylabel("estimate − true force (N)")
