@@ -243,11 +243,7 @@ def _print_survey(survey: HoldSurvey, seeds: str, seconds: float) -> None:
                   caption="95 % CI: the mean's Student-t interval over the seeds; est − true: "
                           "each run's mean estimate error, mean ± SD over seeds (N); band: the "
                           "share of the hold the 95 % band covers the true force")
-    for col in ("estimator", "MAE", "95 % CI", "median", "SD", "est − true", "band"):
-        if col == "estimator":  # names whole; the figures wrap in a narrow terminal
-            table.add_column(col, no_wrap=True, min_width=len("observer"))
-        else:
-            table.add_column(col, justify="right")
+    _add_columns(table, ("estimator", "MAE", "95 % CI", "median", "SD", "est − true", "band"))
     for name in names:
         s = survey.summary(name)
         mae, est, cover = s["mae_n"], s.get("est_error_mean_n"), s.get("band_coverage")
@@ -273,18 +269,21 @@ def _print_survey(survey: HoldSurvey, seeds: str, seconds: float) -> None:
     console.print(f"{survey.twin_version}, {seconds:.1f} s")
 
 
+def _add_columns(table: Table, names: tuple[str, ...]) -> None:
+    """The estimator's column first, its names whole (the figures wrap in a narrow terminal)."""
+    table.add_column(names[0], no_wrap=True, min_width=len("observer"))
+    for col in names[1:]:
+        table.add_column(col, justify="right")
+
+
 def _print_table(rows: dict[str, dict[str, Any]], reductions: dict[str, float],
                  first: dict[str, Any], seconds: float) -> None:
     lo, hi = first["window_s"]
     table = Table(title=f"{first['duration_s']:g} s hold at {first['target_n']:g} N, "
                         f"{first['temp_c']:g} °C, seed {first['seed']}: true force − target over "
                         f"{lo:.4g}–{hi:.4g} s (paper in brackets)")
-    for col in ("estimator", "MAE (N)", "mean (N)", "median (N)", "RMSE (N)", "IQR (N)",
-                "estimate − true: mean / RMSE (N)"):
-        if col == "estimator":  # names whole; the figures wrap in a narrow terminal
-            table.add_column(col, no_wrap=True, min_width=len("observer"))
-        else:
-            table.add_column(col, justify="right")
+    _add_columns(table, ("estimator", "MAE (N)", "mean (N)", "median (N)", "RMSE (N)",
+                         "IQR (N)", "estimate − true: mean / RMSE (N)"))
     for name, d in rows.items():
         q25, q75 = d["iqr_n"]
         table.add_row(
