@@ -106,6 +106,20 @@ def test_a_lost_marker_keeps_the_last_deflection() -> None:
     assert blended - force == pytest.approx(K_OBJ * 2 * 0.15, rel=2e-3)
 
 
+def test_a_seen_contact_sets_the_marker_share_and_the_weight() -> None:
+    params = ChainParams(weight=0.2, seen_weight=0.4)
+    nominal, seen, inside = ClosedChain(params), ClosedChain(params), ClosedChain(params)
+    nominal.start(0.3, 1e-4, TEMP_C)
+    seen.start(0.3, 1e-4, TEMP_C, contact_m=0.083)
+    inside.start(0.3, 1e-4, TEMP_C, contact_m=0.050)  # nearer the root than the marker
+    assert (nominal.contact_m, nominal.weight) == (0.080, 0.2)
+    assert (seen.contact_m, seen.weight) == (0.083, 0.4)
+    assert (inside.contact_m, inside.weight) == (0.080, 0.2)
+    # Further out, the marker bends less of the contact's deflection.
+    assert seen.share == marker_share(0.060, 0.083, TEMP_C, FingerParams()) < nominal.share
+    assert inside.share == nominal.share
+
+
 def test_no_temperature_means_no_chain() -> None:
     chain = ClosedChain()
     chain.start(0.3, 1e-4, math.nan)
@@ -113,7 +127,7 @@ def test_no_temperature_means_no_chain() -> None:
 
 
 @pytest.mark.parametrize("kwargs", [
-    {"weight": -0.1}, {"weight": 1.5}, {"weight": math.nan},
+    {"weight": -0.1}, {"weight": 1.5}, {"weight": math.nan}, {"seen_weight": 1.5},
     {"ref_s": 0.5, "ref_window_s": 1.0}, {"ref_window_s": 0.0},
     {"marker_m": 0.09}, {"marker_m": 0.0}, {"min_compliant_share": 1.0},
 ])

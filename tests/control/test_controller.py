@@ -21,9 +21,12 @@ from relaxgrip.control import (
     make_estimator,
     run_loop,
 )
+from relaxgrip.control.controller import onset_contact_m
 from relaxgrip.errors import InputError
 from relaxgrip.learning.training import load_default_models
+from relaxgrip.perception.proximity import ProximityTarget
 from relaxgrip.twin import GripperTwin, TwinConfig
+from relaxgrip.twin.objects import get_object
 
 
 @pytest.fixture(scope="module")
@@ -96,6 +99,47 @@ def test_a_grasp_walks_through_its_phases_and_holds_the_target(models):
     assert np.nanmin(result["estimate_n"][release]) >= 0.0
     assert np.all(np.isnan(result["hold_s"][release]))
     assert backend.commands[-1] == Command()  # the runner leaves the motor and heaters off
+
+
+@pytest.mark.parametrize("known", [True, False])
+def test_the_held_object_is_seen_before_the_hold_and_its_place_told(models, monkeypatch, known):
+    """With the object known, perception finds it while the motor settles, then stops looking."""
+    cfg = TwinConfig(initial_temp_c=40.0)
+    clock = VirtualClock()
+    twin = GripperTwin(cfg, seed=8, clock=clock)
+    estimator = make_estimator("relax", models.icfn, models.rcfn)
+    controller = GraspController(cfg.rig, estimator, heat=cfg.heat)
+    told: list[float] = []
+    start_hold = estimator.start_hold
+
+    def telling(t_s: float, motor_mm: float, contact_m: float = math.nan) -> None:
+        told.append(contact_m)
+        start_hold(t_s, motor_mm, contact_m)
+
+    monkeypatch.setattr(estimator, "start_hold", telling)
+    ball = get_object("force_ball")
+    grasped = ProximityTarget(ball.width_m, ball.color_rgb) if known else None
+    plan = GraspPlan(target_n=3.0, temp_c=40.0, hold_s=4.0, release=False, grasped=grasped)
+    result = run_loop(twin, controller, clock, plan, 60.0)
+    onset = result.log.first(EventKind.HOLD_ONSET)
+    assert onset is not None
+    assert len(told) == 1
+    if not known:
+        assert math.isnan(told[0])
+        assert math.isnan(onset_contact_m(onset.detail))
+        return
+    # The ball's silhouette puts it within a millimetre of where the twin drew it
+    # (3.5 mm from the nominal 80 mm on this seed), and the log says what the estimator heard.
+    assert abs(told[0] - twin.material.contact_position_m) < 1e-3
+    assert abs(twin.material.contact_position_m - 0.080) > 3e-3
+    assert onset_contact_m(onset.detail) == told[0]
+    assert controller.percept is not None
+    assert controller.percept.proximity is None  # no longer looking
+
+
+def test_a_hold_onset_names_where_the_object_was_seen() -> None:
+    assert onset_contact_m("estimate 5.115 N; object at 79.448 mm") == 79.448 / 1e3
+    assert math.isnan(onset_contact_m("estimate 5.115 N"))
 
 
 def test_the_controller_never_reads_the_truth(models):

@@ -210,7 +210,7 @@ class _RelaxStub:
     def reset(self) -> None:
         pass
 
-    def start_hold(self, t_s: float, motor_position_mm: float) -> None:
+    def start_hold(self, t_s: float, motor_position_mm: float, contact_m: float = math.nan) -> None:
         pass
 
 

@@ -151,6 +151,7 @@ def test_visual_proximity_during_the_approach(name: str) -> None:
         proximity = percept.proximity
         assert proximity is not None
         assert proximity.found
+        assert proximity.position_m == pytest.approx(proximity.ahead_m + 0.080)
         errors.append(proximity.ahead_m - obs.truth.object_ahead_m)
     assert rows[-1][0].truth is not None
     assert rows[-1][0].truth.object_ahead_m == pytest.approx(0.0)

@@ -70,6 +70,11 @@ class ChainParams:
     weight : float
         The chain's share of the blended estimate, in [0, 1]; 0 is Eq. 10
         alone (the paper's).
+    seen_weight : float
+        Its share when perception saw where the object sits along the
+        fingers (:meth:`ClosedChain.start`'s ``contact_m``): the marker's
+        share of the contact deflection is then the run's, and the reading
+        errs by the fingers' difference in creep alone.
     ref_s : float
         The chain counts from this hold time (s): before it the estimate is
         Eq. 10's, and at it the chain starts from Eq. 10's mean over the
@@ -78,7 +83,8 @@ class ChainParams:
         Length of that window (s).
     marker_m, contact_m : float
         Marker and contact positions along the finger (m) for the marker's
-        share of the contact deflection.
+        share of the contact deflection; ``contact_m`` is the nominal one,
+        taken when perception did not see the object.
     finger : FingerParams
         Finger constants for the beam model.
     min_compliant_share : float
@@ -88,6 +94,7 @@ class ChainParams:
     """
 
     weight: float = 0.2
+    seen_weight: float = 0.4
     ref_s: float = 5.0
     ref_window_s: float = 1.0
     marker_m: float = 0.060
@@ -96,8 +103,9 @@ class ChainParams:
     min_compliant_share: float = 0.1
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.weight <= 1.0:
-            raise ValueError(f"chain weight must be in [0, 1], got {self.weight}")
+        for weight in (self.weight, self.seen_weight):
+            if not 0.0 <= weight <= 1.0:
+                raise ValueError(f"chain weight must be in [0, 1], got {weight}")
         if not (self.ref_s >= self.ref_window_s > 0):
             raise ValueError("the chain's reference window must be > 0 s and end at or after it, "
                              f"got {self.ref_window_s} s ending at {self.ref_s} s")
@@ -124,13 +132,16 @@ class ClosedChain:
         """Forget the hold."""
         self.object_stiffness_n_per_mm = NAN
         self.share = NAN
+        self.contact_m = NAN
+        self.weight = NAN
         self._sums = [0.0, 0.0, 0.0]
         self._n = 0
         self._ref: tuple[float, float, float] | None = None
         self._deflection_m = NAN
         self.reading_n = NAN
 
-    def start(self, stiffness_n_per_mm: float, marker_per_mm_m: float, temp_c: float) -> None:
+    def start(self, stiffness_n_per_mm: float, marker_per_mm_m: float, temp_c: float,
+              contact_m: float = NAN) -> None:
         """The hold starts: the object's stiffness from the loading's slopes.
 
         Parameters
@@ -141,12 +152,19 @@ class ClosedChain:
             The marker's deflection per millimetre of motor travel (m/mm).
         temp_c : float
             The finger's temperature (°C) for the beam model; nan: no chain.
+        contact_m : float
+            Where perception saw the object along the fingers (m from the
+            root); nan, or a place beyond the marker's reach, takes the
+            nominal contact and weight.
         """
         self.reset()
         p = self.params
-        if p.weight == 0.0 or not math.isfinite(temp_c):
+        seen = math.isfinite(contact_m) and p.marker_m < contact_m <= p.finger.length_m
+        self.contact_m = contact_m if seen else p.contact_m
+        self.weight = p.seen_weight if seen else p.weight
+        if self.weight == 0.0 or not math.isfinite(temp_c):
             return
-        self.share = marker_share(p.marker_m, p.contact_m, temp_c, p.finger)
+        self.share = marker_share(p.marker_m, self.contact_m, temp_c, p.finger)
         compliant = 1.0 - 2.0 * marker_per_mm_m * 1e3 / self.share
         if compliant >= p.min_compliant_share and stiffness_n_per_mm > 0:
             self.object_stiffness_n_per_mm = stiffness_n_per_mm / compliant
@@ -189,4 +207,4 @@ class ClosedChain:
         f_ref, m_ref, x_ref = self._ref
         fingers_mm = 2.0 * (self._deflection_m - x_ref) * 1e3 / self.share
         self.reading_n = f_ref + self.object_stiffness_n_per_mm * (motor_mm - m_ref - fingers_mm)
-        return (1.0 - p.weight) * estimate_n + p.weight * self.reading_n
+        return (1.0 - self.weight) * estimate_n + self.weight * self.reading_n

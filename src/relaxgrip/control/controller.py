@@ -29,6 +29,7 @@ cuts heaters that are too hot or blind.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -52,13 +53,26 @@ from relaxgrip.errors import InputError
 from relaxgrip.perception.features import marker_pose
 from relaxgrip.perception.marker import TrackStatus
 from relaxgrip.perception.pipeline import Percept, Perception
+from relaxgrip.perception.proximity import ProximityTarget
 from relaxgrip.physics.thermal import HeatParams
 from relaxgrip.rig import RigGeometry
 
-__all__ = ["MAX_TARGET_N", "ForceControlConfig", "GraspController", "GraspPlan", "check_target_n"]
+__all__ = ["MAX_TARGET_N", "ForceControlConfig", "GraspController", "GraspPlan", "check_target_n",
+           "onset_contact_m"]
 
 #: Largest force target the controller accepts (N): the paper's range is 0–10 N.
 MAX_TARGET_N = 10.0
+#: How a hold-onset event's detail says where the grasped object was seen ("… mm").
+ONSET_OBJECT = "object at"
+
+
+def onset_contact_m(detail: str) -> float:
+    """Where a hold-onset event's detail says the grasped object sat (m); nan if it does not.
+
+    The detail gives it to the micrometre, as the estimator was told it.
+    """
+    found = re.search(rf"{ONSET_OBJECT} ([0-9]+\.[0-9]+) mm", detail)
+    return float(found.group(1)) / 1e3 if found else math.nan
 
 
 @dataclass(frozen=True)
@@ -87,6 +101,12 @@ class GraspPlan:
         Open the fingers at the end; else the grasp ends (Done) with the
         motor stopped where it is: the aperture is held, the force no longer
         regulated.
+    grasped : ProximityTarget or None
+        The object to be held, as the operator knows it (width, colour).
+        With it, perception looks for the object in the frames where the
+        motor settles before the hold, and the estimator is told where it
+        sits along the fingers (its closed chain reads the run's marker
+        share from that); ``None``: the nominal contact position.
     """
 
     target_n: float = 5.0
@@ -97,6 +117,7 @@ class GraspPlan:
     lift_mm: float = 0.0
     sustain_s: float = 0.0
     release: bool = True
+    grasped: ProximityTarget | None = None
 
     def __post_init__(self) -> None:
         check_target_n(self.target_n)
@@ -257,6 +278,7 @@ class GraspController:
         self._stiffness_n_per_mm = math.nan
         self._regulated_n = math.nan  # the target the hold has moved to
         self._move_mm = 0.0  # feed-forward travel still to go
+        self._grasped_seen: list[float] | None = None  # object positions (m) while settling
 
     # -- operator requests ---------------------------------------------------------------
 
@@ -409,6 +431,24 @@ class GraspController:
             return EventKind.ESTIMATE_LOST, "no valid estimate"
         return None
 
+    def _look_for_grasped(self, percept: Percept) -> None:
+        """While the motor settles into the hold, perception looks for the plan's object."""
+        if self.plan.grasped is None:
+            return
+        if self._grasped_seen is None:
+            self._grasped_seen = []
+            self.perception.set_target(self.plan.grasped)
+        elif percept.proximity is not None and percept.proximity.found:
+            self._grasped_seen.append(percept.proximity.position_m)
+
+    def _grasped_position_m(self) -> float:
+        """Where the object sat while the motor settled (m, median, to the µm); stop looking."""
+        if self.plan.grasped is None:
+            return math.nan
+        self.perception.set_target(None)
+        seen = self._grasped_seen or []
+        return round(float(np.median(seen)) * 1e3, 3) / 1e3 if seen else math.nan
+
     def _contact(self, t: float, percept: Percept) -> None:
         pose = marker_pose(percept.marker)
         bent = pose is not None and pose[0] > self.config.contact_deflection_m
@@ -495,15 +535,20 @@ class GraspController:
             return self.pid.update(target, est.force_n, dt), 0.0
         # Hold, Lift, Sustain: the force is held.
         if not self._hold_started:
+            self._look_for_grasped(percept)
             if t - self._phase_t < cfg.settle_s:
                 return 0.0, 0.0
             self._hold_started = True
-            self.estimator.start_hold(t, motor)
+            contact_m = self._grasped_position_m()
+            self.estimator.start_hold(t, motor, contact_m)
             self.pid.reset(0.0)
             self._stiffness_n_per_mm = _loading_stiffness(self._loading, est.force_n,
                                                           cfg.loading_share)
             self._regulated_n, self._move_mm = target, 0.0
-            self.log.event(t, EventKind.HOLD_ONSET, f"estimate {est.force_n:.3f} N")
+            detail = f"estimate {est.force_n:.3f} N"
+            if math.isfinite(contact_m):
+                detail += f"; {ONSET_OBJECT} {contact_m * 1e3:.3f} mm"
+            self.log.event(t, EventKind.HOLD_ONSET, detail)
             return 0.0, 0.0
         velocity = (self._regulate(target, est.force_n, dt)
                     if self.estimator.regulates_hold else 0.0)

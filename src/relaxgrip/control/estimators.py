@@ -196,8 +196,12 @@ class ForceEstimator(Protocol):
         """
         ...
 
-    def start_hold(self, t_s: float, motor_position_mm: float) -> None:
-        """The hold starts now (Eq. 8's onset)."""
+    def start_hold(self, t_s: float, motor_position_mm: float, contact_m: float = NAN) -> None:
+        """The hold starts now (Eq. 8's onset).
+
+        ``contact_m`` is where perception saw the object along the fingers
+        (m from the root), nan if it did not look or did not see it.
+        """
         ...
 
     def end_hold(self, t_s: float) -> None:
@@ -343,8 +347,8 @@ class IcfnEstimator:
         hold = NAN if self._onset_t is None else percept.t_s - self._onset_t
         return ForceEstimate(f, raw, self._onset_f, hold_s=hold)
 
-    def start_hold(self, t_s: float, motor_position_mm: float) -> None:
-        """Remember the onset (for the record only)."""
+    def start_hold(self, t_s: float, motor_position_mm: float, contact_m: float = NAN) -> None:
+        """Remember the onset (for the record only; the per-frame ICFN needs no contact)."""
         self._onset_t = t_s
         self._onset_f = self._last
 
@@ -511,13 +515,17 @@ class RelaxEstimator:
         self.chain.reset()
         self.icfn.end_hold(t_s)
 
-    def start_hold(self, t_s: float, motor_position_mm: float) -> None:
-        """Fix the onset, its pose and the closure stiffness; start ``F_inst`` on the loading."""
+    def start_hold(self, t_s: float, motor_position_mm: float, contact_m: float = NAN) -> None:
+        """Fix the onset, its pose and the closure stiffness; start ``F_inst`` on the loading.
+
+        ``contact_m`` (where the object was seen along the fingers) sets the
+        closed chain's marker share; nan takes the nominal contact.
+        """
         self._onset_t = t_s
         self._onset_motor = motor_position_mm
         self.closure_stiffness_n_per_mm, self._pose_per_mm = _closure_slopes(self._loading)
         self.chain.start(self.closure_stiffness_n_per_mm, float(self._pose_per_mm[0]),
-                         self._loading_temp_c)
+                         self._loading_temp_c, contact_m)
         before = [raw - self.closure_stiffness_n_per_mm * (m - motor_position_mm)
                   for t, m, raw, _ in self._loading if t >= t_s - self.onset_before_s]
         self._onset_sum, self._onset_n = float(sum(before)), len(before)

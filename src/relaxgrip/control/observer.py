@@ -422,11 +422,14 @@ class ObserverEstimator:
         else:
             self.icfn.end_hold(t_s)
 
-    def start_hold(self, t_s: float, motor_position_mm: float) -> None:
-        """The hold starts: the scale averages the ICFN over the next ``onset_window_s``."""
+    def start_hold(self, t_s: float, motor_position_mm: float, contact_m: float = NAN) -> None:
+        """The hold starts: the scale averages the ICFN over the next ``onset_window_s``.
+
+        ``contact_m`` (where the object was seen) goes to ``relax``'s closed chain.
+        """
         self._onset_t = t_s
         self._sum_f = self._sum_u = 0.0
         self.scale_n_per_m = self.f_onset_n = NAN
         self._reset_hold()
         if self.relax is not None:
-            self.relax.start_hold(t_s, motor_position_mm)
+            self.relax.start_hold(t_s, motor_position_mm, contact_m)

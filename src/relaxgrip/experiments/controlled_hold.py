@@ -46,7 +46,9 @@ from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import reconstruct
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
+from relaxgrip.perception.proximity import ProximityTarget
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
+from relaxgrip.twin.objects import get_object
 from relaxgrip.validate import check_positive
 
 FloatArray = NDArray[np.float64]
@@ -367,7 +369,8 @@ def run_hold(
     try:  # closed however it ends: the emulator's thread and pty with it
         controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
                                      heat=cfg.heat)
-        plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False)
+        plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False,
+                         grasped=_as_known(cfg.object_name))
         on_step = _scenario(twin, temp_profile, target_profile, disturbance, temp_c, target_n)
         frozen: list[GripperTwin] = []
         if budget:
@@ -392,6 +395,14 @@ def run_hold(
     return HoldResult(kind.value, target_n, temp_c, duration_s, seed, t[keep],
                       loop["truth_force_n"][keep], loop["estimate_n"][keep], loop,
                       target_series_n=targets, fixed_aperture_n=fixed, twin_scatter=scatter)
+
+
+def _as_known(object_name: str | None) -> ProximityTarget | None:
+    """The held object as the operator knows it: its catalogue width and colour."""
+    if object_name is None:
+        return None
+    spec = get_object(object_name)
+    return ProximityTarget(spec.width_m, spec.color_rgb)
 
 
 def _copy_at_onset(twin: GripperTwin, into: list[GripperTwin],

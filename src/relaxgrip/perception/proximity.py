@@ -84,6 +84,9 @@ class Proximity:
         fingers (m); 0 when it is where the grasp wants it; nan if not found.
     bbox_px : tuple of int
         ``(x, y, w, h)`` of the blob in full-resolution pixels.
+    position_m : float
+        Where the object's centre is along the fingers (m from their root):
+        ``ahead_m`` plus the grasp position; nan if not found.
     """
 
     t_s: float
@@ -91,6 +94,7 @@ class Proximity:
     range_m: float = math.nan
     ahead_m: float = math.nan
     bbox_px: tuple[int, int, int, int] = (0, 0, 0, 0)
+    position_m: float = math.nan
 
 
 class ProximityEstimator:
@@ -176,9 +180,10 @@ class ProximityEstimator:
         aperture = self.rig.aperture_m(motor_position_mm)
         finger2gripper = self.rig.finger2gripper(self.rig.marker_finger, aperture)
         centre_g = transform_points(finger2gripper @ self.rig.rgb.cam2finger, centre_cam)
-        ahead_m = float(centre_g[0]) - self.target.grasp_position_m
+        position_m = float(centre_g[0])
         bbox = (round(x / _SCALE), round(y / _SCALE), round(w / _SCALE), round(h / _SCALE))
-        return Proximity(frame.t_s, True, range_m, ahead_m, bbox)
+        return Proximity(frame.t_s, True, range_m, position_m - self.target.grasp_position_m,
+                         bbox, position_m)
 
     def _extent(
         self, blob: NDArray[np.bool_], bbox: tuple[int, int, int, int], blocked: NDArray[np.bool_]

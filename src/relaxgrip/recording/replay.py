@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from relaxgrip.control.controller import onset_contact_m
 from relaxgrip.control.estimators import (
     EstimatorKind,
     ForceEstimate,
@@ -97,7 +98,7 @@ def _replayed(path: Path, tolerant: bool, perception: Perception, est: ForceEsti
         elif kind == "contact":
             est.contact(t)
         elif kind == "hold_onset":
-            est.start_hold(t, motor_mm)
+            est.start_hold(t, motor_mm, onset_contact_m(str(event["detail"])))
             holding = True
         elif kind == "phase" and event["detail"] == "release" and holding:
             est.end_hold(t)
