@@ -14,9 +14,16 @@ it.  ``k_obj`` comes from the loading, where the ICFN rose by
 ``s = k_obj (1 - 2 rho / g)`` per millimetre of motor travel while the
 marker moved ``rho`` (``g`` the marker's share).
 
+How much of the marker's finger's contact deflection the marker shows
+depends on where the object sits along the finger (0.622 ± 0.021 over the
+twin's runs, whose contact scatters 1.9 mm): perception finds the object
+before the hold (:class:`relaxgrip.control.GraspPlan`'s ``grasped``) and
+:meth:`ClosedChain.start` takes the share from where it sits.
+
 Eq. 10's error during a hold is mostly the relaxing share of the finger
 without the marker (the RCFN reads the marker's finger); the chain's is the
-difference of the two fingers' creep.  The two are nearly independent, and
+difference of the two fingers' creep, and the object's position when it is
+not seen.  The two are nearly independent, and
 a weighted mean is better than either.  On the twin (``relax``, 5 N,
 40 °C, the estimate's mean absolute error over 100-280 s, seeds 0-23, from
 its logged frames): Eq. 10 alone 0.047 N, the chain alone 0.064 N, 0.8
@@ -26,7 +33,10 @@ anywhere in 0.58-0.65; the twin's runs read 0.56-0.63).  In closed loop
 over seeds 0-47, 8 N from 0.076 to 0.065 N and 5 N at 55 °C from 0.116 to
 0.077 N (seeds 0-7).  Where the run's error is its onset reading, which
 both readings share, the blend changes nothing: seeds 2000-2047, 0.0636
-against 0.0642 N.
+against 0.0642 N.  With the object's position seen, at weight 0.4, 5 N at
+40 °C went from 0.054 to 0.0505 N over 180 holds on five sets of seeds, but
+8 of 10 other conditions held worse (5 N at 55 °C: 0.050 to 0.083 N, seeds
+0-7), so seeing it is not the default (session 35).
 """
 
 from __future__ import annotations
@@ -74,7 +84,8 @@ class ChainParams:
         Its share when perception saw where the object sits along the
         fingers (:meth:`ClosedChain.start`'s ``contact_m``): the marker's
         share of the contact deflection is then the run's, and the reading
-        errs by the fingers' difference in creep alone.
+        errs by the fingers' difference in creep alone.  0.4 was chosen at
+        5 N, 40 °C, where the fingers' creep differs least.
     ref_s : float
         The chain counts from this hold time (s): before it the estimate is
         Eq. 10's, and at it the chain starts from Eq. 10's mean over the
