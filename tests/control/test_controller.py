@@ -137,6 +137,28 @@ def test_the_held_object_is_seen_before_the_hold_and_its_place_told(models, monk
     assert controller.percept.proximity is None  # no longer looking
 
 
+def test_a_grasp_stopped_while_looking_for_its_object_stops_the_looking(models):
+    cfg = TwinConfig(initial_temp_c=40.0)
+    clock = VirtualClock()
+    twin = GripperTwin(cfg, seed=8, clock=clock)
+    controller = GraspController(cfg.rig, make_estimator("relax", models.icfn, models.rcfn),
+                                 heat=cfg.heat)
+    ball = get_object("force_ball")
+    plan = GraspPlan(target_n=3.0, temp_c=40.0, grasped=ProximityTarget(ball.width_m,
+                                                                        ball.color_rgb))
+    controller.start(plan, clock.now())
+    while controller.phase is not GraspPhase.HOLD or controller.percept is None \
+            or controller.percept.proximity is None:
+        assert clock.now() < 60.0
+        twin.act(controller.step(twin.observe()))
+        clock.advance(1.0 / 30.0)
+    controller.stop(clock.now(), "operator")
+    controller.start(GraspPlan(target_n=3.0, temp_c=40.0), clock.now())
+    twin.act(controller.step(twin.observe()))
+    assert controller.percept is not None
+    assert controller.percept.proximity is None
+
+
 def test_a_hold_onset_names_where_the_object_was_seen() -> None:
     assert onset_contact_m("estimate 5.115 N; object at 79.448 mm") == 79.448 / 1e3
     assert math.isnan(onset_contact_m("estimate 5.115 N"))

@@ -300,6 +300,8 @@ class GraspController:
             self.temperature.check_mode(plan.mode)
         elif plan.temp_c is not None:
             self.temperature.limits.check_setpoint(plan.temp_c)
+        if self._grasped_seen is not None:  # the last grasp stopped while looking for its object
+            self.perception.set_target(None)
         self.plan = plan
         self.log = PhaseLog()
         self.perception.reset()
