@@ -73,6 +73,20 @@ def grasp(models: Any, kind: str = "relax", plan: GraspPlan | None = None,
     return run_loop(backend, controller, clock, plan, max_s), backend
 
 
+def on_twin(models: Any, kind: str, seed: int) -> tuple[GripperTwin, VirtualClock,
+                                                         GraspController]:
+    """A twin at 40 °C on virtual time, and a controller with ``kind``'s estimator."""
+    cfg = TwinConfig(initial_temp_c=40.0)
+    clock = VirtualClock()
+    controller = GraspController(cfg.rig, make_estimator(kind, models.icfn, models.rcfn),
+                                 heat=cfg.heat)
+    return GripperTwin(cfg, seed=seed, clock=clock), clock, controller
+
+
+#: The force ball as an operator names it to the controller: width and colour.
+BALL = ProximityTarget(get_object("force_ball").width_m, get_object("force_ball").color_rgb)
+
+
 def during(result: LoopResult, phase: GraspPhase) -> np.ndarray:
     from relaxgrip.control import PHASES
 
@@ -104,11 +118,8 @@ def test_a_grasp_walks_through_its_phases_and_holds_the_target(models):
 @pytest.mark.parametrize("known", [True, False])
 def test_the_held_object_is_seen_before_the_hold_and_its_place_told(models, monkeypatch, known):
     """With the object known, perception finds it while the motor settles, then stops looking."""
-    cfg = TwinConfig(initial_temp_c=40.0)
-    clock = VirtualClock()
-    twin = GripperTwin(cfg, seed=8, clock=clock)
-    estimator = make_estimator("relax", models.icfn, models.rcfn)
-    controller = GraspController(cfg.rig, estimator, heat=cfg.heat)
+    twin, clock, controller = on_twin(models, "relax", seed=8)
+    estimator = controller.estimator
     told: list[float] = []
     start_hold = estimator.start_hold
 
@@ -117,9 +128,8 @@ def test_the_held_object_is_seen_before_the_hold_and_its_place_told(models, monk
         start_hold(t_s, motor_mm, contact_m)
 
     monkeypatch.setattr(estimator, "start_hold", telling)
-    ball = get_object("force_ball")
-    grasped = ProximityTarget(ball.width_m, ball.color_rgb) if known else None
-    plan = GraspPlan(target_n=3.0, temp_c=40.0, hold_s=4.0, release=False, grasped=grasped)
+    plan = GraspPlan(target_n=3.0, temp_c=40.0, hold_s=4.0, release=False,
+                     grasped=BALL if known else None)
     result = run_loop(twin, controller, clock, plan, 60.0)
     onset = result.log.first(EventKind.HOLD_ONSET)
     assert onset is not None
@@ -138,20 +148,13 @@ def test_the_held_object_is_seen_before_the_hold_and_its_place_told(models, monk
 
 
 def test_a_grasp_stopped_while_looking_for_its_object_stops_the_looking(models):
-    cfg = TwinConfig(initial_temp_c=40.0)
-    clock = VirtualClock()
-    twin = GripperTwin(cfg, seed=8, clock=clock)
-    controller = GraspController(cfg.rig, make_estimator("relax", models.icfn, models.rcfn),
-                                 heat=cfg.heat)
-    ball = get_object("force_ball")
-    plan = GraspPlan(target_n=3.0, temp_c=40.0, grasped=ProximityTarget(ball.width_m,
-                                                                        ball.color_rgb))
-    controller.start(plan, clock.now())
+    twin, clock, controller = on_twin(models, "relax", seed=8)
+    controller.start(GraspPlan(target_n=3.0, temp_c=40.0, grasped=BALL), clock.now())
     while controller.phase is not GraspPhase.HOLD or controller.percept is None \
             or controller.percept.proximity is None:
         assert clock.now() < 60.0
         twin.act(controller.step(twin.observe()))
-        clock.advance(1.0 / 30.0)
+        clock.sleep_until(clock.now() + 1 / 30)
     controller.stop(clock.now(), "operator")
     controller.start(GraspPlan(target_n=3.0, temp_c=40.0), clock.now())
     twin.act(controller.step(twin.observe()))
@@ -319,11 +322,7 @@ def test_set_target_checks_its_range(models):
 
 
 def test_a_second_start_during_a_grasp_is_refused_and_changes_nothing(models):
-    cfg = TwinConfig(initial_temp_c=40.0)
-    clock = VirtualClock()
-    twin = GripperTwin(cfg, seed=1, clock=clock)
-    ctl = GraspController(cfg.rig, make_estimator("icfn", models.icfn, models.rcfn),
-                          heat=cfg.heat)
+    twin, clock, ctl = on_twin(models, "icfn", seed=1)
     plan = GraspPlan(target_n=3.0, temp_c=40.0, hold_s=math.inf)
     ctl.start(plan, clock.now())
     while ctl.phase is not GraspPhase.HOLD and clock.now() < 40.0:
