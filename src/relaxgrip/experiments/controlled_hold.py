@@ -345,13 +345,13 @@ def run_hold(
     budget : bool
         Also hold a copy of the twin at the onset's aperture, for
         :meth:`HoldResult.error_budget` (``relax`` on the twin backend only).
-
     locate_object : bool
         Have perception find the object (its catalogue width and colour) while
         the motor settles before the hold, and the closed chain take its
         marker share from where it sits (beyond the paper, not the default:
         at 5 N, 40 °C it held better, at 55 °C worse; README, section
         Control).
+
     Returns
     -------
     HoldResult
