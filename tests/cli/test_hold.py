@@ -98,6 +98,11 @@ def test_seeds_report_each_seed_and_the_mean_over_them(monkeypatch, capsys):
     (["--temp-c", "-300"], "safe range"),
     (["--estimator", "magic"], "--estimator"),
     (["--duration-s", "0"], "duration"),
+    (["--duration-s", "1e9"], "--duration-s must be at most 3600 s"),
+    (["--disturbance", "push:2:400", "--duration-s", "20"],
+     "--disturbance starts at 400 s, not before the 20 s hold ends"),
+    (["--temp-profile", "step:50:280"], "--temp-profile starts at 280 s"),
+    (["--target-profile", "ramp:5:3:300:10"], "--target-profile starts at 300 s"),
     (["--seed", "-1"], "--seed"),
     (["--plot", "out.gif"], "plot format"),
     (["--plot", "/no/such/dir/x.png"], "does not exist"),
@@ -169,6 +174,7 @@ def test_budget_survey_prints_the_parts_over_seeds(monkeypatch, capsys):
     (["--target-n", "0"], "target force"),
     (["--temp-c", "90"], "safe range"),
     (["--duration-s", "-5"], "duration"),
+    (["--duration-s", "7200"], "at most 3600 s"),
     (["--jobs", "0"], "--jobs"),
 ])
 def test_budget_survey_refuses_bad_input(monkeypatch, capsys, args, message):

@@ -263,6 +263,7 @@ def test_summary_is_the_mean_over_each_scenarios_holds() -> None:
     (["calibrate-band", "{dir}", "--scenarios", "warp"], "warp"),
     (["calibrate-band", "{dir}", "--jobs", "0"], "--jobs"),
     (["calibrate-band", "{dir}", "--duration-s", "-1"], "--duration-s"),
+    (["calibrate-band", "{dir}", "--duration-s", "1e5"], "--duration-s must be at most 3600 s"),
     (["hold", "--estimator", "relax", "--observer", "{dir}"], "--observer"),
     (["hold", "--estimator", "observer", "--observer", "{missing}"], "manifest.json"),
 ])

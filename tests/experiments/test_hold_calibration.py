@@ -272,6 +272,7 @@ def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: py
     (["calibrate-hold", "{dir}", "--seeds", "3"], "two seeds"),
     (["calibrate-hold", "{dir}", "--jobs", "0"], "--jobs"),
     (["calibrate-hold", "{dir}", "--duration-s", "0"], "--duration-s"),
+    (["calibrate-hold", "{dir}", "--duration-s", "4000"], "--duration-s must be at most 3600 s"),
     (["calibrate-hold", "{dir}", "--add", "--duration-s", "6"], "held 280 s"),
     (["calibrate-hold", "{dir}", "--add", "--targets", "5", "--temps", "40", "--seeds", "1003"],
      "already has seed 1003"),

@@ -85,3 +85,22 @@ def test_a_push_on_the_emulator_is_refused_before_it_opens() -> None:
                  disturbance=parse_disturbance("push:1:5"))
     assert {t.name for t in threading.enumerate()} == threads
     assert open_fds() == fds
+
+
+@pytest.mark.parametrize(("profile", "message"), [
+    ({"temp_profile": "ramp:40:55:10:5"}, "--temp-profile starts at 10 s, not before the 10 s"),
+    ({"disturbance": "push:1:12"}, "--disturbance starts at 12 s"),
+])
+def test_a_profile_that_starts_after_the_hold_is_refused(profile: dict[str, str],
+                                                         message: str) -> None:
+    """A scenario past the hold's end would change nothing: refused before the twin runs."""
+    from relaxgrip.experiments.controlled_hold import run_hold
+    from relaxgrip.experiments.profiles import parse_disturbance, parse_temp_profile
+
+    parse = {"temp_profile": parse_temp_profile, "disturbance": parse_disturbance}
+    given = {name: parse[name](text) for name, text in profile.items()}
+    with pytest.raises(InputError, match=message):
+        run_hold("relax", duration_s=10.0, temp_profile=given.get("temp_profile"),
+                 disturbance=given.get("disturbance"))
+    with pytest.raises(InputError, match="at most 3600 s"):
+        run_hold("relax", duration_s=3600.5)

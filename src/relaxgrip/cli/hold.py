@@ -84,7 +84,9 @@ def hold(
     """Close on the force ball to the target and hold it, scoring the steady state (100-280 s)."""
     from relaxgrip.control import EstimatorKind, check_target_n
     from relaxgrip.experiments.controlled_hold import (
+        check_hold_duration_s,
         check_hold_temp_c,
+        check_scenario_times,
         compare_holds,
         run_hold,
     )
@@ -98,7 +100,7 @@ def hold(
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
     from relaxgrip.plots.common import check_plot_path
-    from relaxgrip.validate import check_jobs, check_positive, parse_seeds
+    from relaxgrip.validate import check_jobs, parse_seeds
 
     # Everything is checked before anything starts.
     if estimator not in {k.value for k in EstimatorKind}:
@@ -108,7 +110,9 @@ def hold(
     push = None if disturbance is None else parse_disturbance(disturbance)
     check_target_n(target_n)
     check_hold_temp_c(temp_c)
-    check_positive(duration_s, "--duration-s")
+    check_hold_duration_s(duration_s, "--duration-s")
+    check_scenario_times(duration_s, temp_profile=temps, target_profile=targets,
+                         disturbance=push)
     if seed is not None and seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
     seed_list = None if seeds is None else parse_seeds(seeds)
@@ -325,16 +329,20 @@ def budget_survey(
     """relax's error budget over seeds: each part's bias and spread, what the draw explains."""
     from relaxgrip.control import check_target_n
     from relaxgrip.experiments.budget_survey import SCATTER_GROUPS, survey_budget
-    from relaxgrip.experiments.controlled_hold import check_hold_temp_c, steady_window_s
+    from relaxgrip.experiments.controlled_hold import (
+        check_hold_duration_s,
+        check_hold_temp_c,
+        steady_window_s,
+    )
     from relaxgrip.learning.store import load_models
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
-    from relaxgrip.validate import check_jobs, check_positive, parse_seeds
+    from relaxgrip.validate import check_jobs, parse_seeds
 
     seed_list = parse_seeds(seeds)
     check_target_n(target_n)
     check_hold_temp_c(temp_c)
-    check_positive(duration_s, "--duration-s")
+    check_hold_duration_s(duration_s, "--duration-s")
     check_jobs(jobs)
     bundle = load_default_models() if models is None else load_models(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)

@@ -237,14 +237,15 @@ def calibrate_band_command(
 ) -> None:
     """Recalibrate the observer's 95 % band on closed-loop holds, so it covers what it states."""
     from relaxgrip.experiments.band_calibration import calibrate_band
+    from relaxgrip.experiments.controlled_hold import check_hold_duration_s
     from relaxgrip.learning.observer import load_observer, set_band_scale
     from relaxgrip.learning.store import load_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
-    from relaxgrip.validate import check_jobs, check_positive, parse_seeds
+    from relaxgrip.validate import check_jobs, parse_seeds
 
     seed_list = parse_seeds(seeds)
     names = [s.strip() for s in scenarios.split(",") if s.strip()]
-    check_positive(duration_s, "--duration-s")
+    check_hold_duration_s(duration_s, "--duration-s")
     check_jobs(jobs)
     model = load_observer(observer)
     bundle = None if models is None else load_models(
@@ -322,16 +323,17 @@ def calibrate_hold_command(
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Measure relax's closed-loop error on a grid of holds; relax takes it off its estimate."""
+    from relaxgrip.experiments.controlled_hold import check_hold_duration_s
     from relaxgrip.experiments.hold_calibration import calibrate_hold, calibration_record
     from relaxgrip.fileio import check_writable
     from relaxgrip.learning.store import MANIFEST_NAME, load_models, set_hold_bias
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
-    from relaxgrip.validate import check_jobs, check_positive, parse_floats, parse_seeds
+    from relaxgrip.validate import check_jobs, parse_floats, parse_seeds
 
     target_list = parse_floats(targets, "--targets")
     temp_list = parse_floats(temps, "--temps")
     seed_list = parse_seeds(seeds)
-    check_positive(duration_s, "--duration-s")
+    check_hold_duration_s(duration_s, "--duration-s")
     check_jobs(jobs)
     bundle = load_models(models, icfn_feature_schema=ICFN_SCHEMA,
                          rcfn_feature_schema=RCFN_SCHEMA)
