@@ -34,9 +34,10 @@ over seeds 0-47, 8 N from 0.076 to 0.065 N and 5 N at 55 °C from 0.116 to
 0.077 N (seeds 0-7).  Where the run's error is its onset reading, which
 both readings share, the blend changes nothing: seeds 2000-2047, 0.0636
 against 0.0642 N.  With the object's position seen, at weight 0.4, 5 N at
-40 °C went from 0.054 to 0.0505 N over 180 holds on five sets of seeds, but
-8 of 10 other conditions held worse (5 N at 55 °C: 0.050 to 0.083 N, seeds
-0-7), so seeing it is not the default (session 35).
+40 °C went from 0.054 to 0.0505 N over 180 holds on five sets of seeds;
+across the grid of 1-8 N and 30-55 °C it was neither better nor worse (8
+of 10 conditions worse on seeds 0-7, 8 of 10 better on seeds 8-15; 5 N at
+55 °C +0.022 +- 0.014 N), so seeing it is not the default (sessions 35, 36).
 """
 
 from __future__ import annotations
@@ -85,7 +86,8 @@ class ChainParams:
         fingers (:meth:`ClosedChain.start`'s ``contact_m``): the marker's
         share of the contact deflection is then the run's, and the reading
         errs by the fingers' difference in creep alone.  0.4 was chosen at
-        5 N, 40 °C, where the fingers' creep differs least.
+        5 N, 40 °C; across the grid no weight per temperature stands out
+        (the best scatters from 0 to 0.5 by condition and seed set).
     ref_s : float
         The chain counts from this hold time (s): before it the estimate is
         Eq. 10's, and at it the chain starts from Eq. 10's mean over the

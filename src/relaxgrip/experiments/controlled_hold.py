@@ -375,8 +375,8 @@ def run_hold(
         Have perception find the object (its catalogue width and colour) while
         the motor settles before the hold, and the closed chain take its
         marker share from where it sits (beyond the paper, not the default:
-        at 5 N, 40 °C it held better, at 55 °C worse; README, section
-        Control).
+        at 5 N, 40 °C it held better, across the grid neither better nor
+        worse; README, section Control).
 
     Returns
     -------
