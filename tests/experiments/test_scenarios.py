@@ -102,5 +102,10 @@ def test_a_profile_that_starts_after_the_hold_is_refused(profile: dict[str, str]
     with pytest.raises(InputError, match=message):
         run_hold("relax", duration_s=10.0, temp_profile=given.get("temp_profile"),
                  disturbance=given.get("disturbance"))
+
+
+def test_a_hold_longer_than_an_hour_is_refused() -> None:
+    from relaxgrip.experiments.controlled_hold import run_hold
+
     with pytest.raises(InputError, match="at most 3600 s"):
         run_hold("relax", duration_s=3600.5)

@@ -38,12 +38,12 @@ from relaxgrip.errors import InputError
 from relaxgrip.experiments.controlled_hold import (
     PAPER_DURATION_S,
     HoldResult,
+    check_hold_duration_s,
     check_hold_temp_c,
     map_holds,
     run_hold,
 )
 from relaxgrip.learning.store import ModelBundle
-from relaxgrip.validate import check_positive
 
 __all__ = ["BUDGET_PARTS", "SCATTER_GROUPS", "BudgetSurvey", "survey_budget"]
 
@@ -201,7 +201,7 @@ def survey_budget(seeds: Sequence[int], target_n: float = 5.0, temp_c: float = 4
         raise InputError(f"seeds must be >= 0, got {min(seeds)}")
     check_target_n(target_n)
     check_hold_temp_c(temp_c)
-    check_positive(duration_s, "hold duration")
+    check_hold_duration_s(duration_s)
     holds = map_holds(_one, [(int(s), target_n, temp_c, duration_s, models) for s in seeds],
                       n_jobs)
     budgets, scatter = [], []

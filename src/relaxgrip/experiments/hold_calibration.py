@@ -34,6 +34,7 @@ from relaxgrip.control import GraspController, check_target_n
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.controlled_hold import (
     PAPER_DURATION_S,
+    check_hold_duration_s,
     check_hold_temp_c,
     map_holds,
     run_hold,
@@ -44,7 +45,6 @@ from relaxgrip.learning.training import load_default_models
 from relaxgrip.perception.features import finger_temperature_c
 from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION
-from relaxgrip.validate import check_positive
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TARGETS_N", "DEFAULT_TEMPS_C", "MIN_BIN_S", "MIN_SE_N",
            "TIME_EDGES_S",
@@ -298,7 +298,7 @@ def calibrate_hold(targets_n: Sequence[float] = DEFAULT_TARGETS_N,
         check_target_n(target)
     for temp in new_temps:
         check_hold_temp_c(temp)
-    check_positive(duration_s, "hold duration")
+    check_hold_duration_s(duration_s)
     targets, temps = new_targets, new_temps
     holds: dict[str, list[dict[str, Any]]] = {}
     if add_to is not None:
