@@ -56,7 +56,7 @@ def test_evaluate_json_has_the_paper_metrics(trained: tuple[Path, Path], tmp_pat
     assert 0.0 < history["mae_n"] < float("inf")  # 200 training rows: accuracy is not the point
     for group in out["repeatability"].values():
         assert set(group) >= {"nrmse_mean", "nrmse_std", "auc_rel_mean", "corr_mean",
-                              "gt_end_std_n"}
+                              "gt_end_std_n", "gt_std_100s_n"}
     assert (tmp_path / "accuracy.png").read_bytes()[:4] == b"\x89PNG"
 
 

@@ -138,6 +138,7 @@ def evaluate(
     """Score the models with the paper's metrics (ICFN, RCFN, repeatability)."""
     from relaxgrip.learning.datastore import load_dataset
     from relaxgrip.learning.evaluation import evaluate as run_evaluation
+    from relaxgrip.learning.evaluation import spread_text
     from relaxgrip.learning.store import load_models
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
@@ -181,7 +182,7 @@ def evaluate(
     for temp, g in s["repeatability"].items():
         rows.append((f"repeatability {temp} °C", f"NRMSE {g['nrmse_mean']:.3f}±{g['nrmse_std']:.3f}"
                      f", AUC {g['auc_rel_mean']:.3f}, corr {g['corr_mean']:.3f}, "
-                     f"GT end std {g['gt_end_std_n']:.3f} N"))
+                     f"{spread_text(g)}"))
     for name, value in rows:
         table.add_row(name, value)
     console.print(table)

@@ -12,8 +12,9 @@
   models have an unrelaxed ICFN: its ensemble times each sample's retained
   share (:mod:`relaxgrip.learning.history`), scored like the ICFN.
 * Repeatability: the 40, 50 and 60 °C groups of six holds from the same start
-  force: mean and spread of the curve metrics, and the spread of the true end
-  force.
+  force: mean and spread of the curve metrics, and the spread of the true force
+  at the hold's end and at 100 s since the onset, where the paper's sequences
+  end (its "GT std at t_end").
 """
 
 from __future__ import annotations
@@ -49,7 +50,13 @@ from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["CurveScore", "Evaluation", "evaluate", "reconstruct_online"]
+#: Length of the paper's relaxation sequences (s): its repeatability's "t_end".
+PAPER_SEQUENCE_S = 100.0
+
+__all__ = [
+    "PAPER_SEQUENCE_S", "CurveScore", "Evaluation", "evaluate", "reconstruct_online",
+    "spread_text",
+]
 
 
 @dataclass(frozen=True)
@@ -133,21 +140,31 @@ class Evaluation:
                 "nrmse_from_icfn_mean": i_mean, "nrmse_from_icfn_median": i_med,
                 "sequences": len(self.curves)}
 
-    def repeatability_summary(self) -> dict[str, dict[str, float]]:
-        """Per group: mean ± std of NRMSE, AUC_rel and correlation; spread of the true end force."""
-        def ms(values: list[float]) -> tuple[float, float]:
-            spread = statistics.stdev(values) if len(values) > 1 else 0.0
-            return statistics.fmean(values), spread
+    def repeatability_summary(self) -> dict[str, dict[str, float | None]]:
+        """Per group: mean ± std of NRMSE, AUC_rel and correlation; spread of the true force.
 
-        out = {}
+        ``gt_end_std_n`` is the spread at each hold's end; ``gt_std_100s_n``
+        at :data:`PAPER_SEQUENCE_S` since the onset, the end of the paper's
+        sequences (None where the holds are shorter).
+        """
+        def spread(values: list[float]) -> float:
+            return statistics.stdev(values) if len(values) > 1 else 0.0
+
+        def ms(values: list[float]) -> tuple[float, float]:
+            return statistics.fmean(values), spread(values)
+
+        out: dict[str, dict[str, float | None]] = {}
         for temp, group in self.repeat_groups.items():
             n = ms([c.nrmse for c in group])
             a = ms([c.auc_rel for c in group])
             r = ms([c.corr for c in group])
             ends = [float(c.truth_n[-1]) for c in group]
+            long_enough = all(c.t_s[-1] >= PAPER_SEQUENCE_S for c in group)
+            at_100s = [float(np.interp(PAPER_SEQUENCE_S, c.t_s, c.truth_n)) for c in group]
             out[temp] = {"nrmse_mean": n[0], "nrmse_std": n[1], "auc_rel_mean": a[0],
                          "auc_rel_std": a[1], "corr_mean": r[0], "corr_std": r[1],
-                         "gt_end_std_n": statistics.stdev(ends) if len(ends) > 1 else 0.0,
+                         "gt_end_std_n": spread(ends),
+                         "gt_std_100s_n": spread(at_100s) if long_enough else None,
                          "sequences": len(group)}
         return out
 
@@ -158,6 +175,13 @@ class Evaluation:
         if (history := self.history_summary()) is not None:
             out["icfn_history"] = history
         return out
+
+
+def spread_text(group: dict[str, float | None]) -> str:
+    """A repeatability group's spread of the true force, at 100 s and at the end, as text."""
+    at_100s = group.get("gt_std_100s_n")
+    end = f"GT end std {group['gt_end_std_n']:.3f} N"
+    return end if at_100s is None else f"GT std {at_100s:.3f} N at 100 s, {end[3:]}"
 
 
 def _force_scores(predicted: FloatArray, truth: FloatArray) -> dict[str, Any]:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from relaxgrip.learning.evaluation import CurveScore, Evaluation
+from relaxgrip.learning.evaluation import CurveScore, Evaluation, spread_text
 from relaxgrip.metrics import FORCE_RANGES_N
 from relaxgrip.plots.common import new_figure, save_figure
 
@@ -78,7 +78,7 @@ def plot_accuracy(result: Evaluation, path: str | Path) -> Path:
         s = stats[temp]
         ax.plot(t, truths.mean(axis=0), color=colour, lw=1.5,
                 label=f"{temp} °C: NRMSE {s['nrmse_mean']:.3f}±{s['nrmse_std']:.3f}, "
-                      f"GT end std {s['gt_end_std_n']:.3f} N")
+                      f"{spread_text(s)}")
     ax.set(xlabel="time since onset (s)", ylabel="force (N)",
            title="(f) repeatability: six holds per temperature (band: truth, dashed: RCFN)")
     ax.legend(frameon=False, fontsize=7)
