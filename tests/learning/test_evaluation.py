@@ -40,5 +40,5 @@ def test_holds_shorter_than_the_papers_have_no_spread_at_100_s() -> None:
     group = [_curve(0, 60.0, 4.7, 4.5), _curve(1, 60.0, 4.8, 4.3)]
     stats = _evaluation({"40": group}).repeatability_summary()["40"]
     assert stats["gt_std_100s_n"] is None
-    assert stats["gt_end_std_n"] == pytest.approx(np.std([4.5, 4.3], ddof=1))
+    assert stats["gt_end_std_n"] == pytest.approx(np.std([g.truth_n[-1] for g in group], ddof=1))
     assert spread_text(stats).startswith("GT end std ")
