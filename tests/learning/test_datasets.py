@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,6 +23,7 @@ from relaxgrip.learning.datasets import (
     plan_rcfn,
 )
 from relaxgrip.learning.datastore import TABLES, load_dataset
+from relaxgrip.learning.training import dataset_fingerprint
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 
 SMALL = DatasetSpec(icfn_samples=60, rcfn_sequences=6, seed=3)
@@ -91,6 +93,17 @@ def test_same_seed_same_dataset_whatever_the_workers(small: Path, tmp_path: Path
     for name in TABLES:
         pd.testing.assert_frame_equal(pd.read_parquet(small / f"{name}.parquet"),
                                       pd.read_parquet(serial / f"{name}.parquet"))
+
+
+def test_the_fingerprint_names_the_data_not_the_build(small: Path, tmp_path: Path) -> None:
+    """A rebuild of one spec has the fingerprint of the first, whatever the build reports;
+    another seed has another."""
+    first = load_dataset(small)
+    again = replace(first, manifest={**first.manifest, "build": {"seconds": 1.0}, "warnings": []})
+    assert dataset_fingerprint(again) == dataset_fingerprint(first)
+    other = DatasetSpec(icfn_samples=20, rcfn_sequences=0, seed=4)
+    build_dataset(tmp_path / "other", other, jobs=1)
+    assert dataset_fingerprint(load_dataset(tmp_path / "other")) != dataset_fingerprint(first)
 
 
 def test_dask_backend_gives_the_same_dataset(small: Path, tmp_path: Path) -> None:

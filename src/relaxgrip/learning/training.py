@@ -28,7 +28,10 @@ from relaxgrip.learning.store import ModelBundle, load_models, save_models
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 from relaxgrip.twin import TWIN_VERSION
 
-__all__ = ["TrainedModels", "default_models_dir", "load_default_models", "train_models"]
+__all__ = [
+    "TrainedModels", "dataset_fingerprint", "default_models_dir", "load_default_models",
+    "train_models",
+]
 
 
 @dataclass(frozen=True)
@@ -70,9 +73,18 @@ MIN_RETAINED_SHARE = 0.3
 UNRELAXED_MEMBERS = 5
 
 
-def _fingerprint(data: Dataset) -> str:
-    """Short hash of a dataset's manifest: which data a model was trained on."""
-    text = json.dumps({k: v for k, v in data.manifest.items() if k != "build"}, sort_keys=True)
+#: Manifest entries that report on a build rather than define its data.
+_NOT_THE_DATA = frozenset({"build", "warnings"})
+
+
+def dataset_fingerprint(data: Dataset) -> str:
+    """Short hash of a dataset's manifest: which data a model was trained on.
+
+    Two builds of one spec by the same twin and schemas have the same
+    fingerprint, whatever the build's time, workers or warnings.
+    """
+    defining = {k: v for k, v in data.manifest.items() if k not in _NOT_THE_DATA}
+    text = json.dumps(defining, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -114,7 +126,7 @@ def train_models(data: Dataset, random_state: int = 0,
     unrelaxed, unrelaxed_record = (None, None) if history is None else _fit_unrelaxed(
         data, history, random_state, tuple(unrelaxed_features))
     training = {
-        "dataset": {"fingerprint": _fingerprint(data), "seed": data.manifest["spec"]["seed"],
+        "dataset": {"fingerprint": dataset_fingerprint(data), "seed": data.manifest["spec"]["seed"],
                     "twin_version": data.manifest["twin_version"],
                     "counts": data.manifest["counts"]},
         "icfn": {"train_rows": len(y_train), "val_rows": len(y_val),
