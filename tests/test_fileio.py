@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import socket
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +12,7 @@ import pytest
 from relaxgrip.fileio import (
     atomic_file,
     check_output_dir,
+    check_replaceable,
     check_writable,
     file_entry,
     npz_bytes,
@@ -76,6 +79,37 @@ def test_check_writable_probes_the_place_and_leaves_nothing(tmp_path) -> None:
         check_writable(tmp_path / "file" / "out.png", ValueError)
     with pytest.raises(ValueError, match=r"/proc/x\.png: cannot write in /proc"):
         check_writable(Path("/proc/x.png"), ValueError)
+
+
+def test_special_files_are_never_replaced_by_a_rename(tmp_path) -> None:
+    fifo = tmp_path / "out.png"
+    os.mkfifo(fifo)
+    with pytest.raises(ValueError, match=f"^{fifo} is a FIFO, not a regular file: choose "
+                                         "another output$"):
+        check_writable(fifo, ValueError)
+    with pytest.raises(OSError, match="is a FIFO, not a regular file to replace"):
+        write_files_atomically(tmp_path, [("a.txt", b"a"), ("out.png", b"png")])
+    with pytest.raises(OSError, match="is a FIFO"), atomic_file(fifo) as fh:
+        fh.write(b"data")
+    with pytest.raises(ValueError, match="is a directory, not a regular file"):
+        check_replaceable(tmp_path, ValueError)
+    with pytest.raises(ValueError, match="is a character device"):
+        check_replaceable(Path("/dev/null"), ValueError)  # checked only, never written
+    sock = socket.socket(socket.AF_UNIX)
+    try:
+        sock.bind(str(tmp_path / "s"))
+        with pytest.raises(ValueError, match="is a socket"):
+            check_replaceable(tmp_path / "s", ValueError)
+    finally:
+        sock.close()
+    # Nothing written, nothing replaced; a regular file or a link to one stays replaceable.
+    assert fifo.is_fifo()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.png", "s"]
+    (tmp_path / "f.txt").write_text("old")
+    (tmp_path / "link.txt").symlink_to(tmp_path / "f.txt")
+    check_replaceable(tmp_path / "f.txt", ValueError)
+    check_replaceable(tmp_path / "link.txt", ValueError)
+    check_replaceable(tmp_path / "absent.txt", ValueError)
 
 
 def test_check_output_dir_replaces_only_its_own_outputs(tmp_path) -> None:

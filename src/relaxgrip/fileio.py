@@ -4,9 +4,12 @@ Every file relaxgrip writes for a user (models, reports, figures) goes
 through :func:`write_files_atomically`: each file is written to a temporary
 name beside its destination, flushed to disk, and renamed into place; a
 failure while writing removes the temporaries and leaves whatever was there
-before.  The renames of several files are not one step: a failure between
-them (the machine dies) can leave new files beside an old manifest, which is
-renamed last and records every file's SHA-256, so loading detects it.
+before.  A destination that exists and is not a regular file (a FIFO, a
+device, a socket, a directory) is refused before anything is written: a rename
+would put a regular file in its place.  The renames of several files are not
+one step: a failure between them (the machine dies) can leave new files beside
+an old manifest, which is renamed last and records every file's SHA-256, so
+loading detects it.
 
 Model directories (a ``manifest.json`` naming its format and version, and
 ``.npz`` arrays recorded by :func:`file_entry`) are read back through
@@ -16,11 +19,13 @@ one-line error on anything missing, foreign, too new, truncated or modified.
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import io
 import json
 import os
 import secrets
+import stat
 from collections.abc import Collection, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -31,6 +36,7 @@ import numpy as np
 __all__ = [
     "atomic_file",
     "check_output_dir",
+    "check_replaceable",
     "check_writable",
     "file_entry",
     "npz_bytes",
@@ -64,7 +70,15 @@ def write_files_atomically(directory: Path, files: Sequence[tuple[str, bytes]]) 
     files : sequence of (str, bytes)
         File names inside ``directory`` and their contents; the last one is
         renamed last (put a manifest there).
+
+    Raises
+    ------
+    OSError
+        From the file system, and before anything is written if a name exists
+        there and is not a regular file (:func:`check_replaceable`).
     """
+    for name, _ in files:  # before anything is written
+        _check_replaceable(directory / name)
     temporaries: list[tuple[Path, Path]] = []
     try:
         for name, data in files:
@@ -104,9 +118,11 @@ def atomic_file(path: Path) -> Iterator[io.BufferedWriter]:
     Raises
     ------
     OSError
-        From the file system (no such directory, no space, read-only).
+        From the file system (no such directory, no space, read-only), and
+        if ``path`` exists and is not a regular file (:func:`check_replaceable`).
     """
     path = Path(path)
+    _check_replaceable(path)
     tmp, fd = _temporary(path.parent, path.name)
     try:
         with os.fdopen(fd, "wb") as fh:
@@ -117,6 +133,45 @@ def atomic_file(path: Path) -> Iterator[io.BufferedWriter]:
     finally:
         tmp.unlink(missing_ok=True)
     _sync_directory(path.parent)
+
+
+def _special_kind(path: Path) -> str | None:
+    """What ``path`` is if it exists and is not a regular file ("a FIFO"); else None.
+
+    Symbolic links are followed: one to a regular file is a regular file.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:  # absent, or unreachable: the write itself reports that
+        return None
+    if stat.S_ISREG(mode):
+        return None
+    kinds = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"),
+             (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+             (stat.S_ISSOCK, "a socket"))
+    return next((kind for test, kind in kinds if test(mode)), "a special file")
+
+
+def _check_replaceable(path: Path) -> None:
+    """Refuse, before anything is written, to rename a file over a FIFO, a device, a socket
+    or a directory: the rename would silently put a regular file in its place."""
+    kind = _special_kind(path)
+    if kind is not None:
+        raise OSError(errno.EEXIST, f"is {kind}, not a regular file to replace", str(path))
+
+
+def check_replaceable(path: Path, error: type[Exception]) -> None:
+    """Check that ``path`` is absent or a regular file, which an atomic write may replace.
+
+    Raises
+    ------
+    error
+        Naming ``path`` and what it is instead (a FIFO, a device, a socket,
+        a directory).
+    """
+    kind = _special_kind(Path(path))
+    if kind is not None:
+        raise error(f"{path} is {kind}, not a regular file: choose another output")
 
 
 def _sync_directory(directory: Path) -> None:
@@ -144,9 +199,11 @@ def check_writable(path: Path, error: type[Exception]) -> None:
     ------
     error
         Naming ``path`` and the system's reason (read-only, permission, no
-        such directory, a file where a directory should be).
+        such directory, a file where a directory should be), or what ``path``
+        is if it exists and is not a regular file (:func:`check_replaceable`).
     """
     path = Path(path)
+    check_replaceable(path, error)
     folder = path.parent
     while not folder.exists() and folder != folder.parent:
         folder = folder.parent

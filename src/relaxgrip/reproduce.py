@@ -5,8 +5,12 @@ output directory and states the paper's figures beside ours.  Sections are
 independent: they run in parallel worker processes (joblib), longest first,
 and the report is written once they are all back (``report.md`` and
 ``results.json``, each atomically: an interrupted run leaves the previous
-report intact).  ``quick`` shrinks datasets, grids and holds so the whole run
-fits in about three minutes on two cores.
+report intact).  Figures are drawn into a scratch directory and moved into
+the output directory with the report, so an interrupted run leaves no new or
+partial figure there either.  The output directory must be absent, empty or
+an earlier report (``report.md``, ``results.json``).  ``quick`` shrinks
+datasets, grids and holds so the whole run fits in about three minutes on two
+cores.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import json
 import math
 import os
 import platform
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -22,12 +27,13 @@ from pathlib import Path
 from typing import Any
 
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import check_writable, write_text_atomically
+from relaxgrip.fileio import check_writable, write_files_atomically, write_text_atomically
 from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION
 from relaxgrip.validate import check_jobs
 
-__all__ = ["SECTIONS", "TITLES", "Row", "Section", "check_request", "reproduce", "write_report"]
+__all__ = ["REPORT_FILES", "SECTIONS", "TITLES", "Row", "Section", "check_request", "reproduce",
+           "write_report"]
 
 
 @dataclass(frozen=True)
@@ -410,6 +416,21 @@ _COST = {"accuracy": 6, "scenarios": 5, "holding": 5, "modulation": 4, "cup": 3,
          "timing": 1, "characterization": 0}
 
 
+#: The files that mark a directory as an earlier report, which a new run may overwrite.
+REPORT_FILES = ("report.md", "results.json")
+
+
+def _is_report_dir(directory: Path) -> bool:
+    """Whether ``directory`` is empty (but for temporaries) or an earlier report."""
+    try:
+        names = {p.name for p in directory.iterdir()
+                 if not (p.name.startswith(".") and p.name.endswith(".tmp"))}
+    except OSError as exc:
+        raise InputError(f"{directory}: cannot read ({exc.strerror or exc}): "
+                         "choose another --out") from None
+    return not names or any((directory / name).is_file() for name in REPORT_FILES)
+
+
 def _run_section(key: str, out_dir: Path, quick: bool, seed: int) -> Section:
     import cv2
 
@@ -432,7 +453,8 @@ def check_request(out_dir: Path, jobs: int, only: Sequence[str] | None) -> list[
     ------
     InputError
         ``jobs`` < 1, an unknown section, or an output directory whose parent is
-        missing, that is a file, or that cannot be written.
+        missing, that is a file, that is neither empty nor an earlier report
+        (:data:`REPORT_FILES`), or that cannot be written.
     """
     check_jobs(jobs)
     keys = list(SECTIONS) if only is None else list(only)
@@ -445,6 +467,9 @@ def check_request(out_dir: Path, jobs: int, only: Sequence[str] | None) -> list[
         raise InputError(f"{out_dir}: directory {out_dir.parent} does not exist")
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError(f"{out_dir} exists and is not a directory: choose another --out")
+    if out_dir.is_dir() and not _is_report_dir(out_dir):
+        raise InputError(f"{out_dir} is not empty and holds no reproduce output "
+                         f"({', '.join(REPORT_FILES)}): choose another --out")
     check_writable(out_dir / "report.md" if out_dir.is_dir() else out_dir, InputError)
     return keys
 
@@ -483,18 +508,26 @@ def reproduce(
 
     keys = check_request(out_dir, jobs, only)
     out_dir = Path(out_dir)
-    out_dir.mkdir(exist_ok=True)
     start = time.perf_counter()
     ordered = sorted(keys, key=lambda k: -_COST.get(k, 3))
     done: dict[str, Section] = {}
     # Each section is single-threaded; the parallelism is across sections.
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     parallel = Parallel(n_jobs=min(jobs, len(ordered)), return_as="generator_unordered")
-    for section in parallel(delayed(_run_section)(k, out_dir, quick, seed) for k in ordered):
-        done[section.key] = section
-        if progress is not None:
-            progress(section, len(done), len(ordered))
-    sections = [done[k] for k in SECTIONS if k in done]
+    # Figures are drawn into a scratch directory and moved into out_dir only once every
+    # section is back: an interrupted run leaves out_dir as it was, with no new figure
+    # beside the old report and no half-written file.
+    with tempfile.TemporaryDirectory(prefix="relaxgrip-reproduce-") as scratch:
+        work = Path(scratch)
+        for section in parallel(delayed(_run_section)(k, work, quick, seed) for k in ordered):
+            done[section.key] = section
+            if progress is not None:
+                progress(section, len(done), len(ordered))
+        sections = [done[k] for k in SECTIONS if k in done]
+        out_dir.mkdir(exist_ok=True)
+        figures = [s.figure for s in sections if s.figure is not None
+                   and (work / s.figure).is_file()]
+        write_files_atomically(out_dir, [(name, (work / name).read_bytes()) for name in figures])
     write_report(out_dir, sections, quick=quick, seed=seed,
                  seconds=time.perf_counter() - start)
     return sections

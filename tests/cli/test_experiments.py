@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from relaxgrip.experiments.tasks import TaskResult
 from relaxgrip.reproduce import Row, Section, write_report
 from tests.clitools import run_main
@@ -109,3 +111,52 @@ def test_task_prints_its_verdict_and_criteria(monkeypatch, capsys):
     assert code == 0, err
     assert "success" in out
     assert "stiff_crushes" in out
+
+
+def test_reproduce_refuses_a_directory_that_is_not_a_report(monkeypatch, capsys,
+                                                            tmp_path: Path):
+    data = tmp_path / "dataset"
+    data.mkdir()
+    (data / "icfn.parquet").write_bytes(b"precious")
+    code, out, err = run_main(["reproduce", "--quick", "--out", data], monkeypatch, capsys)
+    assert code == 2, err
+    assert out == ""
+    assert err.strip().splitlines() == [
+        f"error: {data} is not empty and holds no reproduce output (report.md, results.json): "
+        "choose another --out"]
+    assert [p.name for p in data.iterdir()] == ["icfn.parquet"]
+
+
+def _fake_section(name: str, interrupt: bool = False):
+    """A section that draws a small figure, then returns or is interrupted (Ctrl-C)."""
+    def section(out_dir: Path, quick: bool, seed: int) -> Section:
+        (out_dir / name).write_bytes(b"figure")
+        if interrupt:
+            raise KeyboardInterrupt
+        return Section(name, name, [Row("q", "1", "2")], "finding", name, {})
+    return section
+
+
+def test_reproduce_moves_figures_in_only_when_every_section_is_back(monkeypatch, capsys,
+                                                                   tmp_path: Path):
+    from relaxgrip import reproduce
+
+    out = tmp_path / "report"
+    out.mkdir()
+    (out / "report.md").write_text("old report")  # an earlier report: allowed, replaced
+    (out / "kept.png").write_text("old figure")
+    for key, interrupt in (("a.png", False), ("b.png", True)):
+        monkeypatch.setitem(reproduce.SECTIONS, key, _fake_section(key, interrupt))
+        monkeypatch.setitem(reproduce.TITLES, key, key)
+    with pytest.raises(KeyboardInterrupt):
+        reproduce.reproduce(out, quick=True, jobs=1, only=["a.png", "b.png"])
+    # Interrupted: the directory is as it was, with no figure of the unfinished run.
+    assert sorted(p.name for p in out.iterdir()) == ["kept.png", "report.md"]
+    assert (out / "report.md").read_text() == "old report"
+    monkeypatch.setitem(reproduce.SECTIONS, "b.png", _fake_section("b.png"))
+    sections = reproduce.reproduce(out, quick=True, jobs=1, only=["a.png", "b.png"])
+    assert [s.figure for s in sections] == ["a.png", "b.png"]
+    assert sorted(p.name for p in out.iterdir()) == ["a.png", "b.png", "kept.png", "report.md",
+                                                     "results.json"]
+    assert (out / "a.png").read_bytes() == b"figure"
+    assert "old report" not in (out / "report.md").read_text()

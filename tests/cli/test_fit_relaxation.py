@@ -157,6 +157,13 @@ def bad_case(tmp_path: Path, name: str) -> list[str | Path]:
         write_csv(csv, [(t, 20.0 * t, f) for t, _, f in rows])
     elif name == "not-a-csv":
         csv.write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR\xff\xfe")
+    elif name == "huge-force":  # squares overflow float64: warnings, then scipy's text
+        write_csv(csv, [(t, x, f * 1e300) for t, x, f in rows])
+    elif name == "huge-time":  # formerly a fit of meaningless numbers, and 20 warnings
+        write_csv(csv, [(t * 1e300, x, f) for t, x, f in rows])
+    elif name == "duplicate-column":  # formerly the first force_n was read, silently
+        csv.write_text("time_s,force_n,displacement_mm,force_n\n" + "".join(
+            f"{t:.6f},99,{x:.6f},{f:.6f}\n" for t, x, f in rows), encoding="utf-8")
     elif name == "too-few-rows":
         write_csv(csv, rows[:5])
     elif name == "bad-number":
@@ -167,6 +174,7 @@ def bad_case(tmp_path: Path, name: str) -> list[str | Path]:
         write_csv(csv, rows)
     flags: dict[str, list[str | Path]] = {
         "terms-0": ["--terms", "0"],
+        "terms-6": ["--terms", "6"],
         "window-negative": ["--window-s", "-1"],
         "window-too-short": ["--window-s", "0.05"],
         "weighting-unknown": ["--weighting", "log"],
@@ -184,8 +192,13 @@ def bad_case(tmp_path: Path, name: str) -> list[str | Path]:
         ("nan", "line 152: force_n is 'nan'"),
         ("non-monotonic-time", "line 203: time_s 4 does not increase"),
         ("no-hold", "no hold phase"),
-        ("terms-0", "--terms must be >= 1"),
+        ("terms-0", "--terms must be 1-5, got 0"),
         ("window-negative", "--window-s must be > 0"),
+        # In a fresh interpreter: no RuntimeWarning may reach standard error.
+        ("huge-force", "the force reaches 1.2e+300 N, beyond any relaxation test (a fit "
+                       "takes at most 1e+09 N)"),
+        ("huge-time", "the record lasts 1.2e+302 s, beyond any relaxation test (a fit "
+                      "takes at most 1e+10 s)"),
     ],
 )
 def test_bad_input_subprocess(tmp_path: Path, name: str, expected: str) -> None:
@@ -203,6 +216,10 @@ def test_bad_input_subprocess(tmp_path: Path, name: str, expected: str) -> None:
         ("weighting-unknown", "--weighting must be one of time, sample"),
         ("plot-missing-dir", "does not exist"),
         ("plot-bad-extension", "unsupported plot format"),
+        ("terms-6", "--terms must be 1-5, got 6 (each term about triples the fit's search "
+                    "time)"),
+        ("duplicate-column", "duplicate-column.csv: the header names force_n more than once; "
+                             "keep one column of each name"),
     ],
 )
 def test_bad_input_in_process(
@@ -214,6 +231,18 @@ def test_bad_input_in_process(
 ) -> None:
     code, out, err = run_fit_main(bad_case(tmp_path, name), monkeypatch, capsys)
     assert_one_error_line(code, out, err, expected)
+
+
+def test_plot_to_a_fifo_is_refused_before_the_fit(
+    good_csv: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str]
+) -> None:
+    fifo = tmp_path / "fit.png"
+    os.mkfifo(fifo)  # the atomic rename would replace it with a regular file
+    code, out, err = run_fit_main([good_csv, "--plot", fifo], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, f"{fifo} is a FIFO, not a regular file: "
+                                          "choose another output")
+    assert fifo.is_fifo()
 
 
 @pytest.mark.parametrize("variant", ["semicolon-decimal-comma", "tab", "blank-rows"])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -205,6 +206,7 @@ def test_too_few_samples_are_rejected() -> None:
         (T_S, np.where(T_S > 5, np.nan, 1.0), {}, "non-finite"),
         (T_S, np.exp(-T_S), {"weighting": "log"}, "weighting"),
         (T_S, np.exp(-T_S), {"n_terms": 0}, "n_terms"),
+        (T_S, np.exp(-T_S), {"n_terms": 6}, "n_terms must be an integer from 1 to 5"),
     ],
 )
 def test_malformed_arrays_raise_value_error(
@@ -212,6 +214,38 @@ def test_malformed_arrays_raise_value_error(
 ) -> None:
     with pytest.raises(ValueError, match=match):
         fit_prony(t_s, f_n, **kwargs)
+
+
+@pytest.mark.parametrize(
+    ("t_scale", "f_scale", "match"),
+    [
+        (1.0, 1e300, r"the force reaches 2e\+300 N, beyond any relaxation test"),
+        (1.0, 1e10, r"the force reaches 2e\+10 N, .*at most 1e\+09 N"),
+        (1e300, 1.0, r"the record lasts .*e\+30\d s, beyond any relaxation test"),
+        (1e10, 1.0, r"the record lasts .* s, .*at most 1e\+10 s"),
+    ],
+)
+def test_out_of_range_records_are_refused_before_any_arithmetic(
+    t_scale: float, f_scale: float, match: str
+) -> None:
+    f_n = f_scale * reduced_force(T_S, 2.0, 1.0, 5.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # formerly overflow warnings, then scipy's own error
+        for fit in (fit_reduced, fit_prony):
+            with pytest.raises(InputError, match=match):
+                fit(t_scale * T_S, f_n)
+        with pytest.raises(InputError, match="the force reaches"):
+            fit_reduced(T_S, reduced_force(T_S, 2.0, 1.0, 5.0), f_inst_n=1e12)
+
+
+def test_records_at_the_limits_fit_without_warnings() -> None:
+    f_n = 4e8 * reduced_force(T_S, 2.0, 1.0, 5.0)
+    t_s = T_S * (0.9e10 / float(T_S[-1]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        fit = fit_reduced(t_s, f_n)
+    assert fit.tau_s == pytest.approx(5.0 * 0.9e10 / float(T_S[-1]), rel=1e-6)
+    assert fit.f_inst_n == pytest.approx(8e8, rel=1e-6)
 
 
 def test_quadrature_weights_are_the_trapezoid_rule() -> None:

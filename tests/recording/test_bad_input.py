@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -175,6 +176,13 @@ def test_recover_refuses_outputs_it_cannot_write(
     code, out, err = run_main(["recover", good, tmp_path / "no" / "x.mcap"], monkeypatch, capsys)
     assert_one_error_line(code, out, err, "cannot write (No such file or directory)")
     assert list(tmp_path.iterdir()) == []  # no temporary left behind
+    fifo = tmp_path / "ff"
+    os.mkfifo(fifo)  # formerly replaced by a regular file, exit code 0
+    code, out, err = run_main(["recover", good, fifo], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, f"{fifo} is a FIFO, not a regular file: "
+                                          "choose another output")
+    assert fifo.is_fifo()
+    assert list(tmp_path.iterdir()) == [fifo]
 
 
 def _rewritten(src: Path, dst: Path, change) -> None:

@@ -15,7 +15,7 @@ from relaxgrip.experiments.relaxation_fit import (
     fit_relaxation,
     load_relaxation_csv,
 )
-from relaxgrip.physics.fitting import WEIGHTINGS
+from relaxgrip.physics.fitting import MAX_PRONY_TERMS, WEIGHTINGS
 from relaxgrip.plots.common import check_plot_path
 from relaxgrip.plots.relaxation_fit import plot_relaxation_fit
 
@@ -42,7 +42,10 @@ def fit_relaxation_command(
         ),
     ] = None,
     terms: Annotated[
-        int, typer.Option("--terms", metavar="N", help="Number of Prony terms (>= 1).")
+        int,
+        typer.Option(
+            "--terms", metavar="N", help=f"Number of Prony terms (1-{MAX_PRONY_TERMS})."
+        ),
     ] = 3,
     weighting: Annotated[
         str,
@@ -69,8 +72,11 @@ def fit_relaxation_command(
     # Flags are checked before the file is read so that a typo fails fast, with one line.
     if weighting not in WEIGHTINGS:
         raise InputError(f"--weighting must be one of {', '.join(WEIGHTINGS)}, got {weighting!r}")
-    if terms < 1:
-        raise InputError(f"--terms must be >= 1, got {terms}")
+    if not 1 <= terms <= MAX_PRONY_TERMS:
+        raise InputError(
+            f"--terms must be 1-{MAX_PRONY_TERMS}, got {terms} "
+            "(each term about triples the fit's search time)"
+        )
     if window_s is not None and not window_s > 0:  # also rejects nan
         raise InputError(f"--window-s must be > 0, got {window_s}")
     if plot is not None:

@@ -183,7 +183,8 @@ def load_relaxation_csv(path: str | Path) -> RelaxationRecord:
     ------
     relaxgrip.errors.InputError
         With a one-line message naming the file and the problem: the file is
-        missing or unreadable, not a text CSV, lacks a column (named), has an
+        missing or unreadable, not a text CSV, lacks a column or has one twice
+        (named), has an
         unparseable or non-finite value (column and line named), time that
         does not strictly increase (line named), or fewer than
         :data:`MIN_ROWS` data rows.
@@ -219,6 +220,10 @@ def load_relaxation_csv(path: str | Path) -> RelaxationRecord:
     if missing:
         found = ", ".join(h for h in header if h) or "none"
         raise InputError(f"{path}: missing column(s) {', '.join(missing)} (header has: {found})")
+    twice = [c for c in COLUMNS if header.count(c) > 1]
+    if twice:
+        raise InputError(f"{path}: the header names {', '.join(twice)} more than once; "
+                         "keep one column of each name")
     index = [header.index(c) for c in COLUMNS]
 
     data = np.empty((len(rows) - 1, len(COLUMNS)), dtype=np.float64)

@@ -52,6 +52,9 @@ FloatArray = NDArray[np.float64]
 Weighting = Literal["time", "sample"]
 
 __all__ = [
+    "MAX_DURATION_S",
+    "MAX_FORCE_N",
+    "MAX_PRONY_TERMS",
     "WEIGHTINGS",
     "PronyFit",
     "ReducedFit",
@@ -65,6 +68,17 @@ __all__ = [
 ]
 
 WEIGHTINGS: tuple[str, ...] = get_args(Weighting)
+
+#: The most terms :func:`fit_prony` fits.  Each term about triples the global search
+#: (5 terms take seconds, 8 minutes), and a hold's relaxation times, which must lie
+#: decades apart to be told apart, rarely show more; the observer takes 1-5 as well.
+MAX_PRONY_TERMS = 5
+#: The largest force (N) and record duration (s) a fit takes: ten times the capacity
+#: of the largest test machines, and three centuries.  Beyond them a record is not a
+#: relaxation test (a unit slipped, or a value was corrupted), and far beyond them
+#: the squared forces and time weights of the objective overflow float64.
+MAX_FORCE_N = 1e9
+MAX_DURATION_S = 1e10
 
 # Relaxation-time search range: [shortest sampling interval, _TAU_HI_FACTOR x record length].
 _TAU_HI_FACTOR = 10.0
@@ -375,8 +389,10 @@ def fit_reduced(
     Raises
     ------
     relaxgrip.errors.InputError
-        If there are fewer samples than the 3 parameters or the force is
-        constant (``K`` and ``tau`` are then undetermined).
+        If there are fewer samples than the 3 parameters, the force is
+        constant (``K`` and ``tau`` are then undetermined), or the force or
+        the record's duration exceeds :data:`MAX_FORCE_N` or
+        :data:`MAX_DURATION_S`.
     ValueError
         If the arrays are malformed or ``weighting`` is unknown.
     """
@@ -511,7 +527,7 @@ def fit_prony(
     f_n : array_like, shape (n,)
         Measured force (N).
     n_terms : int
-        Number of exponential terms, ``>= 1``.
+        Number of exponential terms, 1 to :data:`MAX_PRONY_TERMS`.
     weighting : {"time", "sample"}
         Objective, see :func:`quadrature_weights`.
 
@@ -525,14 +541,19 @@ def fit_prony(
     ------
     relaxgrip.errors.InputError
         If there are fewer samples than the ``2 n_terms + 1`` parameters, the
-        force is constant, or the hold does not hold ``n_terms`` distinct
-        terms: every fit merges two relaxation times (within a factor 1.05,
-        or with amplitudes over ten times the force's range, which cancel).
+        force is constant, the force or the record's duration exceeds
+        :data:`MAX_FORCE_N` or :data:`MAX_DURATION_S`, or the hold does not
+        hold ``n_terms`` distinct terms: every fit merges two relaxation times
+        (within a factor 1.05, or with amplitudes over ten times the force's
+        range, which cancel).
     ValueError
-        If ``n_terms < 1``, the arrays are malformed or ``weighting`` is unknown.
+        If ``n_terms`` is not an integer from 1 to :data:`MAX_PRONY_TERMS`,
+        the arrays are malformed or ``weighting`` is unknown.
     """
-    if isinstance(n_terms, bool) or not isinstance(n_terms, int | np.integer) or n_terms < 1:
-        raise ValueError(f"n_terms must be an integer >= 1, got {n_terms!r}")
+    if (isinstance(n_terms, bool) or not isinstance(n_terms, int | np.integer)
+            or not 1 <= n_terms <= MAX_PRONY_TERMS):
+        raise ValueError(f"n_terms must be an integer from 1 to {MAX_PRONY_TERMS}, "
+                         f"got {n_terms!r}")
     problem = _Problem.build(t_s, f_n, n_params=2 * int(n_terms) + 1, weighting=weighting)
     if problem.t_s.size > _COARSE_ABOVE:
         # A long record: the global search on pooled samples, the last solve on all.
@@ -556,7 +577,9 @@ def _as_times(t_s: ArrayLike) -> FloatArray:
         raise ValueError(f"t_s must be a 1-D array of at least 2 times, got shape {t.shape}")
     if not np.all(np.isfinite(t)):
         raise ValueError("t_s contains non-finite values")
-    if np.any(np.diff(t) <= 0):
+    with np.errstate(over="ignore"):  # times of opposite huge signs: inf is still > 0
+        increasing = bool(np.all(np.diff(t) > 0))
+    if not increasing:
         raise ValueError("t_s must be strictly increasing")
     return t
 
@@ -617,6 +640,15 @@ class _Problem:
             )
         if np.ptp(f) == 0.0:
             raise InputError("the force is constant: there is no relaxation to fit")
+        # Checked before any arithmetic: squares of larger values overflow, with warnings.
+        peak = max(float(np.max(np.abs(f))), 0.0 if anchor is None else abs(anchor))
+        if peak > MAX_FORCE_N:
+            raise InputError(f"the force reaches {peak:.3g} N, beyond any relaxation test "
+                             f"(a fit takes at most {MAX_FORCE_N:g} N)")
+        duration = float(t[-1]) - float(t[0])
+        if not duration <= MAX_DURATION_S:  # also inf: t_s of opposite huge signs
+            raise InputError(f"the record lasts {duration:.3g} s, beyond any relaxation test "
+                             f"(a fit takes at most {MAX_DURATION_S:g} s)")
         sqrt_w = np.sqrt(quadrature_weights(t, weighting))
         return cls(
             t_s=t,

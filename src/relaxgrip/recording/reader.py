@@ -29,7 +29,7 @@ import numpy as np
 
 from relaxgrip.backend import Frame
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import atomic_file, one_line
+from relaxgrip.fileio import atomic_file, check_writable, one_line
 from relaxgrip.recording.recorder import require_mcap
 from relaxgrip.recording.schemas import RECORDING_FORMAT, RECORDING_VERSION
 from relaxgrip.rig import RigGeometry
@@ -404,8 +404,9 @@ def recover(src: Path, dst: Path) -> RecoverReport:
     Raises
     ------
     InputError
-        Missing or foreign source, nothing readable, ``dst`` the same file or
-        a directory, or ``dst`` not writable.
+        Missing or foreign source, nothing readable, ``dst`` the same file,
+        a directory or another non-regular file (a FIFO, a device), or ``dst``
+        not writable.
     """
     require_mcap()
     from mcap.records import Channel, Chunk, DataEnd, Message, Schema, Statistics
@@ -418,6 +419,7 @@ def recover(src: Path, dst: Path) -> RecoverReport:
         raise InputError(f"{dst}: the output must be another file than the input")
     if dst.is_dir():
         raise InputError(f"{dst}: is a directory; name the MCAP file to write")
+    check_writable(dst, InputError)  # a FIFO or a device is not replaced by a file
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
     count = damaged = 0
