@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import json
+import shutil
+from collections.abc import Callable
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from tests.clitools import assert_one_error_line, run_cli, run_main
@@ -110,3 +113,98 @@ def test_bad_input(
     ]
     code, out, err = run_main(argv, monkeypatch, capsys)
     assert_one_error_line(code, out, err, expected)
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["--hold-s", "1e308"], "hold must last 10 s to 3600 s (and be finite), got 1e+308"),
+        (["--hold-s", "3601"], "hold must last 10 s to 3600 s"),
+        (["--icfn-samples", "999999999999"],
+         "at most 107,000 ICFN samples (ten times the default), got 999,999,999,999"),
+        (["--rcfn-sequences", "999999999999"],
+         "at most 8,100 RCFN sequences (ten times the default), got 999,999,999,999"),
+        (["--backend", "ray"], "--backend ray needs Ray: pip install 'relaxgrip[ray]'"),
+        (["--backend", "dask"], "--backend dask needs Dask: pip install 'relaxgrip[dask]'"),
+    ],
+    ids=["hold-overflow", "hold-over-an-hour", "icfn-samples", "rcfn-sequences", "ray", "dask"],
+)
+def test_build_refuses_before_it_starts(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+    args: list[str], expected: str,
+) -> None:
+    """Out-of-range sizes and a backend that is not installed: one line, no progress bar
+    before it, and no dataset directory."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # as if not installed, whether or not it is
+    monkeypatch.setitem(sys.modules, "dask", None)
+    code, out, err = run_main(["dataset", "build", "--out", tmp_path / "d", *args],
+                              monkeypatch, capsys)
+    assert_one_error_line(code, out, err, expected)
+    assert not (tmp_path / "d").exists()
+
+
+@pytest.fixture(scope="module")
+def tiny_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from relaxgrip.learning.build import build_dataset
+    from relaxgrip.learning.datasets import DatasetSpec
+
+    out = tmp_path_factory.mktemp("tiny") / "data"
+    build_dataset(out, DatasetSpec(icfn_samples=40, rcfn_sequences=4, hold_s=10.0, seed=1),
+                  jobs=2)
+    return out
+
+
+def _nan_in(table: str, column: str) -> Callable[[Path], None]:
+    def corrupt(d: Path) -> None:
+        frame = pd.read_parquet(d / f"{table}.parquet")
+        frame.loc[0, column] = float("nan")
+        frame.to_parquet(d / f"{table}.parquet", index=False)
+    return corrupt
+
+
+def _schema_null(d: Path) -> None:
+    manifest = json.loads((d / "manifest.json").read_text())
+    manifest["icfn_schema"] = None
+    (d / "manifest.json").write_text(json.dumps(manifest))
+
+
+def _curves_directory(d: Path) -> None:
+    (d / "rcfn_curves.parquet").unlink()
+    (d / "rcfn_curves.parquet").mkdir()
+
+
+def _force_as_text(d: Path) -> None:
+    frame = pd.read_parquet(d / "icfn.parquet")
+    frame["force_n"] = frame["force_n"].astype(str)
+    frame.to_parquet(d / "icfn.parquet", index=False)
+
+
+@pytest.mark.parametrize("command", ["evaluate", "train", "fit-observer"])
+@pytest.mark.parametrize(
+    ("corrupt", "expected"),
+    [
+        (_schema_null, "the manifest's icfn_schema is None, not a feature schema"),
+        (_nan_in("icfn", "force_n"), "icfn.parquet: 1 NaN or infinite value in column 'force_n'"),
+        (_nan_in("icfn", "marker_dx_m"), "in column 'marker_dx_m'"),
+        (_nan_in("rcfn_features", "temp_c"), "rcfn_features.parquet: 1 NaN or infinite value"),
+        (_curves_directory, "rcfn_curves.parquet: a directory, not a Parquet table"),
+        (_force_as_text, "icfn.parquet: column 'force_n' holds"),
+    ],
+    ids=["schema-null", "nan-force", "nan-feature", "nan-temp", "curves-dir", "text-force"],
+)
+def test_a_damaged_dataset_is_one_line_before_any_work(
+    tiny_data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str], command: str, corrupt: Callable[[Path], None],
+    expected: str,
+) -> None:
+    damaged = tmp_path / "damaged"
+    shutil.copytree(tiny_data, damaged)
+    corrupt(damaged)
+    args: list[str | Path] = [command, "--data", damaged]
+    if command != "evaluate":
+        args += ["--out", tmp_path / "out"]
+    code, out, err = run_main(args, monkeypatch, capsys)
+    assert_one_error_line(code, out, err, expected)
+    assert not (tmp_path / "out").exists()

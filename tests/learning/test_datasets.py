@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -16,6 +17,9 @@ from relaxgrip.learning.build import build_dataset
 from relaxgrip.learning.datasets import (
     ICFN_MAX_FORCE_N,
     ICFN_SAMPLES,
+    MAX_HOLD_S,
+    MAX_ICFN_SAMPLES,
+    MAX_RCFN_SEQUENCES,
     REPEAT_TEMPS_C,
     REPEATS_PER_GROUP,
     DatasetSpec,
@@ -196,3 +200,60 @@ def test_a_build_too_small_to_train_says_so(small: Path) -> None:
     gaps = [w for w in manifest["warnings"] if w.startswith("no rcfn_sequences")]
     assert len(gaps) == 2
     assert "the first 18 are the repeatability holds" in gaps[0]
+
+
+@pytest.mark.parametrize(
+    ("changes", "expected"),
+    [
+        ({"hold_s": 1e308}, "hold must last 10 s to 3600 s (and be finite), got 1e+308"),
+        ({"hold_s": MAX_HOLD_S + 1}, "hold must last 10 s to 3600 s"),
+        ({"hold_s": 5.0}, "hold must last 10 s to 3600 s"),
+        ({"icfn_samples": 999_999_999_999}, "at most 107,000 ICFN samples (ten times the "
+                                            "default), got 999,999,999,999"),
+        ({"rcfn_sequences": MAX_RCFN_SEQUENCES + 1}, "at most 8,100 RCFN sequences"),
+    ],
+)
+def test_spec_sizes_are_bounded(changes: dict[str, Any], expected: str) -> None:
+    """Sizes a build could never finish (or overflow on) are refused when the spec is made."""
+    with pytest.raises(InputError) as info:
+        replace(DatasetSpec(), **changes)
+    assert expected in str(info.value)
+
+
+def test_the_largest_spec_plans() -> None:
+    spec = DatasetSpec(icfn_samples=MAX_ICFN_SAMPLES, rcfn_sequences=MAX_RCFN_SEQUENCES,
+                       hold_s=MAX_HOLD_S)
+    assert sum(e.n_samples for e in plan_icfn(spec)) == MAX_ICFN_SAMPLES == 10 * ICFN_SAMPLES
+    assert {s.hold_s for s in plan_rcfn(spec)} == {3600.0}
+
+
+def test_a_missing_backend_is_refused_before_the_build(tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    import sys
+
+    from relaxgrip.learning.build import check_backend
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # as if not installed
+    progress: list[int] = []
+    with pytest.raises(InputError, match=r"--backend ray needs Ray: pip install"):
+        build_dataset(tmp_path / "d", SMALL, backend="ray",
+                      progress=lambda done, total: progress.append(done))
+    assert progress == []
+    assert not (tmp_path / "d").exists()
+    assert check_backend("loky") == "loky"
+    with pytest.raises(InputError, match="unknown backend 'spark'"):
+        check_backend("spark")
+
+
+def test_a_hold_without_rcfn_features_gives_no_sequence(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Had no frame of a hold given features, its sequence would have a curve and labels but
+    nothing to read them from: it is dropped, as a hold that never reached its force is."""
+    from relaxgrip.learning.datasets import run_rcfn_sequence
+    from relaxgrip.perception.features import RcfnFeatures
+
+    seq = plan_rcfn(DatasetSpec(icfn_samples=0, rcfn_sequences=1, hold_s=10.0))[0]
+    monkeypatch.setattr(RcfnFeatures, "build", lambda self, temp_c: None)
+    out = run_rcfn_sequence(seq)
+    assert out.dropped == 1
+    assert out.sequence == {}
+    assert out.curve == {}

@@ -38,13 +38,14 @@ def dataset_build(
     json_out: Annotated[bool, typer.Option("--json", help="Print the manifest as JSON.")] = False,
 ) -> None:
     """Generate ICFN and RCFN datasets on the twin, through the real perception pipeline."""
-    from relaxgrip.learning.build import BACKENDS, build_dataset
+    from relaxgrip.learning.build import BACKENDS, build_dataset, check_backend
     from relaxgrip.learning.datasets import DatasetSpec
     from relaxgrip.learning.datastore import check_dataset_out
     from relaxgrip.validate import check_jobs
 
     if backend not in BACKENDS:
         raise InputError(f"--backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+    check_backend(backend)  # its optional dependency, before the progress bar shows
     check_jobs(jobs)
     check_dataset_out(out)
     spec = DatasetSpec(rcfn_sequences=rcfn_sequences, seed=seed, hold_s=hold_s)

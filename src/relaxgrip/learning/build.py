@@ -41,11 +41,37 @@ from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 from relaxgrip.twin import TWIN_VERSION, TwinConfig
 from relaxgrip.validate import check_jobs
 
-__all__ = ["BACKENDS", "build_dataset", "parallel_backend"]
+__all__ = ["BACKENDS", "build_dataset", "check_backend", "parallel_backend"]
 
 BACKENDS: tuple[str, ...] = ("loky", "dask", "ray")
 
 ProgressFn = Callable[[int, int], None]
+
+
+def check_backend(name: str) -> str:
+    """Return ``name`` if it is a backend whose optional dependency imports.
+
+    Checked before a build starts (and before a progress bar shows), not when
+    its workers are wanted.
+
+    Raises
+    ------
+    InputError
+        For an unknown backend, or one whose optional dependency is missing.
+    """
+    if name not in BACKENDS:
+        raise InputError(f"unknown backend {name!r}; choose one of {', '.join(BACKENDS)}")
+    if name == "dask":
+        try:
+            import dask.distributed  # noqa: F401
+        except ImportError:
+            raise InputError("--backend dask needs Dask: pip install 'relaxgrip[dask]'") from None
+    if name == "ray":
+        try:
+            import ray.util.joblib  # noqa: F401
+        except ImportError:
+            raise InputError("--backend ray needs Ray: pip install 'relaxgrip[ray]'") from None
+    return name
 
 
 @contextmanager
@@ -59,15 +85,14 @@ def parallel_backend(name: str, jobs: int) -> Iterator[int]:
     """
     import joblib
 
+    check_backend(name)
     if name == "loky":
         with joblib.parallel_config(backend="loky", inner_max_num_threads=1):
             yield jobs
         return
     if name == "dask":
-        try:
-            from dask.distributed import Client, LocalCluster
-        except ImportError:
-            raise InputError("--backend dask needs Dask: pip install 'relaxgrip[dask]'") from None
+        from dask.distributed import Client, LocalCluster
+
         address = os.environ.get("DASK_SCHEDULER_ADDRESS")
         cluster = None if address else LocalCluster(
             n_workers=jobs, threads_per_worker=1, processes=True, host="127.0.0.1",
@@ -83,11 +108,9 @@ def parallel_backend(name: str, jobs: int) -> Iterator[int]:
                 cluster.close()
         return
     if name == "ray":
-        try:
-            import ray
-            from ray.util.joblib import register_ray
-        except ImportError:
-            raise InputError("--backend ray needs Ray: pip install 'relaxgrip[ray]'") from None
+        import ray
+        from ray.util.joblib import register_ray
+
         register_ray()
         started = not ray.is_initialized()
         if started:
@@ -100,7 +123,6 @@ def parallel_backend(name: str, jobs: int) -> Iterator[int]:
             if started:
                 ray.shutdown()
         return
-    raise InputError(f"unknown backend {name!r}; choose one of {', '.join(BACKENDS)}")
 
 
 def _run(unit: Any) -> UnitResult:
@@ -170,8 +192,7 @@ def build_dataset(
     from joblib import Parallel, delayed
 
     check_jobs(jobs)
-    if backend not in BACKENDS:
-        raise InputError(f"unknown backend {backend!r}; choose one of {', '.join(BACKENDS)}")
+    check_backend(backend)
     check_dataset_out(out_dir)  # before minutes of building, not after
     units = list(iter_units(spec))
     start = time.perf_counter()

@@ -58,6 +58,9 @@ __all__ = [
     "ICFN_MAX_FORCE_N",
     "ICFN_OBJECTS",
     "ICFN_SAMPLES",
+    "MAX_HOLD_S",
+    "MAX_ICFN_SAMPLES",
+    "MAX_RCFN_SEQUENCES",
     "PAPER_ICFN_SAMPLES",
     "RCFN_OBJECTS",
     "DatasetSpec",
@@ -99,6 +102,17 @@ REPEAT_FORCE_N = 5.0
 REPEAT_TEMPS_C: tuple[float, ...] = (40.0, 50.0, 60.0)
 REPEATS_PER_GROUP = 6
 
+#: Longest RCFN hold (s): an hour, the bound of the holding experiments
+#: (``relaxgrip.experiments.controlled_hold.MAX_HOLD_S``, a layer above this one).
+MAX_HOLD_S = 3600.0
+#: Most ICFN samples and RCFN sequences of one dataset: ten times the default sizes.
+#: Generous (the default takes about 5 min on 2 cores, ten times it under an hour on a
+#: workstation; its curves take 0.5 GB with 280-s holds, 7 GB with hour-long ones), but
+#: finite, so that a slip of the keyboard is refused at once instead of planning
+#: billions of units (or allocating hundreds of GB for their plan).
+MAX_ICFN_SAMPLES = 10 * ICFN_SAMPLES
+MAX_RCFN_SEQUENCES = 10 * 810
+
 _RATE_HZ = 30.0
 _ZERO_FRAMES = 15
 _APPROACH_MM_S = 20.0
@@ -117,17 +131,18 @@ class DatasetSpec:
     Attributes
     ----------
     icfn_samples : int
-        ICFN samples (paper: 8,258 up to 8 N; :data:`ICFN_SAMPLES`, up to 11 N).
+        ICFN samples (paper: 8,258 up to 8 N; :data:`ICFN_SAMPLES`, up to 11 N), at
+        most :data:`MAX_ICFN_SAMPLES`.
     rcfn_sequences : int
-        RCFN relaxation sequences (paper: 810).
+        RCFN relaxation sequences (paper: 810), at most :data:`MAX_RCFN_SEQUENCES`.
     seed : int
         Master seed: the same seed gives the same dataset, whatever the workers.
     hold_s : float
-        Length of each RCFN hold (s).  The paper records 100 s and holds for
-        280 s; Eq. 10 fitted over 100 s has relaxed fully by then and misses the
-        slow relaxation that goes on through the hold (0.08–0.13 N of the
-        fixed-aperture force at 100–280 s, 40–50 °C), so the sequences cover
-        the holding experiment's horizon.
+        Length of each RCFN hold (s), 10 s to :data:`MAX_HOLD_S`.  The paper
+        records 100 s and holds for 280 s; Eq. 10 fitted over 100 s has relaxed
+        fully by then and misses the slow relaxation that goes on through the
+        hold (0.08–0.13 N of the fixed-aperture force at 100–280 s, 40–50 °C),
+        so the sequences cover the holding experiment's horizon.
     curve_rate_hz, feature_rate_hz : float
         Rates of the kept force curve and of the RCFN features (Hz).
     samples_per_episode : int
@@ -148,10 +163,17 @@ class DatasetSpec:
     def __post_init__(self) -> None:
         if self.icfn_samples < 0 or self.rcfn_sequences < 0:
             raise InputError("sample and sequence counts must be >= 0")
+        if self.icfn_samples > MAX_ICFN_SAMPLES:
+            raise InputError(f"at most {MAX_ICFN_SAMPLES:,} ICFN samples (ten times the "
+                             f"default), got {self.icfn_samples:,}")
+        if self.rcfn_sequences > MAX_RCFN_SEQUENCES:
+            raise InputError(f"at most {MAX_RCFN_SEQUENCES:,} RCFN sequences (ten times the "
+                             f"default), got {self.rcfn_sequences:,}")
         if self.seed < 0:
             raise InputError(f"seed must be >= 0, got {self.seed}")
-        if not (math.isfinite(self.hold_s) and self.hold_s >= 10.0):
-            raise InputError(f"hold must last at least 10 s (and be finite), got {self.hold_s}")
+        if not (math.isfinite(self.hold_s) and 10.0 <= self.hold_s <= MAX_HOLD_S):
+            raise InputError(f"hold must last 10 s to {MAX_HOLD_S:g} s (and be finite), "
+                             f"got {self.hold_s}")
         if not (self.curve_rate_hz >= 10.0 and self.feature_rate_hz > 0):
             raise InputError("the curve needs >= 10 Hz and the features a positive rate")
         if self.samples_per_episode < 4:
@@ -479,6 +501,9 @@ def run_rcfn_sequence(seq: RcfnSequence) -> UnitResult:
             curve_f.append(force)
         if k % frame_every == 0:
             keep_features(t, h.perceive()[0])
+    if not feats["sequence"]:  # no frame gave RCFN features: nothing to train or score on
+        out.dropped = 1
+        return out
     fit = fit_reduced(np.asarray(curve_t), np.asarray(curve_f), f_inst_n=f0)
     predicted = fit.predict(np.asarray(curve_t))
     span = max(curve_f) - min(curve_f)

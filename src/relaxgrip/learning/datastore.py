@@ -278,23 +278,166 @@ class Dataset:
             [kappa, np.log(tau)])
 
 
-#: Columns every table is read by: an empty table is given them, so that an ICFN-only or
-#: RCFN-only dataset comes to "no ... rows", not to a missing column.
-_KEY_COLUMNS: dict[str, list[str]] = {
-    "icfn": ["episode", "split", "force_n", *ICFN_SCHEMA.names],
-    "rcfn_sequences": ["sequence", "split", "f0_n", "kappa", "tau_s"],
-    "rcfn_features": ["sequence", "t_s", *RCFN_SCHEMA.names],
-    "rcfn_curves": ["sequence", "t_s", "force_n"],
+#: The splits a row may belong to.
+_SPLITS = ("train", "val", "test")
+
+
+@dataclass(frozen=True)
+class _Columns:
+    """The columns of a table that its readers (``Dataset``, training, evaluation, the
+    observer's fit) use, by what they must hold."""
+
+    finite: tuple[str, ...]  # numbers, every one finite
+    numbers: tuple[str, ...] = ()  # numbers, NaN where unknown (recordings lack set points)
+    other: tuple[str, ...] = ()  # any type
+
+    @property
+    def names(self) -> list[str]:
+        """All of them: an empty table is given these."""
+        return [*self.finite, *self.numbers, *self.other]
+
+
+_COLUMNS: dict[str, _Columns] = {
+    "icfn": _Columns(finite=("episode", "t_s", "force_n", *ICFN_SCHEMA.names), other=("split",)),
+    "rcfn_sequences": _Columns(
+        finite=("sequence", "f0_n", "kappa", "tau_s", *(f"onset_{n}" for n in ICFN_SCHEMA.names)),
+        numbers=("temp_set_c", "contact_set_m", "force_set_n", "repeat"),
+        other=("split", "object"),
+    ),
+    "rcfn_features": _Columns(finite=("sequence", "t_s", *RCFN_SCHEMA.names)),
+    "rcfn_curves": _Columns(finite=("sequence", "t_s", "force_n")),
 }
 
 
+def _listed(names: list[str], most: int = 3) -> str:
+    """``'a', 'b', 'c' and 4 more``: a few names for a one-line message."""
+    text = ", ".join(repr(n) for n in names[:most])
+    return text + (f" and {len(names) - most} more" if len(names) > most else "")
+
+
+def _short(value: Any, most: int = 40) -> str:
+    text = repr(value)
+    return text if len(text) <= most else text[: most - 3] + "..."
+
+
+def _name_difference(stored: list[str], expected: tuple[str, ...]) -> str:
+    """How a dataset's feature names differ from the ones computed now, for a message."""
+    lacking = [n for n in expected if n not in stored]
+    extra = [n for n in stored if n not in expected]
+    parts = []
+    if lacking:
+        parts.append(f"the dataset lacks {_listed(lacking)}")
+    if extra:
+        parts.append(f"has {_listed(extra)}, which this relaxgrip does not compute")
+    if parts:
+        return "; ".join(parts)
+    if len(stored) != len(expected):
+        return "the dataset repeats a name"
+    first = next(i for i, (a, b) in enumerate(zip(stored, expected, strict=True)) if a != b)
+    return (f"same names in another order: feature {first} is {stored[first]!r} vs "
+            f"{expected[first]!r}")
+
+
 def _check_schema(manifest: dict[str, Any], key: str, schema: FeatureSchema, path: Path) -> None:
-    stored = manifest.get(key, {})
-    if stored.get("version") != schema.version or tuple(stored.get("names", ())) != schema.names:
+    stored = manifest.get(key)
+    if not (isinstance(stored, dict) and isinstance(stored.get("names"), list)
+            and all(isinstance(n, str) for n in stored["names"])):
+        raise InputError(f"{path}: the manifest's {key} is {_short(stored)}, not a feature "
+                         "schema; rebuild the dataset")
+    names: list[str] = stored["names"]
+    if stored.get("version") != schema.version:
         raise InputError(
             f"{path}: built with features {stored.get('version')!r} but this relaxgrip computes "
             f"{schema.version!r}; rebuild the dataset"
         )
+    if tuple(names) != schema.names:
+        raise InputError(
+            f"{path}: built with {key[:4].upper()} features {schema.version!r} under other names "
+            f"than this relaxgrip computes ({_name_difference(names, schema.names)}); "
+            "rebuild the dataset"
+        )
+
+
+def _check_manifest_entries(manifest: dict[str, Any], path: Path) -> None:
+    """What ``relaxgrip train`` records from the manifest must be there (before it trains)."""
+    spec = manifest.get("spec")
+    seed = spec.get("seed") if isinstance(spec, dict) else None
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise InputError(f"{path}: no spec with an integer seed; rebuild the dataset")
+    if not isinstance(manifest.get("counts"), dict):
+        raise InputError(f"{path}: no counts object; rebuild the dataset")
+    if not isinstance(manifest.get("twin_version"), str):
+        raise InputError(f"{path}: no twin_version text; rebuild the dataset")
+
+
+def _read_table(path: Path, columns: _Columns) -> pd.DataFrame:
+    """One table, read and checked to hold the columns its readers use, with sound values.
+
+    The checks are vectorised: they run on every load, on millions of curve rows.
+    """
+    if path.is_dir():
+        raise InputError(f"{path}: a directory, not a Parquet table")
+    try:
+        table = pd.read_parquet(path)
+    except FileNotFoundError:
+        raise InputError(f"{path}: missing table") from None
+    except Exception as exc:  # pyarrow raises several types for damaged files
+        raise InputError(f"{path}: unreadable Parquet table ({type(exc).__name__})") from None
+    if len(table) == 0:  # a dataset without ICFN samples or without holds
+        return table.reindex(columns=columns.names)
+    missing = [c for c in columns.names if c not in table.columns]
+    if missing:
+        raise InputError(f"{path}: no column{'s' if len(missing) > 1 else ''} "
+                         f"{_listed(missing)}; rebuild the dataset")
+    for name in (*columns.finite, *columns.numbers):
+        dtype = table[name].dtype
+        if not pd.api.types.is_numeric_dtype(dtype) or pd.api.types.is_bool_dtype(dtype):
+            raise InputError(f"{path}: column {name!r} holds {dtype}, not numbers; "
+                             "rebuild the dataset")
+    values = table[list(columns.finite)].to_numpy(np.float64, na_value=np.nan)
+    bad = np.count_nonzero(~np.isfinite(values), axis=0)
+    if bad.any():
+        where = np.flatnonzero(bad)
+        others = f" (and in {where.size - 1} other columns)" if where.size > 1 else ""
+        count = int(bad[where[0]])
+        raise InputError(f"{path}: {count} NaN or infinite value{'s' if count > 1 else ''} in "
+                         f"column {columns.finite[where[0]]!r}{others}; rebuild the dataset")
+    if "split" in columns.other:
+        foreign = ~table["split"].isin(_SPLITS)
+        if foreign.any():
+            count = int(foreign.sum())
+            raise InputError(
+                f"{path}: {count} row{'s' if count > 1 else ''} of split "
+                f"{_short(table['split'][foreign].iloc[0])}, not train, val or test; "
+                "rebuild the dataset"
+            )
+    if "tau_s" in columns.finite and (table["tau_s"] <= 0).any():  # labels take its log
+        raise InputError(f"{path}: column 'tau_s' has {int((table['tau_s'] <= 0).sum())} "
+                         "values <= 0; rebuild the dataset")
+    return table
+
+
+def _check_sequences(d: Path, tables: Mapping[str, pd.DataFrame]) -> None:
+    """Every sequence once, with feature rows and a curve; no rows of unknown sequences."""
+    ids = tables["rcfn_sequences"]["sequence"]
+    repeated = ids[ids.duplicated()]
+    if len(repeated):
+        raise InputError(f"{d / 'rcfn_sequences.parquet'}: sequence {repeated.iloc[0]} has "
+                         f"{int((ids == repeated.iloc[0]).sum())} rows; ids must be unique")
+    known = pd.Index(ids)
+    for name in ("rcfn_features", "rcfn_curves"):
+        path = d / f"{name}.parquet"
+        have = pd.Index(pd.unique(tables[name]["sequence"]))
+        stray = have.difference(known)
+        if len(stray):
+            raise InputError(f"{path}: rows of {len(stray)} sequences that "
+                             f"rcfn_sequences.parquet does not have (e.g. {stray[0]}); "
+                             "rebuild the dataset")
+        lacking = known.difference(have)
+        if len(lacking):
+            raise InputError(f"{path}: no rows for {len(lacking)} of the {len(known)} sequences "
+                             f"of rcfn_sequences.parquet (e.g. {lacking[0]}); "
+                             "rebuild the dataset")
 
 
 def load_dataset(directory: Path) -> Dataset:
@@ -303,8 +446,11 @@ def load_dataset(directory: Path) -> Dataset:
     Raises
     ------
     InputError
-        On a missing directory or table, a foreign or damaged manifest, or a
-        dataset built with other feature schemas.
+        On a missing directory or table, a foreign or damaged manifest, a
+        dataset built with other feature schemas, or a damaged table: a column
+        its readers use missing, text where numbers belong, a NaN or infinite
+        value, a split other than train, val or test, or rows of a sequence
+        that the other tables lack.
     """
     d = Path(directory)
     manifest_path = d / "manifest.json"
@@ -316,16 +462,8 @@ def load_dataset(directory: Path) -> Dataset:
                              "a relaxgrip dataset")
     _check_schema(manifest, "icfn_schema", ICFN_SCHEMA, d)
     _check_schema(manifest, "rcfn_schema", RCFN_SCHEMA, d)
-    tables = {}
-    for name in TABLES:
-        path = d / f"{name}.parquet"
-        try:
-            tables[name] = pd.read_parquet(path)
-        except FileNotFoundError:
-            raise InputError(f"{path}: missing table") from None
-        except Exception as exc:  # pyarrow raises several types for damaged files
-            raise InputError(f"{path}: unreadable Parquet table ({type(exc).__name__})") from None
-        if tables[name].empty:  # a dataset without ICFN samples or without holds
-            tables[name] = tables[name].reindex(columns=_KEY_COLUMNS[name])
+    _check_manifest_entries(manifest, manifest_path)
+    tables = {name: _read_table(d / f"{name}.parquet", _COLUMNS[name]) for name in TABLES}
+    _check_sequences(d, tables)
     return Dataset(tables["icfn"], tables["rcfn_sequences"], tables["rcfn_features"],
                    tables["rcfn_curves"], manifest)
