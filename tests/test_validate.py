@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from relaxgrip.errors import InputError
-from relaxgrip.validate import parse_floats, parse_seeds
+from relaxgrip.validate import parse_floats, parse_names, parse_seeds
 
 
 @pytest.mark.parametrize(("text", "seeds"), [("10-15", [10, 11, 12, 13, 14, 15]),
@@ -20,7 +20,8 @@ def test_ten_thousand_seeds_are_the_most() -> None:
 
 
 @pytest.mark.parametrize("text", ["", "a-b", "3-1", "-2", "1,1", "2-4,3", "0-100000000",
-                                  "0-9999,20000"])
+                                  "0-9999,20000", "\uff15", "1-\uff19", "\u0663", "1_0", "+3",
+                                  "1,,2"])
 def test_bad_seed_lists_are_refused(text: str) -> None:
     with pytest.raises(InputError, match="seed"):
         parse_seeds(text)
@@ -39,3 +40,18 @@ def test_bad_number_lists_are_refused(text: str, match: str) -> None:
     with pytest.raises(InputError, match=match) as info:
         parse_floats(text, "--temps")
     assert str(info.value).startswith("--temps")
+
+
+@pytest.mark.parametrize(("text", "names"), [("standard,ramp", ["standard", "ramp"]),
+                                             (" step ", ["step"])])
+def test_name_lists(text: str, names: list[str]) -> None:
+    assert parse_names(text, "--scenarios") == names
+
+
+@pytest.mark.parametrize(("text", "match"), [("", "empty item"), ("standard,,ramp", "empty item"),
+                                             ("ramp,", "empty item"),
+                                             ("standard,standard", "repeats a name")])
+def test_bad_name_lists_are_refused(text: str, match: str) -> None:
+    with pytest.raises(InputError, match=match) as info:
+        parse_names(text, "--scenarios")
+    assert str(info.value).startswith("--scenarios")

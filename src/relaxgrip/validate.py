@@ -11,7 +11,7 @@ from relaxgrip.errors import InputError
 ABSOLUTE_ZERO_C = -273.15
 
 __all__ = ["check_duty", "check_finite", "check_jobs", "check_positive", "check_temp_c",
-           "parse_seeds"]
+           "parse_floats", "parse_names", "parse_seeds"]
 
 
 def check_finite(value: float, name: str) -> float:
@@ -70,11 +70,11 @@ def parse_seeds(text: str) -> list[int]:
     seeds: list[int] = []
     for part in text.split(","):
         lo, sep, hi = part.strip().partition("-")
-        try:
-            first = int(lo)
-            last = int(hi) if sep else first
-        except ValueError:
-            raise InputError(f"seeds must look like 10-15 or 3,5,8, got {text!r}") from None
+        # ASCII digits only: int() also takes "５", "1_0" and "+3", which no one means as a seed.
+        if not all(n.isascii() and n.isdigit() for n in ((lo, hi) if sep else (lo,))):
+            raise InputError(f"seeds must look like 10-15 or 3,5,8, got {text!r}")
+        first = int(lo)
+        last = int(hi) if sep else first
         if first < 0 or last < first:
             raise InputError(f"seed range {part.strip()!r} must be non-negative and ascending")
         if len(seeds) + last - first + 1 > MAX_SEEDS:
@@ -105,3 +105,21 @@ def parse_floats(text: str, name: str) -> list[float]:
     if len(set(values)) != len(values):
         raise InputError(f"{name} repeats a value in {text!r}")
     return values
+
+
+def parse_names(text: str, name: str) -> list[str]:
+    """Names from ``standard,ramp``; at least one, none empty, no repeats.
+
+    Whether each is a known one is for the caller to check.
+
+    Raises
+    ------
+    InputError
+        Naming ``name`` (the flag) and the text.
+    """
+    names = [part.strip() for part in text.split(",")]
+    if "" in names:
+        raise InputError(f"{name} has an empty item in {text!r}: give names like a,b")
+    if len(set(names)) != len(names):
+        raise InputError(f"{name} repeats a name in {text!r}")
+    return names

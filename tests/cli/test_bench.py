@@ -26,7 +26,9 @@ def test_json_report_has_medians_and_realtime_factor(
 @pytest.mark.parametrize(
     ("args", "expected"),
     [(["bench", "warp-drive"], "unknown benchmark 'warp-drive'"),
-     (["bench", "--repeat", "0"], "--repeat must be >= 1")],
+     (["bench", "--repeat", "0"], "--repeat must be 1-1000, got 0"),
+     (["bench", "--repeat", "1001"], "--repeat must be 1-1000, got 1001"),
+     (["bench", "--repeat", "99999999999999999999"], "--repeat must be 1-1000")],
 )
 def test_bad_flags(
     monkeypatch: pytest.MonkeyPatch,

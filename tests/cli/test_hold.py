@@ -87,6 +87,7 @@ def test_seeds_report_each_seed_and_the_mean_over_them(monkeypatch, capsys):
 @pytest.mark.parametrize(("args", "message"), [
     (["--seeds", "3-1"], "ascending"),
     (["--seeds", "a"], "seeds must look like"),
+    (["--seeds", "\uff15"], "seeds must look like 10-15 or 3,5,8, got '\uff15'"),
     (["--seeds", "1,1"], "repeat"),
     (["--seeds", "1,2", "--seed", "3"], "give one of them"),
     (["--seeds", "1,2", "--plot", "x.png"], "--seeds reports figures over seeds"),

@@ -60,6 +60,22 @@ def test_table_output(
     assert "1 marker(s)" in out
 
 
+@pytest.mark.parametrize("dist", ["-0.3,0.1,0.001,0.001,-0.02", "-0.4 0.2 0 0",
+                                  "2,1,0,0,0,2.3,1.5,0.3"])
+def test_a_real_lens_distortion_is_taken(
+    marker_png: tuple[Path, np.ndarray],
+    dist: str,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    code, out, err = run_main(["perceive", marker_png[0], "--json", "--dist", dist],
+                              monkeypatch, capsys)
+    assert code == 0, err
+    assert err == ""
+    (marker,) = json.loads(out)["markers"]
+    assert all(np.isfinite(marker["tvec_m"]))
+
+
 @pytest.mark.parametrize(
     ("args", "expected"),
     [
@@ -68,6 +84,14 @@ def test_table_output(
         (["{png}", "--dict", "9X9"], "not an ArUco dictionary"),
         (["{png}", "--dist", "1,x"], "--dist must be numbers"),
         (["{png}", "--dist", "1,2,3"], "distortion needs 4, 5, 8"),
+        (["{png}", "--dist", ",,,,"], "--dist has an empty item"),
+        (["{png}", "--dist", ""], "--dist has an empty item"),
+        (["{png}", "--dist", "0,0,,0,0"], "--dist has an empty item"),
+        (["{png}", "--dist", "1e308,0,0,0"], "--dist coefficients must be finite and within"),
+        (["{png}", "--dist", "0,0,0,0,inf"], "--dist coefficients must be finite and within"),
+        (["{png}", "--dist", "0,0,1000,0"], "undistorts this image's edges to no pinhole view"),
+        (["{png}", "--dist", "0,0,0,0,0,0,1000,0"], "undistorts this image's edges to no pinhole"),
+        (["adir"], "adir: is a directory, not an image file"),
         (["{png}", "--fx", "-3"], "fx_px must be 1 to 1e+06 pixels"),
         (["{png}", "--fx", "1e300"], "fx_px must be 1 to 1e+06 pixels"),
         (["{png}", "--fx", "1e-300"], "fx_px must be 1 to 1e+06 pixels"),
@@ -86,6 +110,7 @@ def test_bad_input(
 ) -> None:
     monkeypatch.chdir(tmp_path)
     (tmp_path / "notes.txt").write_text("not an image\n")
+    (tmp_path / "adir").mkdir()
     argv = [a.replace("{png}", str(marker_png[0])) for a in args]
     code, out, err = run_main(["perceive", *argv], monkeypatch, capsys)
     assert_one_error_line(code, out, err, expected)

@@ -8,7 +8,7 @@ import pytest
 from typer.testing import CliRunner
 
 from relaxgrip.cli import app
-from relaxgrip.cli.dashboard import is_loopback
+from relaxgrip.cli.dashboard import check_host, is_loopback
 from relaxgrip.dashboard import require_web_stack
 from relaxgrip.errors import InputError
 
@@ -53,3 +53,18 @@ def test_a_port_in_use_is_refused_before_the_session_opens(monkeypatch) -> None:
                                       "--allow-remote"])
     assert isinstance(result.exception, InputError)
     assert "--host nosuchhost.invalid" in str(result.exception)
+
+
+@pytest.mark.parametrize("host", ["not a host", "", "999.1.1.1", "1.2.3", "-rig", "a..b",
+                                  "[::1]", "rig_1.lab"])
+def test_an_invalid_host_is_named_before_the_remote_check(host: str) -> None:
+    result = CliRunner().invoke(app, ["dashboard", "--host", host])
+    assert isinstance(result.exception, InputError)
+    assert str(result.exception) == (f"--host {host!r} is an invalid host: give an IP address "
+                                     "(127.0.0.1, ::1) or a host name")
+
+
+@pytest.mark.parametrize("host", ["localhost", "127.0.0.1", "::1", "0.0.0.0", "example.org",
+                                  "rig-1.lab.", "x1"])
+def test_addresses_and_host_names_are_valid_hosts(host: str) -> None:
+    assert check_host(host) == host

@@ -181,7 +181,8 @@ def test_calibration_sets_the_drift_scale_where_the_drift_is() -> None:
 
 @pytest.mark.parametrize(("seeds", "scenarios", "match"), [([], ["standard"], "seed"),
                                                           ([0], ["warp"], "warp"),
-                                                          ([0], [], "scenario")])
+                                                          ([0], [], "scenario"),
+                                                          ([0], ["ramp", "ramp"], "repeat")])
 def test_calibration_refuses_what_cannot_run(seeds: list[int], scenarios: list[str],
                                              match: str) -> None:
     with pytest.raises(InputError, match=match):
@@ -261,6 +262,10 @@ def test_summary_is_the_mean_over_each_scenarios_holds() -> None:
     (["calibrate-band", "{missing}"], "manifest.json"),
     (["calibrate-band", "{dir}", "--seeds", "5-2"], "5-2"),
     (["calibrate-band", "{dir}", "--scenarios", "warp"], "warp"),
+    (["calibrate-band", "{dir}", "--scenarios", "standard,standard", "--dry-run"],
+     "--scenarios repeats a name in 'standard,standard'"),
+    (["calibrate-band", "{dir}", "--scenarios", "standard,,ramp", "--dry-run"],
+     "--scenarios has an empty item"),
     (["calibrate-band", "{dir}", "--jobs", "0"], "--jobs"),
     (["calibrate-band", "{dir}", "--duration-s", "-1"], "--duration-s"),
     (["calibrate-band", "{dir}", "--duration-s", "1e5"], "--duration-s must be at most 3600 s"),

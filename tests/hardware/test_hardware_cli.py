@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
+
+import relaxgrip.hardware.emulator as emulator_module
+from tests.clitools import assert_one_error_line, run_main
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 
@@ -46,6 +52,8 @@ def _emulator_rig(tmp_path: Path, port: Path, socket: Path) -> Path:
 
 def test_emulator_cleans_up_its_link_and_socket(tmp_path: Path) -> None:
     port, sock = tmp_path / "dev" / "tty", tmp_path / "run" / "frames.sock"
+    port.parent.mkdir()
+    sock.parent.mkdir()
     out = _run("emulator", "--rig", str(_emulator_rig(tmp_path, port, sock)),
                "--duration-s", "0.3")
     assert out.returncode == 0, out.stderr
@@ -101,3 +109,67 @@ def test_a_second_emulator_does_not_take_the_first_one_s_socket(tmp_path: Path) 
     finally:
         first.terminate()
         first.wait(10)
+
+
+@pytest.mark.parametrize("missing", ["port", "socket"])
+def test_emulator_makes_no_folders_for_a_rig_file(tmp_path: Path, missing: str) -> None:
+    port, sock = tmp_path / "tty", tmp_path / "frames.sock"
+    if missing == "port":
+        port = tmp_path / "nodir" / "a" / "tty"
+    else:
+        sock = tmp_path / "nodir" / "a" / "frames.sock"
+    out = _run("emulator", "--rig", str(_emulator_rig(tmp_path, port, sock)),
+               "--duration-s", "5")
+    assert out.returncode == 2
+    assert out.stderr.strip().count("\n") == 0
+    what = "[serial] port" if missing == "port" else "frame channel socket"
+    assert f"{what} {tmp_path / 'nodir' / 'a'}" in out.stderr
+    assert f"directory {tmp_path / 'nodir' / 'a'} does not exist" in out.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rig.toml"]
+
+
+@pytest.mark.parametrize("duration", ["inf", "1e308", "nan", "0", "86401"])
+def test_emulator_duration_is_finite_and_at_most_a_day(
+        duration: str, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, err = run_main(["emulator", "--duration-s", duration], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "--duration-s must be > 0 and at most 86400 s")
+
+
+def test_emulator_makes_and_removes_its_default_folder(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "relaxgrip-emulator"
+    monkeypatch.setattr(emulator_module, "EMULATOR_DIR", folder)
+    code, out, err = run_main(["emulator", "--duration-s", "0.2"], monkeypatch, capsys)
+    assert code == 0, err
+    assert f"frames: {folder / 'frames.sock'}" in out
+    assert not folder.exists()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_emulator_stopped_by_a_signal_removes_its_link_and_socket(
+        tmp_path: Path, sig: signal.Signals) -> None:
+    import time
+
+    port, sock = tmp_path / "tty", tmp_path / "frames.sock"
+    # SIGINT ignored, as a shell starts a command with ``&``: the emulator still stops on it.
+    proc = subprocess.Popen([sys.executable, "-m", "relaxgrip", "emulator", "--rig",
+                             str(_emulator_rig(tmp_path, port, sock))],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        deadline = time.monotonic() + 60.0
+        while not (sock.exists() and port.is_symlink()) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert sock.exists()
+        time.sleep(0.3)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    assert proc.returncode == 0, err
+    assert not sock.exists()
+    assert not port.is_symlink()

@@ -202,6 +202,22 @@ CORRUPTIONS: dict[str, tuple[Callable[[Path], object], str, str]] = {
         "icfn.npz",
         "colour",
     ),
+    "hidden sizes text": (
+        lambda d: edit_manifest(d, lambda m: m["icfn"]["params"].update(hidden_layer_sizes="abc")),
+        "manifest.json",
+        "'icfn.params.hidden_layer_sizes' must be a list of positive integers, got 'abc'",
+    ),
+    "hidden size zero": (
+        lambda d: edit_manifest(d, lambda m: m["icfn"]["params"].update(hidden_layer_sizes=[0])),
+        "manifest.json",
+        r"'icfn.params.hidden_layer_sizes' must be a list of positive integers, got \[0\]",
+    ),
+    "hidden size float": (
+        lambda d: edit_manifest(d, lambda m: m["icfn"]["params"].update(
+            hidden_layer_sizes=[8.5])),
+        "manifest.json",
+        "hidden_layer_sizes' must be a list of positive integers",
+    ),
 }
 
 
@@ -220,6 +236,12 @@ def test_damaged_directories_raise_one_line_errors(saved, case):
 def test_missing_directory(tmp_path):
     with pytest.raises(ModelFileError, match="no such model directory"):
         load_models(tmp_path / "nowhere")
+
+
+def test_a_file_is_not_a_model_directory(tmp_path):
+    (tmp_path / "good.csv").write_text("t,f\n")
+    with pytest.raises(ModelFileError, match=r"good.csv: not a directory \(a model directory"):
+        load_models(tmp_path / "good.csv")
 
 
 def test_feature_schema_version_mismatch(saved):

@@ -13,7 +13,7 @@ from relaxgrip.learning.datastore import load_dataset
 from relaxgrip.learning.store import load_models
 from relaxgrip.learning.training import train_models
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
-from tests.clitools import run_main
+from tests.clitools import assert_one_error_line, run_main
 
 
 def test_from_recordings_then_train(fixed_holds: list[Path], tmp_path: Path,
@@ -97,3 +97,14 @@ def test_from_recordings_never_writes_over_its_recordings(
     assert code == 2
     assert "holds files that are not the relaxgrip-dataset output's (notes.txt)" in err
     assert (dataset / "notes.txt").read_text(encoding="utf-8") == "mine"
+
+
+@pytest.mark.parametrize("every", ["inf", "nan", "0", "-1"])
+def test_from_recordings_refuses_an_icfn_interval_that_is_not_finite_and_positive(
+        every: str, fixed_holds: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "data"
+    code, stdout, err = run_main(["dataset", "from-recordings", fixed_holds[0], "--out", out,
+                                  "--icfn-every-s", every], monkeypatch, capsys)
+    assert_one_error_line(code, stdout, err, "--icfn-every-s must be a finite number > 0")
+    assert not out.exists()

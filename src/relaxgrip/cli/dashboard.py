@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import ipaddress
+import re
 import secrets
 import socket
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -22,6 +23,34 @@ def is_loopback(host: str) -> bool:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:
         return False
+
+
+#: A DNS label (RFC 1123): letters, digits and inner hyphens, at most 63 characters.
+_LABEL = re.compile(r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)")
+
+
+def check_host(host: str) -> str:
+    """Return ``host`` if it is an IP address or a well-formed host name (not looked up).
+
+    Raises
+    ------
+    InputError
+        Anything else: spaces, an empty name, ``999.1.1.1`` (no address, and a name's
+        last label is never all digits).
+    """
+    if host == "localhost":
+        return host
+    try:
+        ipaddress.ip_address(host)
+        return host
+    except ValueError:
+        pass
+    labels = host.removesuffix(".").split(".")
+    if not (len(host) <= 253 and all(_LABEL.fullmatch(label) for label in labels)
+            and not labels[-1].isdigit()):
+        raise InputError(f"--host {host!r} is an invalid host: give an IP address "
+                         "(127.0.0.1, ::1) or a host name")
+    return host
 
 
 @app.command("dashboard")
@@ -48,6 +77,8 @@ def dashboard(
     require_web_stack()
     if not 0 < port < 65536:
         raise InputError(f"--port must be 1-65535, got {port}")
+    check_host(host)
+    address = _resolve(host, port)  # a name that does not resolve: said before --allow-remote
     remote = not is_loopback(host)
     if remote and not allow_remote:
         raise InputError(f"--host {host} is reachable from other machines: "
@@ -58,7 +89,7 @@ def dashboard(
     from relaxgrip.dashboard.app import create_app
     from relaxgrip.dashboard.session import open_session
 
-    listener = _bind(host, port)  # a port in use is known before anything starts
+    listener = _bind(address, host, port)  # a port in use is known before anything starts
     try:
         session = open_session(backend, clock=WallClock(), seed=seed, estimator=estimator,
                                record_dir=record_dir)
@@ -81,13 +112,19 @@ def dashboard(
         listener.close()
 
 
-def _bind(host: str, port: int) -> socket.socket:
-    """A TCP socket bound to ``host:port`` (not yet listening)."""
+def _resolve(host: str, port: int) -> tuple[int, int, int, Any]:
+    """Family, type, protocol and socket address of ``host:port`` (the first one found)."""
     try:
         family, kind, proto, _, address = socket.getaddrinfo(
             host, port, type=socket.SOCK_STREAM)[0]
     except socket.gaierror as exc:
-        raise InputError(f"--host {host}: {exc.strerror}") from None
+        raise InputError(f"--host {host}: cannot resolve it ({exc.strerror})") from None
+    return family, kind, proto, address
+
+
+def _bind(resolved: tuple[int, int, int, Any], host: str, port: int) -> socket.socket:
+    """A TCP socket bound to the address :func:`_resolve` found (not yet listening)."""
+    family, kind, proto, address = resolved
     sock = socket.socket(family, kind, proto)
     try:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
+import threading
 import time
 from pathlib import Path
+from types import FrameType
 from typing import Annotated
 
 import typer
@@ -14,7 +17,13 @@ from rich.table import Table
 from relaxgrip.cli._app import app, console, emit_json
 from relaxgrip.errors import InputError
 
-DEFAULT_SOCKET = "/tmp/relaxgrip-emulator/frames.sock"
+#: The longest ``--duration-s``: a day. The emulator is a bench tool; a longer run is a typo
+#: (1e308, inf), and leaving ``--duration-s`` out runs it until it is stopped.
+MAX_DURATION_S = 86_400.0
+
+#: Signals that stop the emulator as Ctrl-C does, its link and socket removed: ``kill``,
+#: a closed terminal, and SIGINT also where the shell started it with SIGINT ignored (``&``).
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 @app.command("emulator")
@@ -27,31 +36,49 @@ def emulator(
         "--seed", help="Twin seed (default: the rig file's, else 0).", show_default=False)
     ] = None,
     duration_s: Annotated[float | None, typer.Option(
-        "--duration-s", help="Stop after this long (default: until Ctrl-C).",
+        "--duration-s", help="Stop after this long, at most a day (default: until Ctrl-C).",
         show_default=False)] = None,
 ) -> None:
     """Run the twin behind a pseudo-terminal as an emulated MCU, in wall-clock time."""
     from relaxgrip.clock import WallClock
-    from relaxgrip.hardware.emulator import McuEmulator, twin_config_for_rig
+    from relaxgrip.hardware.emulator import (
+        EMULATOR_DIR,
+        McuEmulator,
+        check_parent_dir,
+        twin_config_for_rig,
+    )
     from relaxgrip.hardware.rig_file import load_rig
     from relaxgrip.twin import TwinConfig
 
     if seed is not None and seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
-    if duration_s is not None and not duration_s > 0:
-        raise InputError(f"--duration-s must be > 0, got {duration_s}")
+    if duration_s is not None and not 0 < duration_s <= MAX_DURATION_S:
+        raise InputError(f"--duration-s must be > 0 and at most {MAX_DURATION_S:g} s (a day), "
+                         f"got {duration_s}")
     spec = load_rig(rig) if rig is not None else None
     config = twin_config_for_rig(spec) if spec is not None else TwinConfig()
     socket_path = (spec.emulator.socket if spec is not None and spec.emulator is not None
-                   else DEFAULT_SOCKET)
+                   else str(EMULATOR_DIR / "frames.sock"))
+    port = Path(spec.serial.port) if spec is not None else None
+    # The default folder is made here (and removed when left empty); any other must exist
+    # (listen() checks the socket's before it makes anything).
+    make_dir = (EMULATOR_DIR in (Path(socket_path).parent, port and port.parent)
+                and not os.path.lexists(EMULATOR_DIR))
+    if port is not None and not (make_dir and port.parent == EMULATOR_DIR):
+        check_parent_dir(port, "[serial] port")
     run_seed = seed if seed is not None else (
         spec.emulator.seed if spec is not None and spec.emulator is not None else 0)
     emu = McuEmulator(config, run_seed, WallClock())
     link: Path | None = None
+    # Handlers can only be set from the main thread (not, say, from a test runner's thread).
+    stop_signals = _STOP_SIGNALS if threading.current_thread() is threading.main_thread() else ()
+    previous = {sig: signal.signal(sig, _interrupt) for sig in stop_signals}
     try:
+        if make_dir:
+            EMULATOR_DIR.mkdir()
         emu.listen(socket_path)
-        if spec is not None:
-            link = _link_port(Path(spec.serial.port), emu.port)
+        if port is not None:
+            link = _link_port(port, emu.port)
         emu.start()
         # One line each, however long the paths: scripts read the port from here.
         console.print(f"port: {emu.port}" + (f" (linked from {link})" if link else ""),
@@ -65,10 +92,24 @@ def emulator(
                 time.sleep(0.1)
                 if emu.error is not None:
                     raise InputError(f"emulator stopped: {emu.error}")
+    except KeyboardInterrupt:  # stopped while starting: cleaned up below, like a timed stop
+        pass
     finally:
+        for sig in stop_signals:  # a second signal must not cut the clean-up short
+            signal.signal(sig, signal.SIG_IGN)
         emu.stop()
         if link is not None and link.is_symlink():
             link.unlink()
+        if make_dir:
+            with contextlib.suppress(OSError):  # not empty: someone else's files are there
+                EMULATOR_DIR.rmdir()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _interrupt(signum: int, frame: FrameType | None) -> None:
+    """Stop the emulator's loop as Ctrl-C does."""
+    raise KeyboardInterrupt
 
 
 def _link_port(link: Path, port: str) -> Path:
@@ -81,7 +122,6 @@ def _link_port(link: Path, port: str) -> Path:
         raise InputError(f"[serial] port {link} exists and is not a link: "
                          "the emulator will not replace it")
     try:
-        link.parent.mkdir(parents=True, exist_ok=True)
         with contextlib.suppress(FileNotFoundError):
             link.unlink()
         os.symlink(port, link)

@@ -243,10 +243,10 @@ def calibrate_band_command(
     from relaxgrip.learning.observer import load_observer, set_band_scale
     from relaxgrip.learning.store import load_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
-    from relaxgrip.validate import check_jobs, parse_seeds
+    from relaxgrip.validate import check_jobs, parse_names, parse_seeds
 
     seed_list = parse_seeds(seeds)
-    names = [s.strip() for s in scenarios.split(",") if s.strip()]
+    names = parse_names(scenarios, "--scenarios")
     check_hold_duration_s(duration_s, "--duration-s")
     check_jobs(jobs)
     model = load_observer(observer)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -35,6 +36,8 @@ def _read_gray(path: Path) -> np.ndarray[Any, np.dtype[np.uint8]]:
     image viewers show it (a phone's portrait photo); other formats are read
     as stored.
     """
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory, not an image file")
     if not path.is_file():
         raise InputError(f"{path}: no such file")
     data = np.fromfile(path, dtype=np.uint8)
@@ -71,14 +74,62 @@ def _read_gray(path: Path) -> np.ndarray[Any, np.dtype[np.uint8]]:
     return to_gray(np.asarray(image, dtype=np.uint8))
 
 
+#: The largest distortion coefficient taken: calibrated lenses, even OpenCV's 8-coefficient
+#: rational model, give coefficients of tens at most; beyond this the polynomial describes no lens.
+MAX_DIST_COEFF = 1000.0
+
+#: How far off axis an image edge may undistort to (tan 89°): a pinhole camera sees less than 90°.
+MAX_NORMALIZED = math.tan(math.radians(89.0))
+
+
 def _parse_dist(text: str | None) -> tuple[float, ...]:
-    if text is None or not text.strip():
+    """Distortion coefficients from ``k1,k2,p1,p2[,k3...]`` (commas or spaces); none if omitted.
+
+    Raises
+    ------
+    InputError
+        An empty item, a non-number, or a coefficient that is not finite or beyond
+        ±:data:`MAX_DIST_COEFF`.
+    """
+    if text is None:
         return ()
+    items = re.split(r"\s*,\s*|\s+", text.strip())
+    if "" in items:
+        raise InputError(f"--dist has an empty item in {text!r}: give k1,k2,p1,p2[,k3...]")
     try:
-        values = tuple(float(v) for v in text.replace(",", " ").split())
+        values = tuple(float(v) for v in items)
     except ValueError:
         raise InputError(f"--dist must be numbers separated by commas, got {text!r}") from None
+    for value in values:
+        if not (math.isfinite(value) and abs(value) <= MAX_DIST_COEFF):
+            raise InputError(f"--dist coefficients must be finite and within "
+                             f"±{MAX_DIST_COEFF:g}, got {value:g}")
     return values
+
+
+def _check_dist_view(intrinsics: CameraIntrinsics) -> None:
+    """Refuse a distortion under which the image's edges undistort to no pinhole view.
+
+    The corners and edge midpoints must undistort to finite points less than 89° off
+    axis that keep their left/right and top/bottom order; otherwise the edge fit and the
+    pose would be computed from non-finite or collapsed points.
+    """
+    if not intrinsics.dist:
+        return
+    w, h = intrinsics.width_px - 1.0, intrinsics.height_px - 1.0
+    border = np.array([[0, 0], [w / 2, 0], [w, 0], [w, h / 2], [w, h], [w / 2, h], [0, h],
+                       [0, h / 2]])
+    with np.errstate(all="ignore"):
+        x, y = intrinsics.normalized(border).T
+    # left edge (0, 6, 7) left of the right edge (2, 3, 4); top (0, 1, 2) above bottom (4, 5, 6)
+    ok = (np.all(np.isfinite(x)) and np.all(np.isfinite(y))
+          and float(np.abs(np.concatenate([x, y])).max()) <= MAX_NORMALIZED
+          and float(x[[0, 6, 7]].max()) < float(x[[2, 3, 4]].min())
+          and float(y[[0, 1, 2]].max()) < float(y[[4, 5, 6]].min()))
+    if not ok:
+        dist = ",".join(f"{d:g}" for d in intrinsics.dist)
+        raise InputError(f"--dist {dist} undistorts this image's edges to no pinhole view "
+                         f"(non-finite, folded or over 89° off axis): check the coefficients")
 
 
 @app.command("perceive")
@@ -117,6 +168,7 @@ def perceive(
         (w - 1) / 2.0 if cx is None else cx, (h - 1) / 2.0 if cy is None else cy,
         _parse_dist(dist),
     )
+    _check_dist_view(intrinsics)
     marker = MarkerMount(dictionary=name, size_m=marker_mm * 1e-3)
     solver = PoseSolver(marker.size_m, intrinsics)
     found = []

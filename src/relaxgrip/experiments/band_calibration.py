@@ -311,11 +311,13 @@ def calibrate_band(observer: ObserverModel, seeds: Sequence[int],
     Raises
     ------
     InputError
-        No seeds, an unknown scenario, or holds without a band.
+        No seeds, an unknown or repeated scenario, or holds without a band.
     """
     if not seeds:
         raise InputError("calibrating the band needs at least one seed")
     scenarios = check_scenarios(scenarios)
+    if len(set(scenarios)) != len(scenarios):  # a repeat would run (and count) its holds twice
+        raise InputError(f"scenarios repeat in {','.join(scenarios)}")
     previous = observer.band_scale, observer.drift_scale
     if observer.drift_scale <= 0:  # a part at scale 0 records nothing of its size
         observer = copy.deepcopy(observer)

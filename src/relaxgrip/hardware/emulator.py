@@ -48,9 +48,11 @@ from relaxgrip.hardware.rig_file import LimitsSpec, RigFile
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
 
 __all__ = [
+    "EMULATOR_DIR",
     "FramePublisher",
     "McuEmulator",
     "TwinPlant",
+    "check_parent_dir",
     "open_emulated_gripper",
     "ready_emulated_gripper",
     "twin_config_for_rig",
@@ -63,6 +65,26 @@ _HOST_QUEUE = 16
 _SO_ACCEPTCON = 0x10000
 #: Longest Unix socket path Linux takes (``sun_path`` is 108 bytes with its NUL).
 _MAX_SOCKET_PATH = 107
+#: The folder of the default link and socket (``docs/rig-emulator.toml``): the only folder
+#: ``relaxgrip emulator`` makes (and removes), so that it runs with no rig file; any other
+#: folder must exist already (a typo in a rig file must not grow a tree of folders).
+EMULATOR_DIR = Path("/tmp/relaxgrip-emulator")
+
+
+def check_parent_dir(path: Path, what: str) -> None:
+    """Refuse ``path`` (a link or socket to make) if its folder is missing.
+
+    Raises
+    ------
+    InputError
+        Naming ``what`` (``[serial] port``) and the folder.
+    """
+    parent = path.parent
+    if parent.is_dir():
+        return
+    if os.path.lexists(parent):
+        raise InputError(f"{what} {path}: {parent} is not a directory")
+    raise InputError(f"{what} {path}: directory {parent} does not exist")
 
 
 class _QueuedSender:
@@ -369,7 +391,7 @@ class McuEmulator:
         ------
         InputError
             If ``path`` is taken by something other than a socket, is too long
-            for a Unix socket, or cannot be created.
+            for a Unix socket, is in a missing folder, or cannot be created.
         """
         p = Path(path)
         if len(os.fsencode(p)) > _MAX_SOCKET_PATH:
@@ -381,9 +403,9 @@ class McuEmulator:
         if p.exists() and _answers(p):
             raise InputError(f"frame channel socket {p}: another emulator is serving it; "
                              "stop it or give this one another [emulator] socket")
+        check_parent_dir(p, "frame channel socket")
         server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
-            p.parent.mkdir(parents=True, exist_ok=True)
             with contextlib.suppress(FileNotFoundError):
                 p.unlink()
             server.bind(str(p))

@@ -48,6 +48,8 @@ __all__ = [
 RGB_SOURCES = ("opencv", "emulator")
 #: Where infrared frames can come from: a UVC radiometric (Y16) camera or the MCU emulator.
 IR_SOURCES = ("uvc", "emulator")
+#: The widest ``open_aperture_mm`` taken (mm).
+MAX_APERTURE_MM = 1000.0
 
 
 class _Table:
@@ -104,9 +106,10 @@ class _Table:
         value = self.raw(key, default, required=default is None)
         if isinstance(value, bool) or not isinstance(value, int):
             raise self.fail(key, f"must be an integer, got {value!r}")
-        if value < min_value or (max_value is not None and value > max_value):
-            hi = "" if max_value is None else f"..{max_value}"
-            raise self.fail(key, f"must be in {min_value}{hi}, got {value}")
+        if max_value is None and value < min_value:
+            raise self.fail(key, f"must be >= {min_value}, got {value}")
+        if max_value is not None and not min_value <= value <= max_value:
+            raise self.fail(key, f"must be in {min_value}..{max_value}, got {value}")
         return int(value)
 
     def string(self, key: str, default: str | None = None,
@@ -439,7 +442,9 @@ def parse_rig(data: dict[str, Any], where: str = "rig file") -> RigFile:
             raise InputError(f"{where}: table [{key}] is missing")
     top = _Table(where, "rig", data.get("rig", {}))
     name = top.string("name", Path(where).stem)
-    aperture = top.number("open_aperture_mm", 150.0, positive=True)
+    # At most a metre: the twin's gripper opens 150 mm (a 148 mm stroke); a larger figure is
+    # a typo or a unit slip, not a bench gripper.
+    aperture = top.number("open_aperture_mm", 150.0, positive=True, max_value=MAX_APERTURE_MM)
     marker_finger = top.integer("marker_finger", 0, max_value=1)
     top.done()
 

@@ -303,6 +303,19 @@ def _read_manifest(path: Path) -> dict[str, Any]:
     return manifest
 
 
+def _check_hidden_layer_sizes(path: Path, params: Mapping[str, Any], where: str) -> None:
+    """An ICFN's ``hidden_layer_sizes`` (if given) must be a list of positive integers.
+
+    Checked here, not left to the estimator, so that the error names the manifest
+    and the field rather than the array file read next.
+    """
+    sizes = params.get("hidden_layer_sizes", [])
+    if not (isinstance(sizes, list) and all(
+            isinstance(h, int) and not isinstance(h, bool) and h >= 1 for h in sizes)):
+        raise ModelFileError(f"{path}: manifest '{where}.hidden_layer_sizes' must be a list "
+                             f"of positive integers, got {sizes!r}")
+
+
 def _first_difference(saved: Sequence[str], expected: Sequence[str]) -> str:
     if len(saved) != len(expected):
         return f"{len(saved)} features vs {len(expected)}"
@@ -364,12 +377,15 @@ def load_models(
         npz, arrays missing or misshapen, or features other than expected.
     """
     directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        raise ModelFileError(f"{directory}: not a directory (a model directory is expected)")
     if not directory.is_dir():
         raise ModelFileError(f"{directory}: no such model directory")
     manifest_path = directory / MANIFEST_NAME
     manifest = _read_manifest(manifest_path)
     _check_features(manifest_path, manifest, "icfn", icfn_feature_schema)
     _check_features(manifest_path, manifest, "rcfn", rcfn_feature_schema)
+    _check_hidden_layer_sizes(manifest_path, manifest["icfn"]["params"], "icfn.params")
 
     icfn_path, icfn_arrays = read_npz_entry(directory, manifest["icfn"], ModelFileError)
     try:
@@ -493,6 +509,8 @@ def _load_unrelaxed(directory: Path, manifest: Mapping[str, Any]) -> UnrelaxedIc
         prefix = f"member{i}/"
         member_arrays = {k.removeprefix(prefix): v for k, v in arrays.items()
                          if k.startswith(prefix)}
+        _check_hidden_layer_sizes(directory / MANIFEST_NAME, member_params,
+                                  f"icfn_unrelaxed.params.members[{i}]")
         try:
             member = ICFN.from_arrays(member_arrays, member_params)
         except (TypeError, ValueError) as exc:

@@ -295,7 +295,9 @@ def dataset_from_recordings(
         if f.resolve() == out or out in f.resolve().parents:
             raise InputError(f"--out {out_dir} holds the recording {f}: writing the dataset "
                              "there would replace it; choose another --out")
-    if not (icfn_every_s > 0 and curve_rate_hz > 0 and feature_rate_hz > 0):
+    if not (math.isfinite(icfn_every_s) and icfn_every_s > 0):  # inf: no sample after t = 0
+        raise InputError(f"--icfn-every-s must be a finite number > 0, got {icfn_every_s}")
+    if not (curve_rate_hz > 0 and feature_rate_hz > 0):
         raise InputError("sampling intervals and rates must be > 0")
     if abs(sum(split) - 1.0) > 1e-9 or min(split) < 0:
         raise InputError(f"split shares must be >= 0 and sum to 1, got {split}")
