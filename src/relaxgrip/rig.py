@@ -38,6 +38,7 @@ FloatArray = NDArray[np.float64]
 
 __all__ = [
     "ARUCO_DICTIONARIES",
+    "MAX_DIST_COEFF",
     "MAX_FOCAL_PX",
     "CameraIntrinsics",
     "FingerGeometry",
@@ -55,6 +56,11 @@ __all__ = [
 
 #: Largest focal length accepted (pixels): a field of view of 0.04° across 640 pixels.
 MAX_FOCAL_PX = 1e6
+#: The largest distortion coefficient taken: calibrated lenses, even OpenCV's 8-coefficient
+#: rational model, give coefficients of tens at most; beyond this the polynomial describes no lens.
+MAX_DIST_COEFF = 1000.0
+#: How far off axis an image edge may undistort to (tan 89°): a pinhole camera sees less than 90°.
+MAX_NORMALIZED = math.tan(math.radians(89.0))
 
 #: Dictionary names accepted for markers (OpenCV's ``DICT_*`` constants, without the prefix).
 ARUCO_DICTIONARIES: tuple[str, ...] = tuple(
@@ -142,8 +148,32 @@ class CameraIntrinsics:
             raise InputError(
                 f"distortion needs 4, 5, 8, 12 or 14 coefficients, got {len(self.dist)}"
             )
-        if not all(math.isfinite(d) for d in self.dist):
-            raise InputError("distortion coefficients must be finite")
+        if not all(math.isfinite(d) and abs(d) <= MAX_DIST_COEFF for d in self.dist):
+            raise InputError(f"distortion coefficients must be finite and within "
+                             f"±{MAX_DIST_COEFF:g}, got {_coefficients(self.dist)}")
+        if self.dist and not self._edges_undistort():
+            raise InputError(f"distortion {_coefficients(self.dist)} undistorts the image's "
+                             "edges to no pinhole view (non-finite, folded or over 89° off "
+                             "axis): check the coefficients")
+
+    def _edges_undistort(self) -> bool:
+        """Whether the image's corners and edge midpoints undistort to a pinhole view.
+
+        They must come out finite, less than 89° off axis, and in their order
+        (the left edge left of the right one, the top above the bottom);
+        otherwise the edge fit and the pose would work on non-finite or
+        collapsed points.
+        """
+        w, h = self.width_px - 1.0, self.height_px - 1.0
+        border = np.array([[0, 0], [w / 2, 0], [w, 0], [w, h / 2], [w, h], [w / 2, h], [0, h],
+                           [0, h / 2]])
+        with np.errstate(all="ignore"):
+            x, y = self.normalized(border).T
+        # left edge (0, 6, 7) left of the right edge (2, 3, 4); top (0, 1, 2) above bottom (4, 5, 6)
+        return bool(np.all(np.isfinite(x)) and np.all(np.isfinite(y))
+                    and float(np.abs(np.concatenate([x, y])).max()) <= MAX_NORMALIZED
+                    and float(x[[0, 6, 7]].max()) < float(x[[2, 3, 4]].min())
+                    and float(y[[0, 1, 2]].max()) < float(y[[4, 5, 6]].min()))
 
     @classmethod
     def centred(
@@ -477,3 +507,8 @@ class RigGeometry:
         side = -1.0 if j == 0 else 1.0
         y = side * (0.5 * aperture_m + 0.5 * self.finger.thickness_m + across)
         return np.stack([along, y, np.full_like(along, 0.5 * self.finger.height_m)], axis=-1)
+
+
+def _coefficients(dist: tuple[float, ...]) -> str:
+    """``0,0,1000,0``: distortion coefficients as a user writes them."""
+    return ",".join(f"{d:g}" for d in dist)

@@ -41,6 +41,11 @@ def test_examples_load_and_match_the_twin_geometry() -> None:
     ("rgb", "source", "webcam", r"\[rgb\] source must be one of opencv, emulator"),
     ("rgb", "fx_px", 0, r"\[rgb\] fx_px must be > 0"),
     ("rgb", "dist", [0.1, 0.2], r"\[rgb\] dist needs 0, 4, 5, 8, 12 or 14"),
+    ("rgb", "dist", [1e308, 0, 0, 0], r"\[rgb\] distortion coefficients must be finite and "
+                                     r"within ±1000, got 1e\+308,0,0,0"),
+    ("rgb", "dist", [0, 0, 1000, 0], r"\[rgb\] distortion 0,0,1000,0 undistorts the image's "
+                                     r"edges to no pinhole view"),
+    ("rgb", "fx_px", 1e9, r"\[rgb\] fx_px must be 1 to 1e\+06 pixels"),
     ("rgb", "position_mm", [1, 2], r"\[rgb\] position_mm needs 3 numbers"),
     ("rgb", "stall_ms", 10, r"\[rgb\] stall_ms must exceed one frame period"),
     ("ir", "scale", 0, r"\[ir\] scale must not be 0"),

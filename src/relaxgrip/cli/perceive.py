@@ -21,7 +21,7 @@ from relaxgrip.perception.marker import (
     refine_corners_by_edges,
     to_gray,
 )
-from relaxgrip.rig import ARUCO_DICTIONARIES, CameraIntrinsics, MarkerMount
+from relaxgrip.rig import ARUCO_DICTIONARIES, MAX_DIST_COEFF, CameraIntrinsics, MarkerMount
 
 __all__ = ["perceive"]
 
@@ -74,14 +74,6 @@ def _read_gray(path: Path) -> np.ndarray[Any, np.dtype[np.uint8]]:
     return to_gray(np.asarray(image, dtype=np.uint8))
 
 
-#: The largest distortion coefficient taken: calibrated lenses, even OpenCV's 8-coefficient
-#: rational model, give coefficients of tens at most; beyond this the polynomial describes no lens.
-MAX_DIST_COEFF = 1000.0
-
-#: How far off axis an image edge may undistort to (tan 89°): a pinhole camera sees less than 90°.
-MAX_NORMALIZED = math.tan(math.radians(89.0))
-
-
 def _parse_dist(text: str | None) -> tuple[float, ...]:
     """Distortion coefficients from ``k1,k2,p1,p2[,k3...]`` (commas or spaces); none if omitted.
 
@@ -105,31 +97,6 @@ def _parse_dist(text: str | None) -> tuple[float, ...]:
             raise InputError(f"--dist coefficients must be finite and within "
                              f"±{MAX_DIST_COEFF:g}, got {value:g}")
     return values
-
-
-def _check_dist_view(intrinsics: CameraIntrinsics) -> None:
-    """Refuse a distortion under which the image's edges undistort to no pinhole view.
-
-    The corners and edge midpoints must undistort to finite points less than 89° off
-    axis that keep their left/right and top/bottom order; otherwise the edge fit and the
-    pose would be computed from non-finite or collapsed points.
-    """
-    if not intrinsics.dist:
-        return
-    w, h = intrinsics.width_px - 1.0, intrinsics.height_px - 1.0
-    border = np.array([[0, 0], [w / 2, 0], [w, 0], [w, h / 2], [w, h], [w / 2, h], [0, h],
-                       [0, h / 2]])
-    with np.errstate(all="ignore"):
-        x, y = intrinsics.normalized(border).T
-    # left edge (0, 6, 7) left of the right edge (2, 3, 4); top (0, 1, 2) above bottom (4, 5, 6)
-    ok = (np.all(np.isfinite(x)) and np.all(np.isfinite(y))
-          and float(np.abs(np.concatenate([x, y])).max()) <= MAX_NORMALIZED
-          and float(x[[0, 6, 7]].max()) < float(x[[2, 3, 4]].min())
-          and float(y[[0, 1, 2]].max()) < float(y[[4, 5, 6]].min()))
-    if not ok:
-        dist = ",".join(f"{d:g}" for d in intrinsics.dist)
-        raise InputError(f"--dist {dist} undistorts this image's edges to no pinhole view "
-                         f"(non-finite, folded or over 89° off axis): check the coefficients")
 
 
 @app.command("perceive")
@@ -168,7 +135,6 @@ def perceive(
         (w - 1) / 2.0 if cx is None else cx, (h - 1) / 2.0 if cy is None else cy,
         _parse_dist(dist),
     )
-    _check_dist_view(intrinsics)
     marker = MarkerMount(dictionary=name, size_m=marker_mm * 1e-3)
     solver = PoseSolver(marker.size_m, intrinsics)
     found = []

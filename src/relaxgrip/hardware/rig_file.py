@@ -327,7 +327,10 @@ def _intrinsics(t: _Table) -> CameraIntrinsics:
     dist = t.numbers("dist", ())
     if len(dist) not in (0, 4, 5, 8, 12, 14):
         raise t.fail("dist", f"needs 0, 4, 5, 8, 12 or 14 coefficients, got {len(dist)}")
-    return CameraIntrinsics(width, height, fx, fy, cx, cy, dist)
+    try:
+        return CameraIntrinsics(width, height, fx, fy, cx, cy, dist)
+    except InputError as exc:  # a bound of the intrinsics themselves: say where it was set
+        raise InputError(f"{t.where}: [{t.name}] {exc}") from None
 
 
 def _stall_s(t: _Table, fps: float, default_ms: float) -> float:
