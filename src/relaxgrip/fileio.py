@@ -38,6 +38,7 @@ __all__ = [
     "check_output_dir",
     "check_replaceable",
     "check_writable",
+    "entries",
     "file_entry",
     "npz_bytes",
     "one_line",
@@ -217,6 +218,18 @@ def check_writable(path: Path, error: type[Exception]) -> None:
         raise error(f"{path}: cannot write in {folder} ({exc.strerror or exc})") from None
 
 
+def entries(directory: Path) -> set[str]:
+    """The names in ``directory``, but for the temporaries an interrupted write left there.
+
+    Raises
+    ------
+    OSError
+        If the directory cannot be listed.
+    """
+    return {p.name for p in Path(directory).iterdir()
+            if not (p.name.startswith(".") and p.name.endswith(".tmp"))}
+
+
 def check_output_dir(directory: Path, format_name: str, own: Collection[str],
                      error: type[Exception]) -> Path:
     """Check that a directory output can be written at ``directory`` and lose nothing.
@@ -235,8 +248,7 @@ def check_output_dir(directory: Path, format_name: str, own: Collection[str],
     if directory.exists() and not directory.is_dir():
         raise error(f"{directory} exists and is not a directory: choose another --out")
     if directory.is_dir():
-        names = {p.name for p in directory.iterdir()
-                 if not (p.name.startswith(".") and p.name.endswith(".tmp"))}
+        names = entries(directory)
         if names:
             try:
                 found = json.loads((directory / "manifest.json").read_text("utf-8")).get("format")

@@ -27,7 +27,12 @@ from pathlib import Path
 from typing import Any
 
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import check_writable, write_files_atomically, write_text_atomically
+from relaxgrip.fileio import (
+    check_writable,
+    entries,
+    write_files_atomically,
+    write_text_atomically,
+)
 from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION
 from relaxgrip.validate import check_jobs
@@ -423,8 +428,7 @@ REPORT_FILES = ("report.md", "results.json")
 def _is_report_dir(directory: Path) -> bool:
     """Whether ``directory`` is empty (but for temporaries) or an earlier report."""
     try:
-        names = {p.name for p in directory.iterdir()
-                 if not (p.name.startswith(".") and p.name.endswith(".tmp"))}
+        names = entries(directory)
     except OSError as exc:
         raise InputError(f"{directory}: cannot read ({exc.strerror or exc}): "
                          "choose another --out") from None

@@ -99,12 +99,17 @@ def test_from_recordings_never_writes_over_its_recordings(
     assert (dataset / "notes.txt").read_text(encoding="utf-8") == "mine"
 
 
-@pytest.mark.parametrize("every", ["inf", "nan", "0", "-1"])
+@pytest.mark.parametrize(("every", "expected"), [
+    ("inf", "--icfn-every-s must be a finite number, got inf"),
+    ("nan", "--icfn-every-s must be a finite number, got nan"),
+    ("0", "--icfn-every-s must be > 0, got 0.0"),
+    ("-1", "--icfn-every-s must be > 0, got -1.0"),
+])
 def test_from_recordings_refuses_an_icfn_interval_that_is_not_finite_and_positive(
-        every: str, fixed_holds: list[Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-        capsys: pytest.CaptureFixture[str]) -> None:
+        every: str, expected: str, fixed_holds: list[Path], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "data"
     code, stdout, err = run_main(["dataset", "from-recordings", fixed_holds[0], "--out", out,
                                   "--icfn-every-s", every], monkeypatch, capsys)
-    assert_one_error_line(code, stdout, err, "--icfn-every-s must be a finite number > 0")
+    assert_one_error_line(code, stdout, err, expected)
     assert not out.exists()

@@ -411,9 +411,11 @@ def _read_table(path: Path, columns: _Columns) -> pd.DataFrame:
                 f"{_short(table['split'][foreign].iloc[0])}, not train, val or test; "
                 "rebuild the dataset"
             )
-    if "tau_s" in columns.finite and (table["tau_s"] <= 0).any():  # labels take its log
-        raise InputError(f"{path}: column 'tau_s' has {int((table['tau_s'] <= 0).sum())} "
-                         "values <= 0; rebuild the dataset")
+    if "tau_s" in columns.finite:  # labels take its log
+        non_positive = int((table["tau_s"] <= 0).sum())
+        if non_positive:
+            raise InputError(f"{path}: column 'tau_s' has {non_positive} values <= 0; "
+                             "rebuild the dataset")
     return table
 
 

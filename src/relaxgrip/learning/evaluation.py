@@ -180,8 +180,10 @@ class Evaluation:
 def spread_text(group: dict[str, float | None]) -> str:
     """A repeatability group's spread of the true force, at 100 s and at the end, as text."""
     at_100s = group.get("gt_std_100s_n")
-    end = f"GT end std {group['gt_end_std_n']:.3f} N"
-    return end if at_100s is None else f"GT std {at_100s:.3f} N at 100 s, {end[3:]}"
+    end = f"end std {group['gt_end_std_n']:.3f} N"
+    if at_100s is None:
+        return f"GT {end}"
+    return f"GT std {at_100s:.3f} N at {PAPER_SEQUENCE_S:g} s, {end}"
 
 
 def _force_scores(predicted: FloatArray, truth: FloatArray) -> dict[str, Any]:

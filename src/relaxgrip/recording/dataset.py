@@ -67,6 +67,7 @@ from relaxgrip.perception.features import (
 from relaxgrip.physics.fitting import fit_reduced
 from relaxgrip.recording.reader import malformed_fields, read_replayable_session, read_session
 from relaxgrip.recording.replay import replay_periods
+from relaxgrip.validate import check_positive
 
 __all__ = ["FIXED_APERTURE_TOL_MM", "MIN_HOLD_S", "dataset_from_recordings"]
 
@@ -295,8 +296,7 @@ def dataset_from_recordings(
         if f.resolve() == out or out in f.resolve().parents:
             raise InputError(f"--out {out_dir} holds the recording {f}: writing the dataset "
                              "there would replace it; choose another --out")
-    if not (math.isfinite(icfn_every_s) and icfn_every_s > 0):  # inf: no sample after t = 0
-        raise InputError(f"--icfn-every-s must be a finite number > 0, got {icfn_every_s}")
+    check_positive(icfn_every_s, "--icfn-every-s")  # inf: no sample after t = 0
     if not (curve_rate_hz > 0 and feature_rate_hz > 0):
         raise InputError("sampling intervals and rates must be > 0")
     if abs(sum(split) - 1.0) > 1e-9 or min(split) < 0:
