@@ -167,6 +167,15 @@ def test_budget_survey_prints_the_parts_over_seeds(monkeypatch, capsys):
     text = " ".join(out.split())
     assert f"{d['parts']['total_n']['mean']:+.3f}" in text
     assert f"taken off {d['bias_free_mae_n']:.3f} N" in text
+    # What relax reads of its run: each percept's row, and (two seeds) no correction fits.
+    seen = d["observability"]
+    assert seen["at_s"] == 14.0
+    assert seen["percepts"]
+    assert set(d["runs"][0]["percepts"]) >= set(seen["percepts"])
+    assert "What relax reads by 14 s of the hold" in text
+    assert all(name in text for name in seen["percepts"])
+    assert "would leave – N" in text
+    assert f"the bias alone {d['bias_free_mae_n']:.3f} N" in text
 
 
 @pytest.mark.parametrize(("args", "message"), [

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -10,9 +11,12 @@ import pytest
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.budget_survey import (
     BUDGET_PARTS,
+    PERCEPTS,
     SCATTER_GROUPS,
     BudgetSurvey,
     _explained,
+    _loo_mae,
+    hold_percepts,
     survey_budget,
 )
 from relaxgrip.experiments.controlled_hold import run_hold
@@ -57,6 +61,37 @@ def test_the_summary_is_over_the_seeds(survey) -> None:
     assert all(math.isnan(v) for part in d["r2"].values() for v in part.values())
 
 
+def test_the_percepts_are_what_the_estimator_read_of_its_run(survey) -> None:
+    hold = run_hold("relax", duration_s=14.0, seed=4, budget=True)
+    seen = hold_percepts(hold)
+    assert survey.percepts[1] == seen
+    assert set(seen) == set(PERCEPTS)
+    assert all(math.isfinite(v) for v in seen.values())
+    # Read at the hold's end when it is shorter than PERCEPT_AT_S, over the 5 s before it.
+    t, motor, icfn = hold.t_s, hold.series("motor_mm"), hold.series("icfn_n")
+    late, early = (t >= 9.0 - 1e-9) & (t <= 14.0 + 1e-9), (t >= 1.0 - 1e-9) & (t <= 4.0 + 1e-9)
+    assert seen["motor_travel_mm"] == pytest.approx(motor[late].mean() - motor[0])
+    assert seen["icfn_drift_n"] == pytest.approx(icfn[late].mean() - icfn[early].mean())
+    f_onset = hold.series("f_onset_n")
+    assert seen["f_onset_n"] == f_onset[np.isfinite(f_onset)][-1]
+    assert hold_percepts(hold, at_s=8.0) != seen
+    # Only the estimator's own series: without the truth the reads are the same.
+    blind = copy.deepcopy(hold)
+    for name in [k for k in blind.loop.series if k.startswith("truth_")]:
+        blind.loop.series[name][:] = np.nan
+    blind.truth_n[:] = np.nan
+    assert hold_percepts(blind) == seen
+    # Three seeds: correlations, but too few runs for any corrective fit.
+    observed = survey.observability()
+    assert observed["percepts"] == list(PERCEPTS)
+    assert set(observed["correlation"]) == {*PERCEPTS, "total_n"}
+    assert observed["correlation"]["total_n"]["total_n"] == pytest.approx(1.0)
+    corrected = observed["corrected_mae_n"]
+    assert corrected["bias"] == survey.bias_free_mae_n()
+    assert all(math.isnan(corrected[k]) for k in ("percepts", "finger_0_share", "both_shares"))
+    assert survey.to_dict()["runs"][1]["percepts"] == seen
+
+
 def _synthetic(n: int, total_of) -> BudgetSurvey:
     rng = np.random.default_rng(0)
     scatter, budgets = [], []
@@ -83,6 +118,59 @@ def test_the_draw_that_drives_a_part_is_the_one_that_predicts_it() -> None:
     assert r2["contact_ambient"] < 0.2
     # A constant part has no spread to explain.
     assert all(math.isnan(v) for v in survey.r2()["closure_n"].values())
+
+
+def _with_percepts(survey: BudgetSurvey, drift_of) -> BudgetSurvey:
+    """``survey`` with percepts: noise, but the ICFN's drift ``drift_of(scatter, total, rng)``."""
+    rng = np.random.default_rng(1)
+    percepts = []
+    for s, b in zip(survey.scatter, survey.budgets, strict=True):
+        p = {k: float(rng.standard_normal()) for k in PERCEPTS}
+        p["icfn_drift_n"] = drift_of(s, b["total_n"], rng)
+        percepts.append(p)
+    return BudgetSurvey(survey.target_n, survey.temp_c, survey.duration_s, survey.seeds,
+                        survey.budgets, survey.scatter, survey.twin_version, percepts)
+
+
+def test_a_correction_reaches_only_what_the_percepts_show_of_the_draw() -> None:
+    def total(s, rng):
+        return (-0.3 * math.log(s["relax_scale_0"]) - 0.4 * math.log(s["relax_scale_1"])
+                + 0.002 * rng.standard_normal())
+
+    def creep(s, total, rng):  # the marker's finger less half the other: not the total's mix
+        return (math.log(s["relax_scale_0"]) - 0.5 * math.log(s["relax_scale_1"])
+                + 0.01 * rng.standard_normal())
+
+    seen = _with_percepts(_synthetic(48, total), creep).observability()
+    r = seen["correlation"]["icfn_drift_n"]
+    assert r["finger_0"] > 0.8
+    assert r["finger_1"] < -0.3
+    mae = seen["corrected_mae_n"]
+    assert mae["both_shares"] < 0.1 * mae["bias"]
+    assert mae["finger_0_share"] > 0.5 * mae["bias"]
+    assert mae["percepts"] > 0.6 * mae["bias"]
+    # Percepts that do show the total's mix correct it.
+    shown = _with_percepts(_synthetic(48, total),
+                           lambda s, t, rng: t + 0.002 * rng.standard_normal())
+    assert shown.observability()["corrected_mae_n"]["percepts"] < 0.2 * mae["bias"]
+    # A percept some run lacks (no chain blended in) is left out of the fit.
+    survey = _with_percepts(_synthetic(48, total), creep)
+    survey.percepts[3]["chain_n"] = math.nan
+    assert survey.observability()["percepts"] == [k for k in PERCEPTS if k != "chain_n"]
+
+
+def test_leave_one_out_mae_is_the_brute_force_one() -> None:
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal((20, 2))
+    y = x[:, 0] - x[:, 1] + 0.3 * rng.standard_normal(20)
+    design = np.column_stack([x, np.ones(20)])
+    residuals = []
+    for i in range(20):
+        keep = np.arange(20) != i
+        coef, *_ = np.linalg.lstsq(design[keep], y[keep], rcond=None)
+        residuals.append(y[i] - design[i] @ coef)
+    assert _loo_mae(x, y) == pytest.approx(np.mean(np.abs(residuals)))
+    assert math.isnan(_loo_mae(x[:7], y[:7]))
 
 
 def test_leave_one_out_r2_is_the_brute_force_one() -> None:

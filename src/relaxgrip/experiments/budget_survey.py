@@ -22,12 +22,22 @@ Two summaries bound what a redesign of the estimator could reach:
   draw predicts, each run left out of its own fit.  What finger 1's draw
   explains is out of reach of the one marker; what no draw explains is the
   ICFN's own per-run reading.
+
+And one measures what the estimator could learn of its own run:
+
+* ``observability``: what the estimator reads by :data:`PERCEPT_AT_S` into
+  the hold (:data:`PERCEPTS`, from its own series, never the truth), each
+  correlated across runs with each finger's relaxing share; and the MAE a
+  per-run correction would leave, fitted (each run left out) on those
+  percepts, on finger 0's true share, or on both fingers' true shares.  A
+  correction on the percepts can only reach what they show of the draw.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -45,7 +55,8 @@ from relaxgrip.experiments.controlled_hold import (
 )
 from relaxgrip.learning.store import ModelBundle
 
-__all__ = ["BUDGET_PARTS", "SCATTER_GROUPS", "BudgetSurvey", "survey_budget"]
+__all__ = ["BUDGET_PARTS", "PERCEPTS", "PERCEPT_AT_S", "SCATTER_GROUPS", "BudgetSurvey",
+           "hold_percepts", "survey_budget"]
 
 FloatArray = NDArray[np.float64]
 
@@ -60,6 +71,48 @@ SCATTER_GROUPS: dict[str, tuple[str, ...]] = {
 }
 SCATTER_GROUPS["all"] = tuple(k for group in SCATTER_GROUPS.values() for k in group)
 _LOG_FACTORS = frozenset(SCATTER_GROUPS["finger_0"] + SCATTER_GROUPS["finger_1"])
+#: Each finger's relaxing share, the draw the percepts are set against.
+_SHARES = {"finger_0": "relax_scale_0", "finger_1": "relax_scale_1"}
+
+#: What ``relax`` reads of its own run (its series, no truth): ``F_inst``; the
+#: per-frame ICFN's drift since the hold's first seconds (the marker finger's
+#: creep); the motor's travel since the onset; Eq. 10's ``K`` and ``tau``; and
+#: what the closed chain's reading adds.
+PERCEPTS = ("f_onset_n", "icfn_drift_n", "motor_travel_mm", "k_n", "tau_s", "chain_n")
+#: Time into the hold the percepts are read at (s): the steady state's start,
+#: from which a correction on them would count in full.
+PERCEPT_AT_S = 100.0
+#: The percepts' averaging window before that time, and the drift's reference (s).
+_PERCEPT_WINDOW_S = 5.0
+_DRIFT_FROM_S = (1.0, 4.0)
+
+
+def hold_percepts(hold: HoldResult, at_s: float = PERCEPT_AT_S) -> dict[str, float]:
+    """:data:`PERCEPTS` of one hold, read ``at_s`` into it (at its end if it is shorter).
+
+    Means over the :data:`_PERCEPT_WINDOW_S` before that time; NaN where the
+    estimator had no value there (``chain_n`` without a chain blended in).
+    """
+    at = min(at_s, hold.duration_s)
+    t = hold.t_s
+
+    def mean(name: str, lo: float, hi: float) -> float:
+        values = hold.series(name)[(t >= lo - 1e-9) & (t <= hi + 1e-9)]
+        values = values[np.isfinite(values)]
+        return float(values.mean()) if values.size else float("nan")
+
+    lo = at - _PERCEPT_WINDOW_S
+    f_onset = hold.series("f_onset_n")
+    f_onset = f_onset[np.isfinite(f_onset)]
+    motor = hold.series("motor_mm")
+    return {
+        "f_onset_n": float(f_onset[-1]) if f_onset.size else float("nan"),
+        "icfn_drift_n": mean("icfn_n", lo, at) - mean("icfn_n", *_DRIFT_FROM_S),
+        "motor_travel_mm": mean("motor_mm", lo, at) - float(motor[0]),
+        "k_n": mean("k_n", lo, at),
+        "tau_s": mean("tau_s", lo, at),
+        "chain_n": mean("chain_n", lo, at),
+    }
 
 
 @dataclass(frozen=True)
@@ -76,6 +129,8 @@ class BudgetSurvey:
     scatter : list of dict
         Each seed's draw (:meth:`relaxgrip.twin.twin.TwinMaterial.scatter`).
     twin_version : str
+    percepts : list of dict
+        Each seed's :func:`hold_percepts` (empty: not read).
     """
 
     target_n: float
@@ -85,6 +140,7 @@ class BudgetSurvey:
     budgets: list[dict[str, float]]
     scatter: list[dict[str, float]]
     twin_version: str
+    percepts: list[dict[str, float]] = field(default_factory=list)
 
     def column(self, name: str) -> FloatArray:
         """One budget part (or ``mae_n``) over the seeds, in seed order."""
@@ -129,6 +185,42 @@ class BudgetSurvey:
                          for group, keys in SCATTER_GROUPS.items()}
         return out
 
+    def observability(self) -> dict[str, Any]:
+        """What the estimator's percepts show of the draw, and what correcting on them would reach.
+
+        Returns
+        -------
+        dict
+            ``correlation``: per percept (those finite in every run) and for
+            ``total_n``, its correlation across runs with the logarithm of
+            each finger's relaxing share (``finger_0``, ``finger_1``) and with
+            ``total_n``.  ``corrected_mae_n``: the mean ``|total_i - fit_i|``
+            of a least-squares fit with an intercept, each run left out of
+            its own fit, on nothing (``bias``, :meth:`bias_free_mae_n`), on
+            the percepts, on finger 0's true share, on both fingers' true
+            shares; NaN where the runs are too few for the fit.
+        """
+        total = self.column("total_n")
+        names = [k for k in PERCEPTS
+                 if self.percepts and all(math.isfinite(p[k]) for p in self.percepts)]
+        percepts = np.array([[p[k] for k in names] for p in self.percepts]).reshape(
+            len(self.percepts), len(names))
+        shares = self._design(tuple(_SHARES.values()))
+        correlation: dict[str, dict[str, float]] = {}
+        for name, values in [*zip(names, percepts.T, strict=True), ("total_n", total)]:
+            correlation[name] = {
+                **{finger: _correlation(values, shares[:, j]) for j, finger in enumerate(_SHARES)},
+                "total_n": _correlation(values, total),
+            }
+        corrected = {
+            "bias": self.bias_free_mae_n(),
+            "percepts": _loo_mae(percepts, total) if names else float("nan"),
+            "finger_0_share": _loo_mae(shares[:, :1], total),
+            "both_shares": _loo_mae(shares, total),
+        }
+        return {"at_s": min(PERCEPT_AT_S, self.duration_s), "percepts": names,
+                "correlation": correlation, "corrected_mae_n": corrected}
+
     def _design(self, keys: Sequence[str]) -> FloatArray:
         cols = [[s[k] for s in self.scatter] for k in keys]
         x = np.array(cols, dtype=np.float64).T
@@ -144,10 +236,28 @@ class BudgetSurvey:
             "target_n": self.target_n, "temp_c": self.temp_c, "duration_s": self.duration_s,
             "seeds": self.seeds, "mae_n": float(self.column("mae_n").mean()),
             "parts": self.parts(), "bias_free_mae_n": self.bias_free_mae_n(),
-            "r2": self.r2(),
-            "runs": [{"seed": s, **b, "twin_scatter": d}
-                     for s, b, d in zip(self.seeds, self.budgets, self.scatter, strict=True)],
+            "r2": self.r2(), "observability": self.observability(),
+            "runs": [{"seed": s, **b, "twin_scatter": d,
+                      **({"percepts": self.percepts[i]} if self.percepts else {})}
+                     for i, (s, b, d) in enumerate(zip(self.seeds, self.budgets, self.scatter,
+                                                       strict=True))],
         }
+
+
+def _loo_residuals(x: FloatArray, y: FloatArray) -> FloatArray | None:
+    """Each run's residual from the least-squares fit (with an intercept) on the others.
+
+    ``None`` with fewer runs than twice the coefficients and two more: a fit
+    with that few runs to spare says little.
+    """
+    n, k = x.shape
+    if n < 2 * (k + 1) + 2:
+        return None
+    design = np.column_stack([x, np.ones(n)])
+    coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+    hat = np.einsum("ij,ji->i", design, np.linalg.pinv(design))
+    out: FloatArray = (y - design @ coef) / (1.0 - hat)
+    return out
 
 
 def _explained(x: FloatArray, y: FloatArray) -> float:
@@ -157,15 +267,24 @@ def _explained(x: FloatArray, y: FloatArray) -> float:
     nothing scores about 0 or below, however few the runs.  NaN with fewer
     runs than twice the coefficients and two more, or if ``y`` is constant.
     """
-    n, k = x.shape
     ss = float(np.sum((y - y.mean()) ** 2))
-    if n < 2 * (k + 1) + 2 or ss <= 0.0:
+    loo = _loo_residuals(x, y)
+    if loo is None or ss <= 0.0:
         return float("nan")
-    design = np.column_stack([x, np.ones(n)])
-    coef, *_ = np.linalg.lstsq(design, y, rcond=None)
-    hat = np.einsum("ij,ji->i", design, np.linalg.pinv(design))
-    loo = (y - design @ coef) / (1.0 - hat)
     return float(1.0 - loo @ loo / ss)
+
+
+def _loo_mae(x: FloatArray, y: FloatArray) -> float:
+    """Mean absolute leave-one-out residual of ``y`` on ``x`` (NaN with too few runs)."""
+    loo = _loo_residuals(x, y)
+    return float("nan") if loo is None else float(np.mean(np.abs(loo)))
+
+
+def _correlation(a: FloatArray, b: FloatArray) -> float:
+    """Pearson's correlation; NaN under three runs or where either does not vary."""
+    if a.size < 3 or np.ptp(a) == 0.0 or np.ptp(b) == 0.0:
+        return float("nan")
+    return float(np.corrcoef(a, b)[0, 1])
 
 
 def _one(args: tuple[int, float, float, float, ModelBundle | None]) -> HoldResult:
@@ -210,4 +329,4 @@ def survey_budget(seeds: Sequence[int], target_n: float = 5.0, temp_c: float = 4
         budgets.append({**hold.error_budget(), "mae_n": hold.metrics()["mae_n"]})
         scatter.append(hold.twin_scatter)
     return BudgetSurvey(target_n, temp_c, duration_s, [int(s) for s in seeds], budgets,
-                        scatter, holds[0].twin_version)
+                        scatter, holds[0].twin_version, [hold_percepts(h) for h in holds])
