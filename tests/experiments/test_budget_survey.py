@@ -157,6 +157,11 @@ def test_a_correction_reaches_only_what_the_percepts_show_of_the_draw() -> None:
     survey = _with_percepts(_synthetic(48, total), creep)
     survey.percepts[3]["chain_n"] = math.nan
     assert survey.observability()["percepts"] == [k for k in PERCEPTS if k != "chain_n"]
+    # A survey without reads (built by hand) fits none.
+    bare = _synthetic(48, total).observability()
+    assert bare["percepts"] == []
+    assert list(bare["correlation"]) == ["total_n"]
+    assert math.isnan(bare["corrected_mae_n"]["percepts"])
 
 
 def test_leave_one_out_mae_is_the_brute_force_one() -> None:
