@@ -32,6 +32,11 @@ from relaxgrip.learning.store import ModelFileError, load_models, save_models
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 from relaxgrip.twin.config import TWIN_VERSION
 
+# The ensembles here train for a few dozen epochs on tiny data, to test the plumbing: that
+# their optimiser has not converged is expected, not news.
+pytestmark = pytest.mark.filterwarnings(
+    "ignore:Stochastic Optimizer:sklearn.exceptions.ConvergenceWarning")
+
 DX = ICFN_SCHEMA.index("marker_dx_m")
 TEMPS = (ICFN_SCHEMA.index("f0_temp_mean_c"), ICFN_SCHEMA.index("f1_temp_mean_c"))
 
