@@ -367,8 +367,7 @@ def budget_survey(
         table.add_column(col, justify="left" if col == "part" else "right")
     for name, p in parts.items():
         table.add_row(name.removesuffix("_n"), f"{p['mean']:+.3f}", f"{p['sd']:.3f}",
-                      *(f"{r2[name][g]:.2f}" if math.isfinite(r2[name][g]) else "–"
-                        for g in SCATTER_GROUPS))
+                      *(_fmt(r2[name][g], ".2f") for g in SCATTER_GROUPS))
     console.print(table)
     console.print(f"MAE from the target {survey.column('mae_n').mean():.3f} N; with the bias "
                   f"measured on the other seeds taken off {survey.bias_free_mae_n():.3f} N")
@@ -376,12 +375,13 @@ def budget_survey(
     console.print(f"{survey.twin_version}, {time.perf_counter() - start:.1f} s")
 
 
+def _fmt(value: float, spec: str) -> str:
+    """``value`` in ``spec``, or a dash where there is no figure (NaN)."""
+    return format(value, spec) if math.isfinite(value) else "–"
+
+
 def _print_observability(seen: dict[str, Any]) -> None:
     """The budget survey's second table: what relax reads of its run, against the draw."""
-
-    def fmt(value: float, spec: str) -> str:
-        return format(value, spec) if math.isfinite(value) else "–"
-
     table = Table(title=f"What relax reads by {seen['at_s']:.0f} s of the hold, across seeds",
                   caption="r: correlation with the log of finger 0's and finger 1's relaxing "
                           "share (the twin's draw), and with the total")
@@ -389,11 +389,11 @@ def _print_observability(seen: dict[str, Any]) -> None:
         table.add_column(col, justify="left" if col == "read" else "right")
     for name, r in seen["correlation"].items():
         label = "total (estimate − true)" if name == "total_n" else name
-        table.add_row(label, *(fmt(r[k], "+.2f") for k in ("finger_0", "finger_1", "total_n")))
+        table.add_row(label, *(_fmt(r[k], "+.2f") for k in ("finger_0", "finger_1", "total_n")))
     console.print(table)
     mae = seen["corrected_mae_n"]
     console.print(f"A per-run correction fitted (each seed left out) on these reads would leave "
-                  f"{fmt(mae['percepts'], '.3f')} N; on finger 0's true share "
-                  f"{fmt(mae['finger_0_share'], '.3f')} N, on both fingers' "
-                  f"{fmt(mae['both_shares'], '.3f')} N (the bias alone "
-                  f"{fmt(mae['bias'], '.3f')} N)")
+                  f"{_fmt(mae['percepts'], '.3f')} N; on finger 0's true share "
+                  f"{_fmt(mae['finger_0_share'], '.3f')} N, on both fingers' "
+                  f"{_fmt(mae['both_shares'], '.3f')} N (the bias alone "
+                  f"{_fmt(mae['bias'], '.3f')} N)")
