@@ -12,7 +12,7 @@ from tests.clitools import run_main
 
 KEYS = {"twin_version", "estimator", "target_n", "temp_c", "seed", "mae_n", "rmse_n",
         "mean_signed_error_n", "median_signed_error_n", "iqr_n", "est_error_mean_n",
-        "est_rmse_n"}
+        "est_rmse_n", "onset_error_n"}
 
 
 def test_hold_json_has_the_paper_statistics(monkeypatch, capsys, tmp_path: Path):
@@ -74,6 +74,8 @@ def test_seeds_report_each_seed_and_the_mean_over_them(monkeypatch, capsys):
     assert [r["seed"] for r in d["runs"]["relax"]] == [1, 4]
     assert d["summary"]["relax"]["mae_n"]["mean"] == pytest.approx(
         np.mean([r["mae_n"] for r in d["runs"]["relax"]]))
+    onsets = [r["onset_error_n"] for r in d["runs"]["relax"]]
+    assert d["summary"]["relax"]["onset_error_n"]["mean"] == pytest.approx(np.mean(onsets))
     code, out, err = run_main(["hold", "--seed", "4", "--duration-s", "8", "--json"],
                               monkeypatch, capsys)
     assert json.loads(out)["mae_n"] == d["runs"]["relax"][1]["mae_n"]
@@ -81,6 +83,7 @@ def test_seeds_report_each_seed_and_the_mean_over_them(monkeypatch, capsys):
     code, out, err = run_main(["hold", "--seeds", "4", "--duration-s", "8"], monkeypatch, capsys)
     assert code == 0, err
     assert f"{d['runs']['relax'][1]['mae_n']:.4f}" in out
+    assert f"relax {d['runs']['relax'][1]['onset_error_n']:+.3f}" in " ".join(out.split())
     assert "nan" not in out
 
 

@@ -57,3 +57,10 @@ def test_the_copy_leaves_the_run_as_it_was(budgeted) -> None:
 def test_a_budget_is_relax_on_the_twin(estimator: str, backend: str) -> None:
     with pytest.raises(InputError, match="budget"):
         run_hold(estimator, duration_s=5.0, backend=backend, budget=True)
+
+
+def test_the_onset_error_is_where_the_closing_stopped(budgeted) -> None:
+    assert budgeted.metrics()["onset_error_n"] == budgeted.truth_n[0] - 5.0
+    # A fixed aperture keeps what the onset left, less the finger's relaxation.
+    fixed = run_hold("fixed", target_n=3.0, duration_s=20.0, seed=2).metrics()
+    assert fixed["onset_error_n"] > fixed["mean_signed_error_n"] + 0.02

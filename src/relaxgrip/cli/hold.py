@@ -228,6 +228,13 @@ def hold(
         console.print(f"figure: {figure}")
 
 
+def _mean_sd(figure: dict[str, Any] | None) -> str:
+    """A survey figure as ``mean ± SD`` (the mean alone for one seed, a dash for none)."""
+    if figure is None:
+        return "–"
+    return f"{figure['mean']:+.3f}" + (f" ± {figure['sd']:.3f}" if figure["n"] > 1 else "")
+
+
 def _print_survey(survey: HoldSurvey, seeds: str, seconds: float) -> None:
     """Per seed each estimator's MAE, then each one's figures over the seeds."""
     from relaxgrip.experiments.controlled_hold import steady_window_s
@@ -248,17 +255,19 @@ def _print_survey(survey: HoldSurvey, seeds: str, seconds: float) -> None:
                           "each run's mean estimate error, mean ± SD over seeds (N); band: the "
                           "share of the hold the 95 % band covers the true force")
     _add_columns(table, ("estimator", "MAE", "95 % CI", "median", "SD", "est − true", "band"))
-    for name in names:
-        s = survey.summary(name)
-        mae, est, cover = s["mae_n"], s.get("est_error_mean_n"), s.get("band_coverage")
+    summaries = {name: survey.summary(name) for name in names}
+    for name, s in summaries.items():
+        mae, cover = s["mae_n"], s.get("band_coverage")
         spread = mae["n"] > 1  # one seed has no spread and no interval
         table.add_row(name, f"{mae['mean']:.4f}",
                       f"{mae['ci95'][0]:.3f}–{mae['ci95'][1]:.3f}" if spread else "–",
                       f"{mae['median']:.3f}", f"{mae['sd']:.3f}" if spread else "–",
-                      "–" if est is None else f"{est['mean']:+.3f}"
-                      + (f" ± {est['sd']:.3f}" if est["n"] > 1 else ""),
+                      _mean_sd(s.get("est_error_mean_n")),
                       "" if cover is None else f"{cover['mean']:.1%}")
     console.print(table)
+    onsets = [f"{name} {_mean_sd(s.get('onset_error_n'))}" for name, s in summaries.items()]
+    console.print(f"The true force at the hold's onset less the target, where the closing "
+                  f"stopped (N, mean ± SD over seeds): {', '.join(onsets)}")
     reductions = survey.reductions()  # a bootstrap each: computed once
     for key, r in reductions.items():
         paper = PAPER_REDUCTION.get(key)

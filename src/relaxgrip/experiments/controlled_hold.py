@@ -187,7 +187,13 @@ class HoldResult:
         return (self.t_s >= lo - 1e-9) & (self.t_s <= hi + 1e-9)
 
     def metrics(self) -> dict[str, Any]:
-        """The paper's hold statistics over the steady-state interval."""
+        """The paper's hold statistics over the steady-state interval.
+
+        Besides them, ``onset_error_n``: the true force at the hold's onset
+        less the target, where the estimator stopped the closing.  A fixed
+        aperture's error over the steady state follows it: that aperture
+        holds what the onset reading left, less the finger's relaxation.
+        """
         mask = self._mask()
         if not mask.any():
             raise InputError("the hold ended before its steady-state interval")
@@ -206,6 +212,7 @@ class HoldResult:
             "iqr_n": [float(q25), float(q75)],
             "est_error_mean_n": float(np.mean(est)) if est.size else math.nan,
             "est_rmse_n": float(np.sqrt(np.mean(est * est))) if est.size else math.nan,
+            "onset_error_n": float(self.truth_n[0] - self.target_t_n[0]),
         }
 
     def error_budget(self) -> dict[str, float]:

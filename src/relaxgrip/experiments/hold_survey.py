@@ -47,7 +47,7 @@ FloatArray = NDArray[np.float64]
 
 #: The per-run figures summarised over seeds (``band_coverage`` only where a band is).
 SURVEY_FIGURES = ("mae_n", "rmse_n", "mean_signed_error_n", "est_error_mean_n",
-                  "est_rmse_n", "band_coverage")
+                  "est_rmse_n", "onset_error_n", "band_coverage")
 #: Resamples of the seeds behind the reductions' intervals; the resampling's own seed.
 RESAMPLES = 2000
 _RESAMPLE_SEED = 0
