@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -26,6 +27,24 @@ def relax_hold(tmp_path_factory: pytest.TempPathFactory,
     path = tmp_path_factory.mktemp("rec") / "relax.mcap"
     with McapRecorder(path) as rec:
         result = run_hold("relax", 5.0, HOLD_S, 40.0, 0, models, recorder=rec)
+    return path, result
+
+
+@pytest.fixture(scope="session")
+def uncalibrated(models: ModelBundle) -> ModelBundle:
+    """The shipped models without their closed-loop calibration."""
+    return replace(models, hold_bias=None)
+
+
+@pytest.fixture(scope="session")
+def png_relax_hold(tmp_path_factory: pytest.TempPathFactory,
+                   uncalibrated: ModelBundle) -> tuple[Path, HoldResult]:
+    """An 8 s relax hold at 5 N, 40 °C, uncalibrated, with lossless frames and the object
+    located (the closed chain reads from 5 s of the hold on): it replays bit for bit."""
+    path = tmp_path_factory.mktemp("png") / "relax.mcap"
+    with McapRecorder(path, rgb_format="png") as rec:
+        result = run_hold("relax", 5.0, 8.0, 40.0, 3, uncalibrated, recorder=rec,
+                          locate_object=True)
     return path, result
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -16,6 +17,7 @@ from relaxgrip.clock import VirtualClock
 from relaxgrip.control import GraspController, GraspPlan, make_estimator, run_loop
 from relaxgrip.experiments.controlled_hold import HoldResult
 from relaxgrip.learning.store import ModelBundle
+from relaxgrip.learning.training import default_models_dir
 from relaxgrip.recording import McapRecorder
 from tests.clitools import assert_one_error_line, run_main
 
@@ -96,6 +98,21 @@ def test_recording_without_ground_truth(relax_hold: tuple[Path, HoldResult], tmp
     code, out, err = run_main(["dataset", "from-recordings", blind, "--out", tmp_path / "d"],
                               monkeypatch, capsys)
     assert_one_error_line(code, out, err, "no force ground truth")
+
+
+def test_calibrating_on_a_recording_without_a_force_reference(
+        relax_hold: tuple[Path, HoldResult], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    good, _ = relax_hold
+    blind = tmp_path / "no-truth.mcap"
+    _without(good, blind, {"/relaxgrip/truth", "/relaxgrip/force_ref"})
+    directory = tmp_path / "models"
+    shutil.copytree(default_models_dir(), directory)
+    before = (directory / "manifest.json").read_bytes()
+    code, out, err = run_main(["calibrate-hold", directory, "--recordings", good,
+                               "--recordings", blind], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, f"{blind}: no force reference")
+    assert (directory / "manifest.json").read_bytes() == before
 
 
 def test_hold_record_refuses_compare(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,

@@ -12,7 +12,7 @@ import pytest
 
 from relaxgrip.clock import VirtualClock
 from relaxgrip.control import GraspController, GraspPlan, make_estimator, run_loop
-from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
+from relaxgrip.experiments.controlled_hold import HoldResult
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.recording import McapRecorder, iter_messages, replay
 from relaxgrip.twin import GripperTwin, TwinConfig
@@ -39,19 +39,16 @@ def test_png_replay_is_exact(tmp_path: Path, models: ModelBundle) -> None:
     assert m["marker_status_agreement"] == 1.0
 
 
-def test_png_replay_of_a_relax_hold_reads_where_the_ball_was_seen(tmp_path: Path,
-                                                                   models: ModelBundle) -> None:
+def test_png_replay_of_a_relax_hold_reads_where_the_ball_was_seen(
+        png_relax_hold: tuple[Path, HoldResult], uncalibrated: ModelBundle) -> None:
     """The hold onset's event tells replay where the object sat: the chain replays exactly."""
-    path = tmp_path / "relax.mcap"
-    with McapRecorder(path, rgb_format="png") as rec:
-        result = run_hold("relax", 5.0, 8.0, 40.0, 3, models, recorder=rec,
-                          locate_object=True)
+    path, result = png_relax_hold
     onsets = [m["detail"] for t, _, m in iter_messages(path)
               if t == "/relaxgrip/events" and m["kind"] == "hold_onset"]
     assert len(onsets) == 1
     assert "object at" in onsets[0]
     assert np.isfinite(result.loop["chain_n"]).sum() > 60  # the chain read for the last 3 s
-    m = replay(path, models).metrics()
+    m = replay(path, uncalibrated).metrics()
     assert m["estimate_compared"] > 200
     assert m["estimate_max_abs_diff_n"] == 0.0
 

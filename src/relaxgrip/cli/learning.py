@@ -300,22 +300,34 @@ def _calibrate_hold_command(models: str, targets: str, temps: str, seeds: str,
                        *(["--add"] if add else [])])
 
 
+#: The twin grid's options and their defaults; ``--recordings`` takes its grid from the plans.
+_TWIN_GRID = {"--targets": "1,2,3,4,5,6,7,8", "--temps": "30,35,40,45,50,55",
+              "--seeds": "1000-1005", "--duration-s": "280"}
+
+
 @app.command("calibrate-hold")
 def calibrate_hold_command(
     models: Annotated[Path, typer.Argument(
         help="Model directory (relaxgrip train); relax's calibrated error is written into its "
              "manifest.", show_default=False)],
-    targets: Annotated[str, typer.Option(
-        "--targets", help="Target forces of the grid (N), comma-separated.")
-    ] = "1,2,3,4,5,6,7,8",
-    temps: Annotated[str, typer.Option(
-        "--temps", help="Finger temperatures of the grid (°C), comma-separated.")
-    ] = "30,35,40,45,50,55",
-    seeds: Annotated[str, typer.Option(
+    targets: Annotated[str | None, typer.Option(
+        "--targets", help="Target forces of the grid (N), comma-separated. [default: "
+                          f"{_TWIN_GRID['--targets']}]", show_default=False)] = None,
+    temps: Annotated[str | None, typer.Option(
+        "--temps", help="Finger temperatures of the grid (°C), comma-separated. [default: "
+                        f"{_TWIN_GRID['--temps']}]", show_default=False)] = None,
+    seeds: Annotated[str | None, typer.Option(
         "--seeds", help="Twin seeds per condition: 1000-1007, 3,5,8 or a mix (take ones not "
-                        "used to check). Each run counts about once.")] = "1000-1005",
-    duration_s: Annotated[float, typer.Option(
-        "--duration-s", help="Hold length (s); the grid's times reach it.")] = 280.0,
+                        "used to check). Each run counts about once. [default: "
+                        f"{_TWIN_GRID['--seeds']}]", show_default=False)] = None,
+    duration_s: Annotated[float | None, typer.Option(
+        "--duration-s", help="Hold length (s); the grid's times reach it. [default: "
+                             f"{_TWIN_GRID['--duration-s']}]", show_default=False)] = None,
+    recordings: Annotated[list[Path] | None, typer.Option(
+        "--recordings", help="Measure on recorded holds instead of the twin: recordings "
+                             "(.mcap) or directories of them, relax or observer holds with a "
+                             "force reference, two or more per target and temperature; "
+                             "repeat the option for more.", show_default=False)] = None,
     jobs: Annotated[int, typer.Option("--jobs", help="Holds in parallel.")] = 2,
     add: Annotated[bool, typer.Option(
         "--add", help="Add these holds to the directory's calibration (more seeds at a "
@@ -324,14 +336,35 @@ def calibrate_hold_command(
         "--dry-run", help="Measure and report; do not rewrite the directory.")] = False,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """Measure relax's closed-loop error on a grid of holds; relax takes it off its estimate."""
+    """Measure relax's closed-loop error on a grid of holds; relax takes it off its estimate.
+
+    The holds run on the twin, or, with --recordings, are a lab's own recorded
+    holds of its gripper, replayed.
+    """
     from relaxgrip.experiments.controlled_hold import check_hold_duration_s
-    from relaxgrip.experiments.hold_calibration import calibrate_hold, calibration_record
+    from relaxgrip.experiments.hold_calibration import (
+        calibrate_hold,
+        calibration_record,
+        condition_name,
+    )
     from relaxgrip.fileio import check_writable
     from relaxgrip.learning.store import MANIFEST_NAME, load_models, set_hold_bias
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
     from relaxgrip.validate import check_jobs, parse_floats, parse_seeds
 
+    if recordings is not None:
+        given = [flag for flag, value in zip(_TWIN_GRID, (targets, temps, seeds, duration_s),
+                                             strict=True) if value is not None]
+        if given:
+            raise InputError(f"{given[0]} sets the twin's grid; with --recordings the grid is "
+                             "the recordings' targets and temperatures")
+        if add:
+            raise InputError("--add grows a calibration on the twin; with --recordings give "
+                             "every recording at once")
+    targets = _TWIN_GRID["--targets"] if targets is None else targets
+    temps = _TWIN_GRID["--temps"] if temps is None else temps
+    seeds = _TWIN_GRID["--seeds"] if seeds is None else seeds
+    duration_s = float(_TWIN_GRID["--duration-s"]) if duration_s is None else duration_s
     target_list = parse_floats(targets, "--targets")
     temp_list = parse_floats(temps, "--temps")
     seed_list = parse_seeds(seeds)
@@ -342,23 +375,38 @@ def calibrate_hold_command(
     earlier = calibration_record(bundle.manifest) if add else None
     if not dry_run:
         check_writable(models / MANIFEST_NAME, InputError)
-    count = len(target_list) * len(temp_list) * len(seed_list)  # parse_floats: no repeats
     start = time.perf_counter()
-    with (console.status(f"{count} closed-loop holds …") if not json_out else nullcontext()):
-        result = calibrate_hold(target_list, temp_list, seed_list, duration_s, bundle, jobs,
-                                add_to=earlier)
-    # How to measure it again: every command whose holds it holds, in order.
-    command = _calibrate_hold_command(str(models), targets, temps, seeds, duration_s, add)
-    earlier_commands: list[str] = []
-    if earlier is not None:
-        stored = earlier.get("commands")
-        earlier_commands = ([c for c in stored if isinstance(c, str)] if isinstance(stored, list)
-                            else [_calibrate_hold_command(  # a record from before the list
-                                str(models), ",".join(f"{v:g}" for v in earlier["targets_n"]),
-                                ",".join(f"{v:g}" for v in earlier["temps_c"]),
-                                ",".join(str(v) for v in earlier.get("seeds", [])),
-                                float(earlier["duration_s"]), False)])
-    record = {**result.record(), "commands": [*earlier_commands, command]}
+    if recordings is not None:
+        from relaxgrip.experiments.recorded_calibration import calibration_from_recordings
+        from relaxgrip.recording import require_mcap
+
+        require_mcap()
+        with (console.status("replaying the recorded holds …") if not json_out
+              else nullcontext()):
+            result = calibration_from_recordings(recordings, bundle, jobs)
+        count = sum(map(len, result.holds.values()))
+        command = shlex.join(["relaxgrip", "calibrate-hold", str(models),
+                              *(arg for path in recordings for arg in ("--recordings", str(path)))])
+        record = {**result.record(), "commands": [command]}
+    else:
+        count = len(target_list) * len(temp_list) * len(seed_list)  # parse_floats: no repeats
+        with (console.status(f"{count} closed-loop holds …") if not json_out
+              else nullcontext()):
+            result = calibrate_hold(target_list, temp_list, seed_list, duration_s, bundle, jobs,
+                                    add_to=earlier)
+        # How to measure it again: every command whose holds it holds, in order.
+        command = _calibrate_hold_command(str(models), targets, temps, seeds, duration_s, add)
+        earlier_commands: list[str] = []
+        if earlier is not None:
+            stored = earlier.get("commands")
+            earlier_commands = (
+                [c for c in stored if isinstance(c, str)] if isinstance(stored, list)
+                else [_calibrate_hold_command(  # a record from before the list
+                    str(models), ",".join(f"{v:g}" for v in earlier["targets_n"]),
+                    ",".join(f"{v:g}" for v in earlier["temps_c"]),
+                    ",".join(str(v) for v in earlier.get("seeds", [])),
+                    float(earlier["duration_s"]), False)])
+        record = {**result.record(), "commands": [*earlier_commands, command]}
     if not dry_run:
         set_hold_bias(models, result.bias, record, measured_on=bundle.manifest)
     if json_out:
@@ -366,12 +414,12 @@ def calibrate_hold_command(
                    **record})
         return
     table = Table(title="relax, estimate − true force over the steady state, uncalibrated")
-    for column in ("target (N)", "temperature (°C)", "seeds", "mean (N)", "SE (N)", "MAE (N)"):
+    for column in ("target (N)", "temperature (°C)", "holds", "mean (N)", "SE (N)", "MAE (N)"):
         table.add_column(column, justify="right")
     summary = result.summary()
     for target in result.targets_n:
         for temp in result.temps_c:
-            name = f"{target:g}N {temp:g}C"
+            name = condition_name(target, temp)
             row = summary[name]
             table.add_row(f"{target:g}", f"{temp:g}", str(len(result.holds[name])),
                           f"{row['est_error_mean_n']:+.3f}", f"{row['se_n']:.3f}",
@@ -379,4 +427,5 @@ def calibrate_hold_command(
     console.print(table)
     verb = "measured (not written)" if dry_run else f"written to {models}"
     added = f" added to {sum(map(len, result.holds.values())) - count}" if add else ""
-    console.print(f"{count} holds{added}, {verb}, {time.perf_counter() - start:.0f} s")
+    kind = f"recorded holds of {result.duration_s:g} s" if recordings is not None else "holds"
+    console.print(f"{count} {kind}{added}, {verb}, {time.perf_counter() - start:.0f} s")

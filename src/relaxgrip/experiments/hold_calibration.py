@@ -38,6 +38,7 @@ from relaxgrip.experiments.controlled_hold import (
     check_hold_temp_c,
     map_holds,
     run_hold,
+    steady_window_s,
 )
 from relaxgrip.learning.hold_bias import HoldBias
 from relaxgrip.learning.store import HOLD_BIAS_KEY, ModelBundle, model_checksums
@@ -47,9 +48,9 @@ from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TARGETS_N", "DEFAULT_TEMPS_C", "MIN_BIN_S", "MIN_SE_N",
-           "TIME_EDGES_S",
+           "RECORDINGS_SOURCE", "TIME_EDGES_S",
            "HoldCalibration", "calibrate_hold", "calibration_from_holds", "calibration_record",
-           "smooth_bias",
+           "condition_name", "hold_row", "smooth_bias",
            "time_bins"]
 
 FloatArray = NDArray[np.float64]
@@ -61,6 +62,8 @@ DEFAULT_TARGETS_N = (1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0)
 DEFAULT_TEMPS_C = (30.0, 35.0, 40.0, 45.0, 50.0, 55.0)
 #: Seeds the shipped figures are not measured on (those use 0-47).
 DEFAULT_SEEDS = tuple(range(1000, 1006))
+#: What a calibration measured on recordings carries where one on the twin has its version.
+RECORDINGS_SOURCE = "recordings"
 #: Edges of the time bins since the onset (s); each bin's mean error sits at its centre
 #: on ``log(1 + t)``.  The early bins are short: the error settles over the first 30 s.
 TIME_EDGES_S = (0.0, 1.0, 3.0, 10.0, 30.0, 100.0, 190.0, 280.0)
@@ -102,26 +105,70 @@ class _TemperatureTap:
                 self.temps_c.append(value)
 
 
+def hold_row(t_s: FloatArray, estimate_n: FloatArray, chain_n: FloatArray, truth_n: FloatArray,
+             f_onset_n: FloatArray, temps_c: Sequence[float], target_n: float,
+             duration_s: float) -> dict[str, Any]:
+    """One uncalibrated hold as a calibration stores it, from its series since the onset.
+
+    Parameters
+    ----------
+    t_s : ndarray
+        Time since the hold's onset of each period (s); periods past
+        ``duration_s`` are left out.
+    estimate_n, chain_n : ndarray
+        The uncalibrated estimate, and what the closed chain added to it (0
+        where nothing): the table corrects Eq. 10, and the chain's reading is
+        blended into the corrected estimate after it, so what it added is not
+        Eq. 10's error.
+    truth_n : ndarray
+        The true force (N; nan where there is no reference).
+    f_onset_n : ndarray
+        The estimator's ``F_inst`` (nan before it has one).
+    temps_c : sequence of float
+        The finger temperature the estimator read through the hold.
+
+    Returns
+    -------
+    dict
+        The mean of estimate − truth per time bin (``bins_n``), the last
+        ``F_inst`` and the mean temperature as read, and over the steady state
+        the MAE of the truth from the target and the mean estimate error.
+
+    Raises
+    ------
+    InputError
+        No true force over the steady state.
+    """
+    keep = (t_s >= 0.0) & (t_s <= duration_s + 1e-9)
+    t, est, truth = t_s[keep], estimate_n[keep], truth_n[keep]
+    err = est - chain_n[keep] - truth
+    bins = []
+    for lo, hi in time_bins(duration_s):
+        rows = (t >= lo) & (t <= hi) & np.isfinite(err)
+        bins.append(float(np.mean(err[rows])) if rows.any() else math.nan)
+    lo, hi = steady_window_s(duration_s)
+    window = (t >= lo - 1e-9) & (t <= hi + 1e-9) & np.isfinite(truth)
+    if not window.any():
+        raise InputError(f"no true force over the hold's steady state ({lo:.4g}-{hi:.4g} s "
+                         "after the onset)")
+    est_err = est[window] - truth[window]
+    est_err = est_err[np.isfinite(est_err)]
+    onset = f_onset_n[keep]
+    onset = onset[np.isfinite(onset)]
+    return {"bins_n": bins, "f_inst_n": float(onset[-1]) if onset.size else math.nan,
+            "temp_c": float(np.mean(temps_c)) if len(temps_c) else math.nan,
+            "mae_n": float(np.mean(np.abs(truth[window] - target_n))),
+            "est_error_mean_n": float(np.mean(est_err)) if est_err.size else math.nan}
+
+
 def _one(args: tuple[float, float, int, float, ModelBundle]) -> dict[str, Any]:
     """One uncalibrated hold: its error per time bin and what the estimator read."""
     target_n, temp_c, seed, duration_s, models = args
     tap = _TemperatureTap()
     hold = run_hold("relax", target_n, duration_s, temp_c, seed, models, recorder=tap)
-    # The table corrects Eq. 10, and the closed chain's reading is blended into the
-    # corrected estimate after it: what it added is not Eq. 10's error.
-    chain = np.nan_to_num(hold.series("chain_n"))
-    err = hold.estimate_n - chain - hold.truth_n
-    bins = []
-    for lo, hi in time_bins(duration_s):
-        rows = (hold.t_s >= lo) & (hold.t_s <= hi) & np.isfinite(err)
-        bins.append(float(np.mean(err[rows])) if rows.any() else math.nan)
-    onset = hold.series("f_onset_n")
-    onset = onset[np.isfinite(onset)]
-    metrics = hold.metrics()
-    return {"seed": seed, "bins_n": bins,
-            "f_inst_n": float(onset[-1]) if onset.size else math.nan,
-            "temp_c": float(np.mean(tap.temps_c)) if tap.temps_c else math.nan,
-            "mae_n": metrics["mae_n"], "est_error_mean_n": metrics["est_error_mean_n"]}
+    row = hold_row(hold.t_s, hold.estimate_n, np.nan_to_num(hold.series("chain_n")),
+                   hold.truth_n, hold.series("f_onset_n"), tap.temps_c, target_n, duration_s)
+    return {"seed": seed, **row}
 
 
 @dataclass(frozen=True)
@@ -145,6 +192,8 @@ class HoldCalibration:
     kernels : list of str
         Per time bin, the Gaussian process :func:`smooth_bias` fitted.
     twin_version : str
+        The twin the holds ran on, or :data:`RECORDINGS_SOURCE` for recorded
+        holds (:mod:`relaxgrip.experiments.recorded_calibration`).
     """
 
     bias: HoldBias
@@ -168,8 +217,10 @@ class HoldCalibration:
 
     def record(self) -> dict[str, Any]:
         """The manifest's record beside the grid (JSON: a figure there is none of is null)."""
+        holds = ("recorded holds replayed with relax uncalibrated"
+                 if self.twin_version == RECORDINGS_SOURCE else "uncalibrated relax holds")
         return json_safe({
-            "method": "mean of estimate - true force of uncalibrated relax holds per target, "
+            "method": f"mean of estimate - true force of {holds} per target, "
                       "temperature and time bin, smoothed over force and temperature by "
                       "Gaussian-process regression with each mean's standard error as its "
                       "noise (relaxgrip calibrate-hold)",
@@ -239,7 +290,8 @@ def smooth_bias(points: FloatArray, means: FloatArray, ses: FloatArray, at_force
     return values, str(gp.kernel_)
 
 
-def _condition(target_n: float, temp_c: float) -> str:
+def condition_name(target_n: float, temp_c: float) -> str:
+    """A condition of the grid as the record names it: ``"5N 40C"``."""
     return f"{target_n:g}N {temp_c:g}C"
 
 
@@ -305,8 +357,8 @@ def calibrate_hold(targets_n: Sequence[float] = DEFAULT_TARGETS_N,
         holds = _holds_to_add_to(add_to, new_targets, new_temps, seeds, duration_s)
         targets = _axis([*new_targets, *add_to["targets_n"]], "target")
         temps = _axis([*new_temps, *add_to["temps_c"]], "temperature")
-        new = {_condition(f, t) for f in new_targets for t in new_temps}
-        missing = [name for name in (_condition(f, t) for f in targets for t in temps)
+        new = {condition_name(f, t) for f in new_targets for t in new_temps}
+        missing = [name for name in (condition_name(f, t) for f in targets for t in temps)
                    if name not in new and name not in holds]
         if missing:
             raise InputError(f"with these holds the grid would lack the condition {missing[0]}:"
@@ -320,7 +372,7 @@ def calibrate_hold(targets_n: Sequence[float] = DEFAULT_TARGETS_N,
             for target in new_targets for temp in new_temps for seed in seeds]
     results = map_holds(_one, jobs, n_jobs)
     for (target, temp, *_), row in zip(jobs, results, strict=True):
-        holds.setdefault(_condition(target, temp), []).append(row)
+        holds.setdefault(condition_name(target, temp), []).append(row)
     every = sorted({int(r["seed"]) for rows in holds.values() for r in rows})
     return calibration_from_holds(targets, temps, every, duration_s, holds)
 
@@ -391,7 +443,7 @@ def _holds_to_add_to(record: Mapping[str, Any], targets: list[float], temps: lis
         name: [_stored(r) for r in rows] for name, rows in record["holds"].items()}
     for target in targets:
         for temp in temps:
-            name = _condition(target, temp)
+            name = condition_name(target, temp)
             there = sorted({int(r["seed"]) for r in holds.get(name, [])} & set(map(int, seeds)))
             if there:
                 raise InputError(f"the condition {name} already has seed {there[0]}: add "
@@ -413,8 +465,8 @@ def calibration_from_holds(targets: list[float], temps: list[float], seeds: list
     """
     for target in targets:
         for temp in temps:
-            if len(holds.get(_condition(target, temp), [])) < 2:
-                raise InputError(f"the condition {_condition(target, temp)} needs holds on "
+            if len(holds.get(condition_name(target, temp), [])) < 2:
+                raise InputError(f"the condition {condition_name(target, temp)} needs holds on "
                                  "at least two seeds")
     bins = time_bins(duration_s)
     shape = (len(targets), len(temps))
@@ -422,7 +474,7 @@ def calibration_from_holds(targets: list[float], temps: list[float], seeds: list
     f_inst, read_c = np.empty(shape), np.empty(shape)
     for i, target in enumerate(targets):
         for j, temp in enumerate(temps):
-            name = _condition(target, temp)
+            name = condition_name(target, temp)
             errors = np.array([r["bins_n"] for r in holds[name]], dtype=np.float64)
             counts = np.isfinite(errors).sum(axis=0)
             if counts.min() < 2:

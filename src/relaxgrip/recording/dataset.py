@@ -69,7 +69,8 @@ from relaxgrip.recording.reader import malformed_fields, read_replayable_session
 from relaxgrip.recording.replay import replay_periods
 from relaxgrip.validate import check_positive
 
-__all__ = ["FIXED_APERTURE_TOL_MM", "MIN_HOLD_S", "dataset_from_recordings"]
+__all__ = ["FIXED_APERTURE_TOL_MM", "MIN_HOLD_S", "dataset_from_recordings", "recording_files",
+           "truth_force_n"]
 
 #: A hold counts as fixed-aperture if the encoder stays this close to its onset value (mm).
 FIXED_APERTURE_TOL_MM = 0.01
@@ -83,7 +84,30 @@ _SEQ_COLUMNS = (
 )
 
 
-def _truth_force(period_messages: dict[str, dict[str, Any]]) -> float:
+def recording_files(paths: Sequence[Path | str]) -> list[Path]:
+    """The recordings ``paths`` name, each once: a directory stands for the ``*.mcap`` in it.
+
+    Raises
+    ------
+    InputError
+        No recordings, or a directory without any.
+    """
+    files: list[Path] = []
+    seen: set[Path] = set()
+    for p in map(Path, paths):
+        found = sorted(p.glob("*.mcap")) if p.is_dir() else [p]
+        if p.is_dir() and not found:
+            raise InputError(f"{p}: no .mcap recordings in this directory")
+        for f in found:
+            if f.resolve() not in seen:
+                seen.add(f.resolve())
+                files.append(f)
+    if not files:
+        raise InputError("no recordings given")
+    return files
+
+
+def truth_force_n(period_messages: dict[str, dict[str, Any]]) -> float:
     """True force of a period: the twin's truth, else the force sensor's last reading."""
     truth = period_messages.get("/relaxgrip/truth")
     if truth is not None:
@@ -133,7 +157,7 @@ def _one(index: int, path: Path, split: str, models: ModelBundle, icfn_every_s: 
     for period, percept, _ in replay_periods(path, models, estimator="icfn"):
         obs = period.messages["/relaxgrip/observation"]
         motor = float(obs["motor_position_mm"])
-        force = _truth_force(period.messages)
+        force = truth_force_n(period.messages)
         truth = period.get("/relaxgrip/truth")
         phase = period.messages["/relaxgrip/phase"]["phase"]
         t = period.t_s
@@ -279,18 +303,7 @@ def dataset_from_recordings(
         No recordings, an unreadable one, one without frames or ground truth,
         or no ICFN sample at all.
     """
-    files: list[Path] = []
-    seen: set[Path] = set()
-    for p in map(Path, paths):
-        found = sorted(p.glob("*.mcap")) if p.is_dir() else [p]
-        if p.is_dir() and not found:
-            raise InputError(f"{p}: no .mcap recordings in this directory")
-        for f in found:  # one recording named twice would sit in two splits
-            if f.resolve() not in seen:
-                seen.add(f.resolve())
-                files.append(f)
-    if not files:
-        raise InputError("no recordings given")
+    files = recording_files(paths)  # one recording named twice would sit in two splits
     out = Path(out_dir).resolve()
     for f in files:
         if f.resolve() == out or out in f.resolve().parents:

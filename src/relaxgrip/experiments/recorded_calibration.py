@@ -1,0 +1,241 @@
+"""Calibrating ``relax``'s closed-loop error on recorded holds (``calibrate-hold --recordings``).
+
+:func:`~relaxgrip.experiments.hold_calibration.calibrate_hold` measures the
+error on the twin, which is right for the twin and for the models trained on
+its data.  A lab's own gripper, with its own models, has its own error: this
+measures it on the lab's recordings of regulated holds (``relax`` or
+``observer``) with a force reference (the twin's truth, or a force sensor's
+``/relaxgrip/force_ref`` channel).  Each recording's frames are perceived
+again and ``relax`` is replayed on them uncalibrated
+(:func:`~relaxgrip.recording.replay.replay_periods`); its estimate against
+the reference gives the hold's error per time bin, exactly as a hold run on
+the twin does.  Each recording is one hold of the grid: its target and
+temperature are the recorded plan's, and every target needs holds at every
+temperature, at least two of each.
+
+The recorded controller acted on its own estimate, which may have been
+calibrated: the replayed hold follows the recorded closure, not the one an
+uncalibrated controller would have made.  The two differ by the calibration
+(about 0.1 N of force), a second-order change of the estimate's error.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from relaxgrip.errors import InputError
+from relaxgrip.experiments.controlled_hold import map_holds
+from relaxgrip.experiments.hold_calibration import (
+    MIN_BIN_S,
+    RECORDINGS_SOURCE,
+    HoldCalibration,
+    calibration_from_holds,
+    condition_name,
+    hold_row,
+)
+from relaxgrip.learning.store import ModelBundle
+from relaxgrip.perception.features import finger_temperature_c
+from relaxgrip.recording.dataset import recording_files, truth_force_n
+from relaxgrip.recording.reader import malformed_fields, read_replayable_session
+from relaxgrip.recording.replay import replay_periods
+
+__all__ = ["RecordedHold", "calibration_from_recordings", "recorded_hold", "recorded_plan"]
+
+FloatArray = NDArray[np.float64]
+
+#: Estimators whose recordings are regulated holds ``relax`` can be calibrated on.
+REGULATED = ("relax", "observer")
+
+
+@dataclass(frozen=True)
+class RecordedHold:
+    """One recording's hold, replayed with ``relax`` uncalibrated.
+
+    Attributes
+    ----------
+    path : Path
+    target_n, temp_c : float
+        The recorded plan's target (N) and finger temperature (°C).
+    length_s : float
+        How long the hold was to last: the plan's ``hold_s``, or where the
+        recording's hold ended when the plan held until released.
+    t_s : ndarray
+        Time since the hold's onset of each period from the onset on (s).
+    estimate_n : ndarray
+        The replayed, uncalibrated estimate (N).
+    chain_n : ndarray
+        What the closed chain added to it (N, 0 where nothing): the
+        calibration corrects Eq. 10, and the chain is blended in after it.
+    truth_n : ndarray
+        The force reference (N; nan in a period without one).
+    f_onset_n : ndarray
+        The estimator's ``F_inst`` (N; nan before it has one).
+    temps_c : list of float
+        The finger temperature the estimator read, each period of the hold
+        with an infrared percept.
+    """
+
+    path: Path
+    target_n: float
+    temp_c: float
+    length_s: float
+    t_s: FloatArray
+    estimate_n: FloatArray
+    chain_n: FloatArray
+    truth_n: FloatArray
+    f_onset_n: FloatArray
+    temps_c: list[float]
+
+    def row(self, duration_s: float) -> dict[str, Any]:
+        """The hold as a calibration stores it (:func:`hold_row`), over ``duration_s``.
+
+        Raises
+        ------
+        InputError
+            No force reference over the hold's steady state.
+        """
+        try:
+            row = hold_row(self.t_s, self.estimate_n, self.chain_n, self.truth_n,
+                           self.f_onset_n, self.temps_c, self.target_n, duration_s)
+        except InputError as exc:
+            raise InputError(f"{self.path}: {exc}") from None
+        return {**row, "recording": self.path.name}
+
+
+def recorded_plan(path: Path) -> tuple[float, float, float]:
+    """A recording's hold as planned, from its session message alone: target (N),
+    finger temperature (°C) and length (s; inf: held until released).
+
+    Raises
+    ------
+    InputError
+        Not a replayable recording; one of another estimator than ``relax``
+        or ``observer``; a plan without a finger temperature.
+    """
+    session = read_replayable_session(path)
+    estimator = session.get("estimator")
+    if estimator not in REGULATED:
+        raise InputError(f"{path}: a {estimator} hold; calibrating relax takes holds regulated "
+                         f"by {' or '.join(REGULATED)}")
+    plan = session.get("plan")
+    with malformed_fields(path):
+        if not isinstance(plan, dict):
+            raise TypeError(f"the session's plan is {type(plan).__name__}, not an object")
+        target_n, temp_c, hold_s = (float(plan["target_n"]), plan["temp_c"],
+                                    float(plan["hold_s"]))
+        if temp_c is None:
+            raise InputError(f"{path}: the hold's plan gives a stiffness mode, not a "
+                             "temperature; calibrating takes holds at a set temperature")
+        return target_n, float(temp_c), hold_s
+
+
+def recorded_hold(path: Path, models: ModelBundle) -> RecordedHold:
+    """Replay one recording's hold with ``models``' ``relax``, uncalibrated.
+
+    Raises
+    ------
+    InputError
+        As :func:`recorded_plan`; no hold in the recording, or more than one;
+        a hold that ended before its plan's length; no force reference in it.
+    """
+    target_n, temp_c, hold_s = recorded_plan(path)
+    bundle = replace(models, hold_bias=None)
+    onset_s = end_s = math.nan
+    onsets = 0
+    rows: list[tuple[float, float, float, float, float]] = []
+    temps: list[float] = []
+    with malformed_fields(path):
+        for period, percept, estimate in replay_periods(path, bundle, estimator="relax"):
+            for event in period.events:
+                if event["kind"] == "hold_onset":
+                    onsets += 1
+                    onset_s = float(event["t_s"])
+                elif event["kind"] == "phase" and event["detail"] == "release":
+                    end_s = float(event["t_s"])
+            if onsets == 0:
+                continue
+            rows.append((period.t_s - onset_s, estimate.force_n,
+                         estimate.chain_n if math.isfinite(estimate.chain_n) else 0.0,
+                         truth_force_n(period.messages), estimate.f_onset_n))
+            if math.isfinite(estimate.hold_s) and percept.thermal is not None:
+                value = finger_temperature_c(percept.thermal)
+                if math.isfinite(value):
+                    temps.append(value)
+    if onsets != 1:
+        raise InputError(f"{path}: {onsets} holds in the recording; calibrating takes one hold "
+                         "per recording" if onsets else f"{path}: the recording has no hold")
+    cols = np.array(rows, dtype=np.float64).reshape(-1, 5)
+    after = cols[:, 0] >= 0.0
+    cols = cols[after]
+    reached = float(cols[-1, 0]) if cols.size else 0.0
+    length = hold_s if math.isfinite(hold_s) else (
+        end_s - onset_s if math.isfinite(end_s) else reached)
+    if reached < length - MIN_BIN_S:
+        raise InputError(f"{path}: the hold was recorded for {reached:.1f} s of its "
+                         f"{length:.4g} s")
+    if not np.isfinite(cols[:, 3]).any():
+        raise InputError(f"{path}: no force reference (the twin's truth or a force sensor's "
+                         "/relaxgrip/force_ref) in the hold")
+    t, force, chain, truth, f_onset = cols.T
+    return RecordedHold(path, target_n, temp_c, float(length), t, force, chain, truth,
+                        f_onset, temps)
+
+
+def _replayed(args: tuple[Path, ModelBundle]) -> RecordedHold:
+    return recorded_hold(*args)
+
+
+def calibration_from_recordings(paths: Sequence[Path | str], models: ModelBundle,
+                                n_jobs: int = 1) -> HoldCalibration:
+    """``relax``'s closed-loop error measured on recorded holds (see the module).
+
+    Parameters
+    ----------
+    paths : sequence of Path
+        Recordings (``.mcap``; a directory stands for the ``*.mcap`` in it),
+        one regulated hold each.
+    models : ModelBundle
+        The models to calibrate; any calibration they carry is not used.
+    n_jobs : int
+        Recordings replayed in parallel.
+
+    Returns
+    -------
+    HoldCalibration
+        Over the grid of the recordings' targets and temperatures, every hold
+        cut at the shortest one's length; each hold's ``seed`` is its place in
+        the recordings' order and ``recording`` its file name.
+
+    Raises
+    ------
+    InputError
+        As :func:`recorded_hold` for any recording, and a grid with a target
+        lacking a temperature or a condition with fewer than two recordings.
+    """
+    files = recording_files(paths)
+    plans = [recorded_plan(path) for path in files]  # the grid checked before any replay
+    targets = sorted({target for target, _, _ in plans})
+    temps = sorted({temp for _, temp, _ in plans})
+    for target in targets:
+        for temp in temps:
+            count = sum((t, c) == (target, temp) for t, c, _ in plans)
+            if count < 2:
+                raise InputError(
+                    f"the recordings hold {target:g} N at {temp:g} °C {count} time(s): every "
+                    "target of the grid needs holds at every temperature, two or more each")
+    holds = map_holds(_replayed, [(path, models) for path in files], n_jobs)
+    duration = min(h.length_s for h in holds)
+    by_condition: dict[str, list[dict[str, Any]]] = {}
+    for seed, hold in enumerate(holds):
+        name = condition_name(hold.target_n, hold.temp_c)
+        by_condition.setdefault(name, []).append({"seed": seed, **hold.row(duration)})
+    result = calibration_from_holds(targets, temps, list(range(len(holds))), duration,
+                                    by_condition)
+    return replace(result, twin_version=RECORDINGS_SOURCE)
