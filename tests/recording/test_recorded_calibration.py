@@ -1,4 +1,4 @@
-"""``calibrate-hold --recordings``: relax's closed-loop error measured on recorded holds."""
+"""``calibrate-hold`` and ``calibrate-band --recordings``: calibrations on recorded holds."""
 
 from __future__ import annotations
 
@@ -9,9 +9,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from relaxgrip.experiments.band_calibration import calibrate_band
 from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
 from relaxgrip.experiments.hold_calibration import RECORDINGS_SOURCE, hold_row
-from relaxgrip.experiments.recorded_calibration import calibration_from_recordings, recorded_hold
+from relaxgrip.experiments.recorded_calibration import (
+    calibrate_band_on_recordings,
+    calibration_from_recordings,
+    recorded_hold,
+)
+from relaxgrip.learning.observer import (
+    ObserverModel,
+    default_observer_dir,
+    load_default_observer,
+    load_observer,
+)
 from relaxgrip.learning.store import MANIFEST_NAME, ModelBundle, load_models
 from relaxgrip.learning.training import default_models_dir
 from relaxgrip.recording import McapRecorder
@@ -108,9 +119,9 @@ def test_cli_writes_the_recorded_calibration(relax_hold: tuple[Path, HoldResult]
 
 @pytest.mark.parametrize(("args", "expected"), [
     (["--recordings", "{relax}", "--recordings", "{second}", "--targets", "5"],
-     "--targets sets the twin's grid"),
+     "--targets sets the twin's holds"),
     (["--recordings", "{relax}", "--recordings", "{second}", "--duration-s", "6"],
-     "--duration-s sets the twin's grid"),
+     "--duration-s sets the twin's holds"),
     (["--recordings", "{relax}", "--recordings", "{second}", "--add"], "--add grows"),
     (["--recordings", "{relax}"], "hold 5 N at 40 °C 1 time(s)"),
     (["--recordings", "{relax}", "--recordings", "{second}", "--recordings", "{fixed}"],
@@ -128,3 +139,60 @@ def test_cli_refuses_what_cannot_calibrate(args: list[str], expected: str,
     filled = [a.format(**paths) for a in args]
     assert_refused_unchanged(["calibrate-hold", "{dir}", *filled], expected,
                              default_models_dir(), tmp_path, monkeypatch, capsys)
+
+
+@pytest.fixture(scope="module")
+def png_observer_hold(tmp_path_factory: pytest.TempPathFactory, models: ModelBundle,
+                      observer: ObserverModel) -> tuple[Path, HoldResult]:
+    """An 8 s observer hold at 5 N, 40 °C (the standard scenario) with lossless frames."""
+    path = tmp_path_factory.mktemp("observer") / "observer.mcap"
+    with McapRecorder(path, rgb_format="png") as rec:
+        result = run_hold("observer", 5.0, 8.0, 40.0, 3, models, recorder=rec,
+                          observer=observer)
+    return path, result
+
+
+@pytest.fixture(scope="module")
+def observer() -> ObserverModel:
+    return load_default_observer()
+
+
+def test_the_band_calibrated_on_a_recording_is_the_twins(
+        png_observer_hold: tuple[Path, HoldResult], models: ModelBundle,
+        observer: ObserverModel) -> None:
+    """The observer replayed on lossless frames: the band's samples, scales and report are
+    those of the same hold on the twin."""
+    path, _ = png_observer_hold
+    recorded = calibrate_band_on_recordings(observer, [path], models)
+    twin = calibrate_band(observer, [3], ["standard"], 8.0, models)
+    assert recorded.samples == twin.samples > 200
+    assert (recorded.band_scale, recorded.drift_scale) == (twin.band_scale, twin.drift_scale)
+    assert recorded.band_scale != observer.band_scale
+    row = recorded.scenarios["recorded"]["seeds"]["0"]
+    assert row == {"recording": path.name, **twin.scenarios["standard"]["seeds"]["3"]}
+    assert recorded.scenarios["recorded"]["source"] == RECORDINGS_SOURCE
+    assert "recorded holds replayed" in recorded.record()["method"]
+
+
+def test_cli_calibrates_the_band_on_recordings(png_observer_hold: tuple[Path, HoldResult],
+                                               relax_hold: tuple[Path, HoldResult],
+                                               tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    directory = tmp_path / "observer"
+    shutil.copytree(default_observer_dir(), directory)
+    args: list[str | Path] = ["calibrate-band", directory, "--recordings", png_observer_hold[0],
+                              "--recordings", relax_hold[0], "--jobs", "1"]
+    code, out, err = run_main([*args, "--json"], monkeypatch, capsys)
+    assert code == 0, err
+    record = json.loads(out)
+    assert record["written"] is True
+    assert [row["recording"] for row in record["scenarios"]["recorded"]["seeds"].values()] == [
+        "observer.mcap", "relax.mcap"]
+    assert load_observer(directory).band_scale == record["band_scale"]
+    before = (directory / MANIFEST_NAME).read_bytes()
+    for extra, expected in ((["--seeds", "3"], "--seeds sets the twin's holds"),
+                            (["--scenarios", "ramp"], "--scenarios sets the twin's holds")):
+        code, out, err = run_main([*args, *extra], monkeypatch, capsys)
+        assert code == 2
+        assert expected in err
+    assert (directory / MANIFEST_NAME).read_bytes() == before

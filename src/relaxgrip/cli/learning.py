@@ -212,23 +212,42 @@ def fit_observer_command(
                   f"{time.perf_counter() - start:.0f} s")
 
 
+#: The twin's band holds: options and defaults; ``--recordings`` takes recorded holds instead.
+_TWIN_BAND = {"--seeds": "3000-3035", "--scenarios": "standard,ramp,step", "--duration-s": "280"}
+
+
+def _refuse_twin_options(options: dict[str, str], given: tuple[object, ...]) -> None:
+    """With ``--recordings``, an option that sets the twin's holds (``given`` in the order of
+    ``options``) is refused rather than ignored."""
+    for flag, value in zip(options, given, strict=True):
+        if value is not None:
+            raise InputError(f"{flag} sets the twin's holds; with --recordings the holds are "
+                             "the recordings'")
+
+
 @app.command("calibrate-band")
 def calibrate_band_command(
     observer: Annotated[Path, typer.Argument(
         help="Observer directory (relaxgrip fit-observer); its band's scales are rewritten.",
         show_default=False)],
-    seeds: Annotated[str, typer.Option(
+    seeds: Annotated[str | None, typer.Option(
         "--seeds", help="Twin seeds: 3000-3035, 3,5,8 or a mix (take ones not used to check "
                         "or to design with; the shipped band: 3000-3035). "
                         "Each run counts about once: 12 seeds leave the scale about ±20 % "
-                        "unsure, 36 about ±13 % (the reported interval).")
-    ] = "3000-3035",
-    scenarios: Annotated[str, typer.Option(
+                        "unsure, 36 about ±13 % (the reported interval). [default: "
+                        f"{_TWIN_BAND['--seeds']}]", show_default=False)] = None,
+    scenarios: Annotated[str | None, typer.Option(
         "--scenarios", help="Comma-separated: standard, ramp (40 -> 55 °C from 150 s), "
-                            "step (5 -> 3 N at 150 s), push (2 N from 200 s).")
-    ] = "standard,ramp,step",
-    duration_s: Annotated[float, typer.Option(
-        "--duration-s", help="Hold length (s); profile times scale with it.")] = 280.0,
+                            "step (5 -> 3 N at 150 s), push (2 N from 200 s). [default: "
+                            f"{_TWIN_BAND['--scenarios']}]", show_default=False)] = None,
+    duration_s: Annotated[float | None, typer.Option(
+        "--duration-s", help="Hold length (s); profile times scale with it. [default: "
+                             f"{_TWIN_BAND['--duration-s']}]", show_default=False)] = None,
+    recordings: Annotated[list[Path] | None, typer.Option(
+        "--recordings", help="Calibrate on recorded holds instead of the twin: recordings "
+                             "(.mcap) or directories of them, relax or observer holds with a "
+                             "force reference; repeat the option for more.",
+        show_default=False)] = None,
     models: Annotated[Path | None, typer.Option(
         "--models", help="ICFN/RCFN directory (default: the shipped models).",
         show_default=False)] = None,
@@ -237,7 +256,11 @@ def calibrate_band_command(
         "--dry-run", help="Measure and report; do not rewrite the directory.")] = False,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """Recalibrate the observer's 95 % band on closed-loop holds, so it covers what it states."""
+    """Recalibrate the observer's 95 % band on closed-loop holds, so it covers what it states.
+
+    The holds run on the twin, or, with --recordings, are a lab's own recorded
+    holds of its gripper, replayed.
+    """
     from relaxgrip.experiments.band_calibration import calibrate_band
     from relaxgrip.experiments.controlled_hold import check_hold_duration_s
     from relaxgrip.learning.observer import load_observer, set_band_scale
@@ -245,17 +268,32 @@ def calibrate_band_command(
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
     from relaxgrip.validate import check_jobs, parse_names, parse_seeds
 
-    seed_list = parse_seeds(seeds)
-    names = parse_names(scenarios, "--scenarios")
+    if recordings is not None:
+        _refuse_twin_options(_TWIN_BAND, (seeds, scenarios, duration_s))
+    seed_list = parse_seeds(_TWIN_BAND["--seeds"] if seeds is None else seeds)
+    names = parse_names(_TWIN_BAND["--scenarios"] if scenarios is None else scenarios,
+                        "--scenarios")
+    duration_s = float(_TWIN_BAND["--duration-s"]) if duration_s is None else duration_s
     check_hold_duration_s(duration_s, "--duration-s")
     check_jobs(jobs)
     model = load_observer(observer)
     bundle = None if models is None else load_models(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
     start = time.perf_counter()
-    with (console.status(f"{len(names) * len(seed_list)} closed-loop holds …")
-          if not json_out else nullcontext()):
-        result = calibrate_band(model, seed_list, names, duration_s, bundle, jobs)
+    if recordings is not None:
+        from relaxgrip.experiments.recorded_calibration import calibrate_band_on_recordings
+        from relaxgrip.learning.training import load_default_models
+        from relaxgrip.recording import require_mcap
+
+        require_mcap()
+        with (console.status("replaying the recorded holds …") if not json_out
+              else nullcontext()):
+            result = calibrate_band_on_recordings(
+                model, recordings, bundle if bundle is not None else load_default_models(), jobs)
+    else:
+        with (console.status(f"{len(names) * len(seed_list)} closed-loop holds …")
+              if not json_out else nullcontext()):
+            result = calibrate_band(model, seed_list, names, duration_s, bundle, jobs)
     if not dry_run:
         set_band_scale(observer, result.band_scale, result.record(), result.drift_scale)
     if json_out:
@@ -265,12 +303,13 @@ def calibrate_band_command(
     table = Table(title=f"band coverage at {result.level:.0%}: scale {result.previous_scale:.3g}"
                         f" -> {result.band_scale:.3g}, drift scale "
                         f"{result.previous_drift_scale:.3g} -> {result.drift_scale:.3g}")
-    for column in ("scenario", "seed", "MAE (N)", "coverage before", "coverage after"):
+    for column in ("scenario", "seed" if recordings is None else "recording", "MAE (N)",
+                   "coverage before", "coverage after"):
         table.add_column(column)
     for name, entry in result.scenarios.items():
         for seed, row in entry["seeds"].items():
-            table.add_row(name, seed, f"{row['mae_n']:.3f}", f"{row['coverage_before']:.1%}",
-                          f"{row['coverage_after']:.1%}")
+            table.add_row(name, row.get("recording", seed), f"{row['mae_n']:.3f}",
+                          f"{row['coverage_before']:.1%}", f"{row['coverage_after']:.1%}")
     console.print(table)
     summary = Table(title="per scenario, mean over its holds")
     for column in ("scenario", "holds", "MAE (N)", "coverage before", "coverage after"):
@@ -303,6 +342,7 @@ def _calibrate_hold_command(models: str, targets: str, temps: str, seeds: str,
 #: The twin grid's options and their defaults; ``--recordings`` takes its grid from the plans.
 _TWIN_GRID = {"--targets": "1,2,3,4,5,6,7,8", "--temps": "30,35,40,45,50,55",
               "--seeds": "1000-1005", "--duration-s": "280"}
+
 
 
 @app.command("calibrate-hold")
@@ -353,11 +393,7 @@ def calibrate_hold_command(
     from relaxgrip.validate import check_jobs, parse_floats, parse_seeds
 
     if recordings is not None:
-        given = [flag for flag, value in zip(_TWIN_GRID, (targets, temps, seeds, duration_s),
-                                             strict=True) if value is not None]
-        if given:
-            raise InputError(f"{given[0]} sets the twin's grid; with --recordings the grid is "
-                             "the recordings' targets and temperatures")
+        _refuse_twin_options(_TWIN_GRID, (targets, temps, seeds, duration_s))
         if add:
             raise InputError("--add grows a calibration on the twin; with --recordings give "
                              "every recording at once")

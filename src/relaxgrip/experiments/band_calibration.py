@@ -63,6 +63,7 @@ from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.controlled_hold import HoldResult
+from relaxgrip.experiments.hold_calibration import RECORDINGS_SOURCE
 from relaxgrip.experiments.scenarios import SCENARIOS, check_scenarios, scenario_holds
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
@@ -98,9 +99,15 @@ class BandSamples:
     @classmethod
     def of(cls, hold: HoldResult, band_scale: float, drift_scale: float) -> BandSamples:
         """The samples of an ``observer`` hold whose band had these scales."""
-        lo, hi = hold.series("band_lo_n"), hold.series("band_hi_n")
-        est, truth = hold.series("estimate_n"), hold.series("truth_force_n")
-        drift = hold.series("band_drift_n")
+        return cls.of_series(hold.series("estimate_n"), hold.series("truth_force_n"),
+                             hold.series("band_lo_n"), hold.series("band_hi_n"),
+                             hold.series("band_drift_n"), band_scale, drift_scale)
+
+    @classmethod
+    def of_series(cls, est: FloatArray, truth: FloatArray, lo: FloatArray, hi: FloatArray,
+                  drift: FloatArray, band_scale: float, drift_scale: float) -> BandSamples:
+        """The samples of a hold's series: the estimate, the truth, the band (its low and
+        high edge and its drift part), the band's scales."""
         onset = (0.5 * (hi - lo) - drift) / band_scale
         ok = (np.isfinite(onset) & (onset > 0) & np.isfinite(drift) & np.isfinite(est)
               & np.isfinite(truth))
@@ -240,7 +247,11 @@ class BandCalibration:
         The scales the holds ran with.
     scenarios : dict of str to dict
         Per scenario: its profiles, and per seed the MAE (N) and the coverage
-        of the hold samples at the old and at the new scales.
+        of the hold samples at the old and at the new scales.  Measured on
+        recordings (:func:`relaxgrip.experiments.recorded_calibration.
+        calibrate_band_on_recordings`), one scenario, ``recorded``, with
+        ``source`` ``"recordings"`` and a row per recording, its file name
+        under ``recording``.
     """
 
     band_scale: float
@@ -266,6 +277,9 @@ class BandCalibration:
 
     def record(self) -> dict[str, Any]:
         """The manifest's ``band_recalibration`` entry."""
+        recorded = any(entry.get("source") == RECORDINGS_SOURCE
+                       for entry in self.scenarios.values())
+        holds = "recorded holds replayed" if recorded else "closed-loop holds"
         return {
             "band_scale": self.band_scale, "scale_interval_90": list(self.scale_interval),
             "drift_scale": self.drift_scale,
@@ -274,7 +288,7 @@ class BandCalibration:
             "method": f"least band scale with {self.level:g} of |estimate - truth| within the "
                       "identified half-width where it is the whole band, then least drift "
                       "scale with the same share within both parts where the share's drift "
-                      "is there, over closed-loop holds; intervals: the seeds resampled "
+                      f"is there, over {holds}; intervals: the seeds resampled "
                       "(relaxgrip calibrate-band)",
             "seeds": self.seeds, "samples": self.samples, "drift_samples": self.drift_samples,
             "previous_scale": self.previous_scale,

@@ -21,6 +21,7 @@ uncalibrated controller would have made.  The two differ by the calibration
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -31,6 +32,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
+from relaxgrip.experiments.band_calibration import (
+    BandCalibration,
+    BandSamples,
+    fit_scales,
+    seed_intervals,
+)
 from relaxgrip.experiments.controlled_hold import map_holds
 from relaxgrip.experiments.hold_calibration import (
     MIN_BIN_S,
@@ -40,18 +47,22 @@ from relaxgrip.experiments.hold_calibration import (
     condition_name,
     hold_row,
 )
+from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.perception.features import finger_temperature_c
 from relaxgrip.recording.dataset import recording_files, truth_force_n
 from relaxgrip.recording.reader import malformed_fields, read_replayable_session
 from relaxgrip.recording.replay import replay_periods
 
-__all__ = ["RecordedHold", "calibration_from_recordings", "recorded_hold", "recorded_plan"]
+__all__ = ["RECORDED_SCENARIO", "RecordedHold", "calibrate_band_on_recordings",
+           "calibration_from_recordings", "recorded_hold", "recorded_plan"]
 
 FloatArray = NDArray[np.float64]
 
 #: Estimators whose recordings are regulated holds ``relax`` can be calibrated on.
 REGULATED = ("relax", "observer")
+#: The one scenario of a band calibration on recordings, a row per recording.
+RECORDED_SCENARIO = "recorded"
 
 
 @dataclass(frozen=True)
@@ -62,7 +73,8 @@ class RecordedHold:
     ----------
     path : Path
     target_n, temp_c : float
-        The recorded plan's target (N) and finger temperature (°C).
+        The recorded plan's target (N) and finger temperature (°C; nan for a
+        plan by stiffness mode).
     length_s : float
         How long the hold was to last: the plan's ``hold_s``, or where the
         recording's hold ended when the plan held until released.
@@ -80,6 +92,8 @@ class RecordedHold:
     temps_c : list of float
         The finger temperature the estimator read, each period of the hold
         with an infrared percept.
+    band_lo_n, band_hi_n, band_drift_n : ndarray
+        The ``observer``'s band and its drift part (N; nan for ``relax``).
     """
 
     path: Path
@@ -92,6 +106,13 @@ class RecordedHold:
     truth_n: FloatArray
     f_onset_n: FloatArray
     temps_c: list[float]
+    band_lo_n: FloatArray
+    band_hi_n: FloatArray
+    band_drift_n: FloatArray
+
+    def within(self, duration_s: float) -> NDArray[np.bool_]:
+        """The periods of the hold's first ``duration_s`` (from its onset on)."""
+        return self.t_s <= duration_s + 1e-9
 
     def row(self, duration_s: float) -> dict[str, Any]:
         """The hold as a calibration stores it (:func:`hold_row`), over ``duration_s``.
@@ -111,13 +132,14 @@ class RecordedHold:
 
 def recorded_plan(path: Path) -> tuple[float, float, float]:
     """A recording's hold as planned, from its session message alone: target (N),
-    finger temperature (°C) and length (s; inf: held until released).
+    finger temperature (°C; nan for a plan by stiffness mode) and length (s; inf: held
+    until released).
 
     Raises
     ------
     InputError
-        Not a replayable recording; one of another estimator than ``relax``
-        or ``observer``; a plan without a finger temperature.
+        Not a replayable recording, or one of another estimator than
+        ``relax`` or ``observer``.
     """
     session = read_replayable_session(path)
     estimator = session.get("estimator")
@@ -128,16 +150,24 @@ def recorded_plan(path: Path) -> tuple[float, float, float]:
     with malformed_fields(path):
         if not isinstance(plan, dict):
             raise TypeError(f"the session's plan is {type(plan).__name__}, not an object")
-        target_n, temp_c, hold_s = (float(plan["target_n"]), plan["temp_c"],
-                                    float(plan["hold_s"]))
-        if temp_c is None:
-            raise InputError(f"{path}: the hold's plan gives a stiffness mode, not a "
-                             "temperature; calibrating takes holds at a set temperature")
-        return target_n, float(temp_c), hold_s
+        temp_c = plan["temp_c"]
+        return (float(plan["target_n"]), math.nan if temp_c is None else float(temp_c),
+                float(plan["hold_s"]))
 
 
-def recorded_hold(path: Path, models: ModelBundle) -> RecordedHold:
-    """Replay one recording's hold with ``models``' ``relax``, uncalibrated.
+def recorded_hold(path: Path, models: ModelBundle, estimator: str = "relax",
+                  observer: ObserverModel | None = None) -> RecordedHold:
+    """Replay one recording's hold with ``models``' ``estimator``.
+
+    Parameters
+    ----------
+    path : Path
+    models : ModelBundle
+        As the estimator is to run: strip their calibration for ``relax``'s
+        own (:func:`calibration_from_recordings` does).
+    estimator : {"relax", "observer"}
+    observer : ObserverModel, optional
+        The observer's parameters (default: the shipped ones).
 
     Raises
     ------
@@ -146,13 +176,13 @@ def recorded_hold(path: Path, models: ModelBundle) -> RecordedHold:
         a hold that ended before its plan's length; no force reference in it.
     """
     target_n, temp_c, hold_s = recorded_plan(path)
-    bundle = replace(models, hold_bias=None)
     onset_s = end_s = math.nan
     onsets = 0
-    rows: list[tuple[float, float, float, float, float]] = []
+    rows: list[tuple[float, ...]] = []
     temps: list[float] = []
     with malformed_fields(path):
-        for period, percept, estimate in replay_periods(path, bundle, estimator="relax"):
+        for period, percept, estimate in replay_periods(path, models, estimator=estimator,
+                                                        observer=observer):
             for event in period.events:
                 if event["kind"] == "hold_onset":
                     onsets += 1
@@ -163,7 +193,8 @@ def recorded_hold(path: Path, models: ModelBundle) -> RecordedHold:
                 continue
             rows.append((period.t_s - onset_s, estimate.force_n,
                          estimate.chain_n if math.isfinite(estimate.chain_n) else 0.0,
-                         truth_force_n(period.messages), estimate.f_onset_n))
+                         truth_force_n(period.messages), estimate.f_onset_n,
+                         estimate.band_lo_n, estimate.band_hi_n, estimate.band_drift_n))
             if math.isfinite(estimate.hold_s) and percept.thermal is not None:
                 value = finger_temperature_c(percept.thermal)
                 if math.isfinite(value):
@@ -171,7 +202,7 @@ def recorded_hold(path: Path, models: ModelBundle) -> RecordedHold:
     if onsets != 1:
         raise InputError(f"{path}: {onsets} holds in the recording; calibrating takes one hold "
                          "per recording" if onsets else f"{path}: the recording has no hold")
-    cols = np.array(rows, dtype=np.float64).reshape(-1, 5)
+    cols = np.array(rows, dtype=np.float64).reshape(-1, 8)
     after = cols[:, 0] >= 0.0
     cols = cols[after]
     reached = float(cols[-1, 0]) if cols.size else 0.0
@@ -183,13 +214,42 @@ def recorded_hold(path: Path, models: ModelBundle) -> RecordedHold:
     if not np.isfinite(cols[:, 3]).any():
         raise InputError(f"{path}: no force reference (the twin's truth or a force sensor's "
                          "/relaxgrip/force_ref) in the hold")
-    t, force, chain, truth, f_onset = cols.T
+    t, force, chain, truth, f_onset, lo, hi, drift = cols.T
     return RecordedHold(path, target_n, temp_c, float(length), t, force, chain, truth,
-                        f_onset, temps)
+                        f_onset, temps, lo, hi, drift)
 
 
-def _replayed(args: tuple[Path, ModelBundle]) -> RecordedHold:
+def _replayed(args: tuple[Path, ModelBundle, str, ObserverModel | None]) -> RecordedHold:
     return recorded_hold(*args)
+
+
+def _recorded_grid(paths: Sequence[Path | str]) -> list[Path]:
+    """The recordings ``paths`` name, their plans checked before any is replayed.
+
+    Raises
+    ------
+    InputError
+        As :func:`recorded_plan` for any recording; a plan by stiffness mode;
+        a target lacking a temperature or a condition with fewer than two
+        recordings.
+    """
+    files = recording_files(paths)
+    plans = [recorded_plan(path) for path in files]
+    for path, (_, temp, _) in zip(files, plans, strict=True):
+        if math.isnan(temp):
+            raise InputError(f"{path}: the hold's plan gives a stiffness mode, not a "
+                             "temperature; the calibration's grid takes holds at a set "
+                             "temperature")
+    targets = sorted({target for target, _, _ in plans})
+    temps = sorted({temp for _, temp, _ in plans})
+    for target in targets:
+        for temp in temps:
+            count = sum((t, c) == (target, temp) for t, c, _ in plans)
+            if count < 2:
+                raise InputError(
+                    f"the recordings hold {target:g} N at {temp:g} °C {count} time(s): every "
+                    "target of the grid needs holds at every temperature, two or more each")
+    return files
 
 
 def calibration_from_recordings(paths: Sequence[Path | str], models: ModelBundle,
@@ -219,19 +279,12 @@ def calibration_from_recordings(paths: Sequence[Path | str], models: ModelBundle
         As :func:`recorded_hold` for any recording, and a grid with a target
         lacking a temperature or a condition with fewer than two recordings.
     """
-    files = recording_files(paths)
-    plans = [recorded_plan(path) for path in files]  # the grid checked before any replay
-    targets = sorted({target for target, _, _ in plans})
-    temps = sorted({temp for _, temp, _ in plans})
-    for target in targets:
-        for temp in temps:
-            count = sum((t, c) == (target, temp) for t, c, _ in plans)
-            if count < 2:
-                raise InputError(
-                    f"the recordings hold {target:g} N at {temp:g} °C {count} time(s): every "
-                    "target of the grid needs holds at every temperature, two or more each")
-    holds = map_holds(_replayed, [(path, models) for path in files], n_jobs)
+    files = _recorded_grid(paths)
+    bundle = replace(models, hold_bias=None)
+    holds = map_holds(_replayed, [(path, bundle, "relax", None) for path in files], n_jobs)
     duration = min(h.length_s for h in holds)
+    targets = sorted({h.target_n for h in holds})
+    temps = sorted({h.temp_c for h in holds})
     by_condition: dict[str, list[dict[str, Any]]] = {}
     for seed, hold in enumerate(holds):
         name = condition_name(hold.target_n, hold.temp_c)
@@ -239,3 +292,63 @@ def calibration_from_recordings(paths: Sequence[Path | str], models: ModelBundle
     result = calibration_from_holds(targets, temps, list(range(len(holds))), duration,
                                     by_condition)
     return replace(result, twin_version=RECORDINGS_SOURCE)
+
+
+def calibrate_band_on_recordings(observer: ObserverModel, paths: Sequence[Path | str],
+                                 models: ModelBundle, n_jobs: int = 1) -> BandCalibration:
+    """The observer's band scales set on recorded holds, as :func:`calibrate_band` sets them
+    on the twin's.
+
+    Each recording's frames are perceived again and the ``observer`` with
+    ``models`` (their calibration included, as it holds) replayed on them;
+    its error against the force reference over the hold, against the two
+    parts of its band, sets the scales.  Each recording counts as a seed of
+    the resampled intervals; the report's one scenario, ``recorded``, has a
+    row per recording.
+
+    Parameters
+    ----------
+    observer : ObserverModel
+        Fitted observer; the result does not depend on its scales.
+    paths : sequence of Path
+        Recordings (a directory stands for the ``*.mcap`` in it), each one
+        ``relax`` or ``observer`` hold with a force reference.
+    models : ModelBundle
+        ICFN and RCFN the observer reads.
+    n_jobs : int
+        Recordings replayed in parallel.
+
+    Raises
+    ------
+    InputError
+        As :func:`recorded_hold`; no band in the holds.
+    """
+    files = recording_files(paths)
+    for path in files:  # every plan checked before any replay
+        recorded_plan(path)
+    previous = observer.band_scale, observer.drift_scale
+    if observer.drift_scale <= 0:  # a part at scale 0 records nothing of its size
+        observer = copy.deepcopy(observer)
+        observer.drift_scale = 1.0
+    used = observer.band_scale, observer.drift_scale
+    holds = map_holds(_replayed, [(path, models, "observer", observer) for path in files], n_jobs)
+    samples = []
+    for hold in holds:
+        keep = hold.within(hold.length_s)
+        samples.append(BandSamples.of_series(
+            hold.estimate_n[keep], hold.truth_n[keep], hold.band_lo_n[keep],
+            hold.band_hi_n[keep], hold.band_drift_n[keep], *used))
+    every = BandSamples.join(samples)
+    if not every.size:
+        raise InputError("the recorded holds gave the observer no band to calibrate")
+    band, drift = fit_scales(every, observer.band_level)
+    drift = previous[1] if drift is None else drift
+    band_interval, drift_interval = seed_intervals(samples, observer.band_level)
+    rows = {str(i): {"recording": hold.path.name, "mae_n": hold.row(hold.length_s)["mae_n"],
+                     "coverage_before": x.coverage(*previous),
+                     "coverage_after": x.coverage(band, drift)}
+            for i, (hold, x) in enumerate(zip(holds, samples, strict=True))}
+    return BandCalibration(band, band_interval, drift, drift_interval, observer.band_level,
+                           every.size, int(np.count_nonzero(every.drift_n > 0)),
+                           list(range(len(holds))), *previous,
+                           {RECORDED_SCENARIO: {"source": RECORDINGS_SOURCE, "seeds": rows}})

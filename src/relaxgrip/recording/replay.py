@@ -33,6 +33,7 @@ from relaxgrip.control.estimators import (
     bundle_estimator,
 )
 from relaxgrip.errors import InputError
+from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.perception.pipeline import Percept, Perception
 from relaxgrip.recording.reader import (
@@ -50,7 +51,7 @@ __all__ = ["ReplayResult", "replay", "replay_periods"]
 
 
 def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
-                   estimator: str | None = None
+                   estimator: str | None = None, observer: ObserverModel | None = None
                    ) -> Iterator[tuple[Period, Percept, ForceEstimate]]:
     """Each period of a recording with the replayed percept and estimate.
 
@@ -64,6 +65,8 @@ def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
         Read a killed recording up to its last complete chunk.
     estimator : str, optional
         Estimator to replay (default: the recorded one).
+    observer : ObserverModel, optional
+        The ``observer`` estimator's parameters (default: the shipped ones).
 
     Raises
     ------
@@ -73,9 +76,10 @@ def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
     session = read_replayable_session(path, tolerant)
     name = estimator or str(session.get("estimator"))
     if name not in {k.value for k in EstimatorKind}:
-        raise InputError(f"{path}: cannot replay estimator {name!r} (fixed, icfn or relax)")
+        raise InputError(f"{path}: cannot replay estimator {name!r} "
+                         "(fixed, icfn, relax or observer)")
     perception = Perception(rig_from_dict(session["rig"]))
-    est = bundle_estimator(name, models)
+    est = bundle_estimator(name, models, observer)
     perception.reset()
     est.reset()
     with malformed_fields(path):
