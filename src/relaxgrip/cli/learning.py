@@ -344,7 +344,6 @@ _TWIN_GRID = {"--targets": "1,2,3,4,5,6,7,8", "--temps": "30,35,40,45,50,55",
               "--seeds": "1000-1005", "--duration-s": "280"}
 
 
-
 @app.command("calibrate-hold")
 def calibrate_hold_command(
     models: Annotated[Path, typer.Argument(

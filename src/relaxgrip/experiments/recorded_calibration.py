@@ -1,22 +1,27 @@
-"""Calibrating ``relax``'s closed-loop error on recorded holds (``calibrate-hold --recordings``).
+"""The closed-loop calibrations on recorded holds (``calibrate-hold`` and ``calibrate-band``
+with ``--recordings``).
 
-:func:`~relaxgrip.experiments.hold_calibration.calibrate_hold` measures the
-error on the twin, which is right for the twin and for the models trained on
-its data.  A lab's own gripper, with its own models, has its own error: this
-measures it on the lab's recordings of regulated holds (``relax`` or
-``observer``) with a force reference (the twin's truth, or a force sensor's
+:func:`~relaxgrip.experiments.hold_calibration.calibrate_hold` and
+:func:`~relaxgrip.experiments.band_calibration.calibrate_band` measure on the
+twin, which is right for the twin and for the models trained on its data.  A
+lab's own gripper, with its own models, has its own errors: these measure
+them on the lab's recordings of regulated holds (``relax`` or ``observer``)
+with a force reference (the twin's truth, or a force sensor's
 ``/relaxgrip/force_ref`` channel).  Each recording's frames are perceived
-again and ``relax`` is replayed on them uncalibrated
-(:func:`~relaxgrip.recording.replay.replay_periods`); its estimate against
-the reference gives the hold's error per time bin, exactly as a hold run on
-the twin does.  Each recording is one hold of the grid: its target and
-temperature are the recorded plan's, and every target needs holds at every
-temperature, at least two of each.
+again and the estimator replayed on them
+(:func:`~relaxgrip.recording.replay.replay_periods`); on lossless frames the
+replayed series are the loop's bit for bit, so a calibration on recordings
+of the twin's holds is the twin's calibration of those holds.
 
-The recorded controller acted on its own estimate, which may have been
-calibrated: the replayed hold follows the recorded closure, not the one an
-uncalibrated controller would have made.  The two differ by the calibration
-(about 0.1 N of force), a second-order change of the estimate's error.
+* :func:`calibration_from_recordings`: ``relax`` replayed uncalibrated; each
+  recording is one hold of the grid, its target and temperature the recorded
+  plan's, and every target needs holds at every temperature, two or more of
+  each.  The recorded controller acted on its own estimate, which may have
+  been calibrated: the replay follows the closure it made, not the one an
+  uncalibrated controller would have made.  On twelve 100 s holds that moved
+  a condition's mean by 0.002-0.010 N (docs/hold-experiments.md, session 39).
+* :func:`calibrate_band_on_recordings`: the ``observer`` replayed as it
+  holds; each recording a seed of the band's intervals.
 """
 
 from __future__ import annotations
