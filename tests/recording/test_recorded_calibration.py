@@ -41,11 +41,11 @@ def second_hold(tmp_path_factory: pytest.TempPathFactory,
 
 
 def test_a_recorded_hold_is_the_loops_hold(png_relax_hold: tuple[Path, HoldResult],
-                                          models: ModelBundle) -> None:
+                                          uncalibrated: ModelBundle) -> None:
     """Lossless frames of an uncalibrated hold: the replayed series are the loop's, bit for bit,
     and the hold's row is the one a hold on the twin gives."""
     path, loop = png_relax_hold
-    hold = recorded_hold(path, models)  # calibrated models: their calibration is left out
+    hold = recorded_hold(path, uncalibrated)
     n = loop.t_s.size
     assert (hold.target_n, hold.temp_c, hold.length_s) == (5.0, 40.0, 8.0)
     np.testing.assert_array_equal(hold.t_s[:n], loop.t_s)

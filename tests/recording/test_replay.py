@@ -119,7 +119,7 @@ def test_replay_tells_the_estimator_of_contact_onset_and_release(
                  GraspPlan(target_n=3.0, temp_c=40.0, hold_s=1.0), 30.0, recorder=rec)
     assert [c for c, _ in calls["live"]] == ["contact", "start_hold", "end_hold"]
     monkeypatch.setattr(replay_module, "bundle_estimator",
-                        lambda kind, bundle: spying(kind, "replay"))
+                        lambda kind, bundle, observer=None: spying(kind, "replay"))
     r = replay(path, models)
     assert calls["replay"] == calls["live"]
     assert r.metrics()["estimate_valid_agreement"] == 1.0
