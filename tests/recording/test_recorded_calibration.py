@@ -125,7 +125,7 @@ def test_cli_writes_the_recorded_calibration(relax_hold: tuple[Path, HoldResult]
     (["--recordings", "{relax}", "--recordings", "{second}", "--add"], "--add grows"),
     (["--recordings", "{relax}"], "hold 5 N at 40 °C 1 time(s)"),
     (["--recordings", "{relax}", "--recordings", "{second}", "--recordings", "{fixed}"],
-     "a fixed hold; calibrating relax takes holds regulated by relax or observer"),
+     "a fixed hold; the calibrations take holds regulated by relax or observer"),
     (["--recordings", "{missing}"], "no such recording"),
 ])
 def test_cli_refuses_what_cannot_calibrate(args: list[str], expected: str,

@@ -149,7 +149,7 @@ def recorded_plan(path: Path) -> tuple[float, float, float]:
     session = read_replayable_session(path)
     estimator = session.get("estimator")
     if estimator not in REGULATED:
-        raise InputError(f"{path}: a {estimator} hold; calibrating relax takes holds regulated "
+        raise InputError(f"{path}: a {estimator} hold; the calibrations take holds regulated "
                          f"by {' or '.join(REGULATED)}")
     plan = session.get("plan")
     with malformed_fields(path):
