@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import copy
 import importlib
 import json
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -12,11 +14,13 @@ import pytest
 
 from relaxgrip.clock import VirtualClock
 from relaxgrip.control import GraspController, GraspPlan, make_estimator, run_loop
-from relaxgrip.experiments.controlled_hold import HoldResult
+from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
+from relaxgrip.learning.observer import ObserverModel, default_observer_dir, load_default_observer
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.recording import McapRecorder, iter_messages, replay
+from relaxgrip.recording.replay import replay_periods
 from relaxgrip.twin import GripperTwin, TwinConfig
-from tests.clitools import run_main
+from tests.clitools import assert_one_error_line, run_main
 
 
 def test_png_replay_is_exact(tmp_path: Path, models: ModelBundle) -> None:
@@ -205,3 +209,35 @@ def test_replay_shows_a_calibration_other_than_the_recordings(
              if models.hold_bias is None else None)
     changed = replay(path, replace(models, hold_bias=other)).metrics()
     assert changed["calibration_valid_agreement"] < 1.0
+
+
+def test_an_observer_recording_replays_with_the_observer_it_ran_with(
+        tmp_path: Path, models: ModelBundle, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The observer replays with the parameters it is given (an observer of another band
+    replays another band); ``--observer`` names the ones the recording ran with (here the
+    shipped ones, copied)."""
+    path = tmp_path / "observer.mcap"
+    observer = load_default_observer()
+    with McapRecorder(path) as rec:
+        run_hold("observer", 5.0, 3.0, 40.0, 2, models, recorder=rec, observer=observer)
+    other = copy.deepcopy(observer)
+    other.band_scale = 2.0 * observer.band_scale
+
+    def widths(model: ObserverModel) -> np.ndarray:
+        rows = [e.band_hi_n - e.band_lo_n
+                for _, _, e in replay_periods(path, models, observer=model)]
+        return np.array(rows)[np.isfinite(rows)]
+
+    narrow, wide = widths(observer), widths(other)
+    assert narrow.size > 50
+    np.testing.assert_allclose(wide, 2.0 * narrow, rtol=1e-9)
+    directory = tmp_path / "observer-dir"
+    shutil.copytree(default_observer_dir(), directory)
+    code, out, err = run_main(["replay", path, "--observer", directory, "--json"], monkeypatch,
+                              capsys)
+    assert code == 0, err
+    assert json.loads(out)["estimate_max_abs_diff_n"] < 0.05  # JPEG frames
+    code, out, err = run_main(["replay", path, "--observer", tmp_path / "none"], monkeypatch,
+                              capsys)
+    assert_one_error_line(code, out, err, "none")

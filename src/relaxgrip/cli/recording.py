@@ -32,18 +32,24 @@ def replay_cmd(
     models: Annotated[Path | None, typer.Option(
         "--models", help="Model directory (default: the shipped models).", show_default=False)
     ] = None,
+    observer_dir: Annotated[Path | None, typer.Option(
+        "--observer", help="Observer directory an observer recording ran with (relaxgrip "
+                           "fit-observer; default: the shipped observer).",
+        show_default=False)] = None,
     plot: Annotated[Path | None, typer.Option(
         "--plot", help="Figure of recorded and replayed estimate (.png/.pdf/.svg).",
         show_default=False)] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Re-run perception and estimation on a recording and compare with what it recorded."""
+    from relaxgrip.learning.observer import load_observer
     from relaxgrip.plots.common import check_plot_path
     from relaxgrip.recording.replay import replay
 
     if plot is not None:
         check_plot_path(plot)
-    result = replay(recording, _models(models))
+    observer = None if observer_dir is None else load_observer(observer_dir)
+    result = replay(recording, _models(models), observer=observer)
     if plot is not None:
         _plot_replay(result, plot)
     if json_out:

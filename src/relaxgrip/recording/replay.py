@@ -203,8 +203,12 @@ def _f(value: Any) -> float:
     return math.nan if value is None else float(value)
 
 
-def replay(path: Path, models: ModelBundle, tolerant: bool = False) -> ReplayResult:
+def replay(path: Path, models: ModelBundle, tolerant: bool = False,
+           observer: ObserverModel | None = None) -> ReplayResult:
     """Re-run perception and estimation on a recording and compare with what it recorded.
+
+    ``observer``: the parameters an ``observer`` recording ran with (default:
+    the shipped ones).
 
     Raises
     ------
@@ -215,7 +219,8 @@ def replay(path: Path, models: ModelBundle, tolerant: bool = False) -> ReplayRes
     rec_status: list[str] = []
     rep_status: list[str] = []
     with malformed_fields(path):
-        for period, percept, estimate in replay_periods(path, models, tolerant):
+        for period, percept, estimate in replay_periods(path, models, tolerant,
+                                                        observer=observer):
             rec = period.messages["/relaxgrip/estimate"]
             truth = period.get("/relaxgrip/truth")
             perception = period.get("/relaxgrip/perception")
