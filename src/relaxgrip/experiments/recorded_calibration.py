@@ -64,7 +64,7 @@ __all__ = ["RECORDED_SCENARIO", "RecordedHold", "calibrate_band_on_recordings",
 
 FloatArray = NDArray[np.float64]
 
-#: Estimators whose recordings are regulated holds ``relax`` can be calibrated on.
+#: Estimators whose recordings are regulated holds the calibrations take.
 REGULATED = ("relax", "observer")
 #: The one scenario of a band calibration on recordings, a row per recording.
 RECORDED_SCENARIO = "recorded"
@@ -72,7 +72,7 @@ RECORDED_SCENARIO = "recorded"
 
 @dataclass(frozen=True)
 class RecordedHold:
-    """One recording's hold, replayed with ``relax`` uncalibrated.
+    """One recording's hold, an estimator replayed on it (:func:`recorded_hold`).
 
     Attributes
     ----------
@@ -86,7 +86,7 @@ class RecordedHold:
     t_s : ndarray
         Time since the hold's onset of each period from the onset on (s).
     estimate_n : ndarray
-        The replayed, uncalibrated estimate (N).
+        The replayed estimate (N).
     chain_n : ndarray
         What the closed chain added to it (N, 0 where nothing): the
         calibration corrects Eq. 10, and the chain is blended in after it.
