@@ -68,3 +68,22 @@ def test_an_invalid_host_is_named_before_the_remote_check(host: str) -> None:
                                   "rig-1.lab.", "x1"])
 def test_addresses_and_host_names_are_valid_hosts(host: str) -> None:
     assert check_host(host) == host
+
+
+@pytest.mark.parametrize(("flag", "expected"), [("--observer", "not an observer model directory"),
+                                                ("--models", "no such model directory")])
+def test_a_missing_model_directory_is_named_and_the_port_freed(flag: str, expected: str,
+                                                               tmp_path) -> None:
+    import socket
+
+    probe = socket.socket()
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    result = CliRunner().invoke(app, ["dashboard", "--port", str(port), "--record-dir",
+                                      str(tmp_path), flag, str(tmp_path / "none")])
+    assert isinstance(result.exception, InputError)
+    assert expected in str(result.exception)
+    again = socket.socket()
+    again.bind(("127.0.0.1", port))  # the dashboard's listener was closed
+    again.close()

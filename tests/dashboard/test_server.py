@@ -302,3 +302,25 @@ def test_malformed_controls_get_a_reply_and_keep_the_viewer(served) -> None:
         assert _state(ws)["recording"] is None
         assert _control(ws, "target", 4, 5)["ok"]  # the same viewer, still served
     assert session.alive
+
+
+def test_a_session_runs_the_models_and_observer_it_is_given(make_session, tmp_path) -> None:
+    """``--models`` and ``--observer``: a lab's own estimator on its own gripper."""
+    import shutil
+
+    from relaxgrip.errors import InputError
+    from relaxgrip.learning.observer import default_observer_dir, load_observer, set_band_scale
+    from relaxgrip.learning.training import default_models_dir
+
+    directory = tmp_path / "observer"
+    shutil.copytree(default_observer_dir(), directory)
+    set_band_scale(directory, 0.5, {"method": "a test's"})
+    session = make_session(estimator="observer", models_dir=default_models_dir(),
+                           observer_dir=directory)
+    try:
+        assert session.controller.estimator.model.band_scale == 0.5
+        assert load_observer(default_observer_dir()).band_scale != 0.5
+    finally:
+        session.close()
+    with pytest.raises(InputError, match="not an observer model directory"):
+        make_session(observer_dir=tmp_path / "none")

@@ -70,6 +70,12 @@ def dashboard(
     seed: Annotated[int, typer.Option("--seed", help="Twin seed.")] = 0,
     record_dir: Annotated[Path, typer.Option(
         "--record-dir", help="Where MCAP recordings go.")] = Path("."),
+    models: Annotated[Path | None, typer.Option(
+        "--models", help="Model directory (relaxgrip train; default: the shipped models).",
+        show_default=False)] = None,
+    observer_dir: Annotated[Path | None, typer.Option(
+        "--observer", help="Observer directory (relaxgrip fit-observer; default: the shipped "
+                           "observer).", show_default=False)] = None,
 ) -> None:
     """Serve the live dashboard and run the gripper loop in real time (30 Hz) behind it."""
     from relaxgrip.dashboard import require_web_stack
@@ -92,7 +98,8 @@ def dashboard(
     listener = _bind(address, host, port)  # a port in use is known before anything starts
     try:
         session = open_session(backend, clock=WallClock(), seed=seed, estimator=estimator,
-                               record_dir=record_dir)
+                               record_dir=record_dir, models_dir=models,
+                               observer_dir=observer_dir)
     except BaseException:
         listener.close()
         raise

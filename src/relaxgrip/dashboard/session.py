@@ -444,7 +444,8 @@ class LiveSession:
 
 def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
                  estimator: str = "observer", object_name: str = "force_ball",
-                 record_dir: Path = Path("."), models_dir: Path | None = None) -> LiveSession:
+                 record_dir: Path = Path("."), models_dir: Path | None = None,
+                 observer_dir: Path | None = None) -> LiveSession:
     """A session on the twin, the MCU emulator (twin behind a pty) or a rig file's gripper.
 
     Parameters
@@ -465,12 +466,15 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
         Where recordings go.
     models_dir : Path, optional
         Model directory (default: the shipped models).
+    observer_dir : Path, optional
+        The ``observer`` estimator's directory (default: the shipped one).
 
     Returns
     -------
     LiveSession
         Not yet started.
     """
+    from relaxgrip.learning.observer import load_observer
     from relaxgrip.learning.store import load_models
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
@@ -491,6 +495,7 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
         raise InputError(f"recording directory {record_dir} does not exist")
     bundle = load_default_models() if models_dir is None else load_models(
         models_dir, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
+    observer = None if observer_dir is None else load_observer(observer_dir)
     if backend.startswith("serial:"):
         from relaxgrip.hardware.gripper import open_rig_gripper
         from relaxgrip.hardware.rig_file import load_rig
@@ -499,7 +504,7 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
         gripper = open_rig_gripper(rig, clock)
         try:
             gripper.reset()
-            controller = GraspController(rig.geometry, bundle_estimator(kind, bundle))
+            controller = GraspController(rig.geometry, bundle_estimator(kind, bundle, observer))
         except BaseException:  # the port and the camera threads are not left open
             gripper.close()
             raise
@@ -507,7 +512,7 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
                            rearm=gripper.reset)
     cfg = TwinConfig(object_name=object_name)
     virtual = VirtualClock(clock.now())
-    controller = GraspController(cfg.rig, bundle_estimator(kind, bundle),
+    controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
                                  heat=cfg.heat)
     if backend == "emulator":
         from relaxgrip.hardware.emulator import ready_emulated_gripper
