@@ -68,8 +68,8 @@ from relaxgrip.experiments.scenarios import SCENARIOS, check_scenarios, scenario
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
 
-__all__ = ["DEFAULT_SCENARIOS", "BandCalibration", "BandSamples", "calibrate_band",
-           "fit_scales", "least_covering", "seed_intervals"]
+__all__ = ["DEFAULT_SCENARIOS", "BandCalibration", "BandHold", "BandSamples", "calibrate_band",
+           "calibration_of", "fit_scales", "least_covering", "measuring", "seed_intervals"]
 
 FloatArray = NDArray[np.float64]
 
@@ -333,30 +333,77 @@ def calibrate_band(observer: ObserverModel, seeds: Sequence[int],
     if len(set(scenarios)) != len(scenarios):  # a repeat would run (and count) its holds twice
         raise InputError(f"scenarios repeat in {','.join(scenarios)}")
     previous = observer.band_scale, observer.drift_scale
-    if observer.drift_scale <= 0:  # a part at scale 0 records nothing of its size
-        observer = copy.deepcopy(observer)
-        observer.drift_scale = 1.0
+    observer = measuring(observer)
     jobs = [(name, seed) for name in scenarios for seed in seeds]
     holds = scenario_holds([("observer", name, seed) for name, seed in jobs], duration_s,
                            models, observer, n_jobs)
     used = observer.band_scale, observer.drift_scale
-    samples = [BandSamples.of(h, *used) for h in holds]
-    every = BandSamples.join(samples)
+    measured = [BandHold(name, SCENARIOS[name].to_dict(), seed,
+                         {"mae_n": hold.metrics()["mae_n"]}, BandSamples.of(hold, *used))
+                for (name, seed), hold in zip(jobs, holds, strict=True)]
+    return calibration_of(measured, seeds, observer.band_level, previous)
+
+
+def measuring(observer: ObserverModel) -> ObserverModel:
+    """The observer to run the holds with: a band part at scale 0 records nothing of its
+    size, so the drift part gets scale 1 (a copy; the scales set do not depend on it)."""
+    if observer.drift_scale > 0:
+        return observer
+    observer = copy.deepcopy(observer)
+    observer.drift_scale = 1.0
+    return observer
+
+
+@dataclass(frozen=True)
+class BandHold:
+    """One hold's band samples with where the report lists it.
+
+    Attributes
+    ----------
+    scenario : str
+        The report's scenario.
+    header : dict
+        What the report says of the scenario (its profiles, or its source).
+    seed : int
+        The seed the hold counts as in the resampled intervals.
+    row : dict
+        The hold's figures for the report (its MAE, a recording's name).
+    samples : BandSamples
+    """
+
+    scenario: str
+    header: dict[str, Any]
+    seed: int
+    row: dict[str, Any]
+    samples: BandSamples
+
+
+def calibration_of(holds: Sequence[BandHold], seeds: Sequence[int], level: float,
+                   previous: tuple[float, float]) -> BandCalibration:
+    """The band's scales set on ``holds`` (:func:`fit_scales`), their intervals with
+    ``seeds`` resampled (:func:`seed_intervals`), and each hold's coverage at the
+    ``previous`` and the new scales.
+
+    Raises
+    ------
+    InputError
+        No hold sample with a band.
+    """
+    every = BandSamples.join([h.samples for h in holds])
     if not every.size:
         raise InputError("the holds recorded no band to calibrate")
-    band, drift = fit_scales(every, observer.band_level)
+    band, drift = fit_scales(every, level)
     drift = previous[1] if drift is None else drift
-    by_seed = [BandSamples.join([x for (_, s), x in zip(jobs, samples, strict=True) if s == seed])
-               for seed in seeds]
-    band_interval, drift_interval = seed_intervals(by_seed, observer.band_level)
+    by_seed = [BandSamples.join([h.samples for h in holds if h.seed == seed]) for seed in seeds]
+    band_interval, drift_interval = seed_intervals(by_seed, level)
     report: dict[str, dict[str, Any]] = {}
-    for (name, seed), hold, x in zip(jobs, holds, samples, strict=True):
-        entry = report.setdefault(name, {**SCENARIOS[name].to_dict(), "seeds": {}})
-        entry["seeds"][str(seed)] = {
-            "mae_n": hold.metrics()["mae_n"],
-            "coverage_before": x.coverage(*previous),
-            "coverage_after": x.coverage(band, drift),
+    for hold in holds:
+        entry = report.setdefault(hold.scenario, {**hold.header, "seeds": {}})
+        entry["seeds"][str(hold.seed)] = {
+            **hold.row,
+            "coverage_before": hold.samples.coverage(*previous),
+            "coverage_after": hold.samples.coverage(band, drift),
         }
-    return BandCalibration(band, band_interval, drift, drift_interval, observer.band_level,
-                           every.size, int(np.count_nonzero(every.drift_n > 0)), list(seeds),
-                           *previous, report)
+    return BandCalibration(band, band_interval, drift, drift_interval, level, every.size,
+                           int(np.count_nonzero(every.drift_n > 0)), list(seeds), *previous,
+                           report)

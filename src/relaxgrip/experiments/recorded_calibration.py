@@ -26,7 +26,6 @@ of the twin's holds is the twin's calibration of those holds.
 
 from __future__ import annotations
 
-import copy
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -39,9 +38,10 @@ from numpy.typing import NDArray
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.band_calibration import (
     BandCalibration,
+    BandHold,
     BandSamples,
-    fit_scales,
-    seed_intervals,
+    calibration_of,
+    measuring,
 )
 from relaxgrip.experiments.controlled_hold import map_holds
 from relaxgrip.experiments.hold_calibration import (
@@ -228,8 +228,9 @@ def _replayed(args: tuple[Path, ModelBundle, str, ObserverModel | None]) -> Reco
     return recorded_hold(*args)
 
 
-def _recorded_grid(paths: Sequence[Path | str]) -> list[Path]:
-    """The recordings ``paths`` name, their plans checked before any is replayed.
+def _recorded_grid(paths: Sequence[Path | str]) -> tuple[list[Path], list[float], list[float]]:
+    """The recordings ``paths`` name and their grid's targets (N) and temperatures (°C), the
+    plans checked before any is replayed.
 
     Raises
     ------
@@ -254,7 +255,7 @@ def _recorded_grid(paths: Sequence[Path | str]) -> list[Path]:
                 raise InputError(
                     f"the recordings hold {target:g} N at {temp:g} °C {count} time(s): every "
                     "target of the grid needs holds at every temperature, two or more each")
-    return files
+    return files, targets, temps
 
 
 def calibration_from_recordings(paths: Sequence[Path | str], models: ModelBundle,
@@ -284,12 +285,10 @@ def calibration_from_recordings(paths: Sequence[Path | str], models: ModelBundle
         As :func:`recorded_hold` for any recording, and a grid with a target
         lacking a temperature or a condition with fewer than two recordings.
     """
-    files = _recorded_grid(paths)
+    files, targets, temps = _recorded_grid(paths)
     bundle = replace(models, hold_bias=None)
     holds = map_holds(_replayed, [(path, bundle, "relax", None) for path in files], n_jobs)
     duration = min(h.length_s for h in holds)
-    targets = sorted({h.target_n for h in holds})
-    temps = sorted({h.temp_c for h in holds})
     by_condition: dict[str, list[dict[str, Any]]] = {}
     for seed, hold in enumerate(holds):
         name = condition_name(hold.target_n, hold.temp_c)
@@ -326,34 +325,22 @@ def calibrate_band_on_recordings(observer: ObserverModel, paths: Sequence[Path |
     Raises
     ------
     InputError
-        As :func:`recorded_hold`; no band in the holds.
+        As :func:`recorded_hold`; no band in the holds (:func:`calibration_of`).
     """
     files = recording_files(paths)
     for path in files:  # every plan checked before any replay
         recorded_plan(path)
     previous = observer.band_scale, observer.drift_scale
-    if observer.drift_scale <= 0:  # a part at scale 0 records nothing of its size
-        observer = copy.deepcopy(observer)
-        observer.drift_scale = 1.0
+    observer = measuring(observer)
     used = observer.band_scale, observer.drift_scale
     holds = map_holds(_replayed, [(path, models, "observer", observer) for path in files], n_jobs)
-    samples = []
-    for hold in holds:
+    measured = []
+    for seed, hold in enumerate(holds):
         keep = hold.within(hold.length_s)
-        samples.append(BandSamples.of_series(
+        samples = BandSamples.of_series(
             hold.estimate_n[keep], hold.truth_n[keep], hold.band_lo_n[keep],
-            hold.band_hi_n[keep], hold.band_drift_n[keep], *used))
-    every = BandSamples.join(samples)
-    if not every.size:
-        raise InputError("the recorded holds gave the observer no band to calibrate")
-    band, drift = fit_scales(every, observer.band_level)
-    drift = previous[1] if drift is None else drift
-    band_interval, drift_interval = seed_intervals(samples, observer.band_level)
-    rows = {str(i): {"recording": hold.path.name, "mae_n": hold.row(hold.length_s)["mae_n"],
-                     "coverage_before": x.coverage(*previous),
-                     "coverage_after": x.coverage(band, drift)}
-            for i, (hold, x) in enumerate(zip(holds, samples, strict=True))}
-    return BandCalibration(band, band_interval, drift, drift_interval, observer.band_level,
-                           every.size, int(np.count_nonzero(every.drift_n > 0)),
-                           list(range(len(holds))), *previous,
-                           {RECORDED_SCENARIO: {"source": RECORDINGS_SOURCE, "seeds": rows}})
+            hold.band_hi_n[keep], hold.band_drift_n[keep], *used)
+        row = {"recording": hold.path.name, "mae_n": hold.row(hold.length_s)["mae_n"]}
+        measured.append(BandHold(RECORDED_SCENARIO, {"source": RECORDINGS_SOURCE}, seed, row,
+                                 samples))
+    return calibration_of(measured, range(len(holds)), observer.band_level, previous)
