@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -15,6 +16,17 @@ from relaxgrip.recording import McapRecorder
 HOLD_S = 6.0
 
 
+def record_hold(path: Path, estimator: str, target_n: float, duration_s: float,
+                temp_c: float, seed: int, models: ModelBundle, rgb_format: str = "jpeg",
+                **hold: Any) -> tuple[Path, HoldResult]:
+    """A hold on the twin (:func:`run_hold`, ``hold`` its further arguments), recorded at
+    ``path``."""
+    with McapRecorder(path, rgb_format=rgb_format) as rec:
+        result = run_hold(estimator, target_n, duration_s, temp_c, seed, models, recorder=rec,
+                          **hold)
+    return path, result
+
+
 @pytest.fixture(scope="session")
 def models() -> ModelBundle:
     return load_default_models()
@@ -24,10 +36,8 @@ def models() -> ModelBundle:
 def relax_hold(tmp_path_factory: pytest.TempPathFactory,
                models: ModelBundle) -> tuple[Path, HoldResult]:
     """A 6 s relax hold at 5 N, 40 °C, recorded with JPEG frames."""
-    path = tmp_path_factory.mktemp("rec") / "relax.mcap"
-    with McapRecorder(path) as rec:
-        result = run_hold("relax", 5.0, HOLD_S, 40.0, 0, models, recorder=rec)
-    return path, result
+    return record_hold(tmp_path_factory.mktemp("rec") / "relax.mcap", "relax", 5.0, HOLD_S,
+                       40.0, 0, models)
 
 
 @pytest.fixture(scope="session")
@@ -41,21 +51,14 @@ def png_relax_hold(tmp_path_factory: pytest.TempPathFactory,
                    uncalibrated: ModelBundle) -> tuple[Path, HoldResult]:
     """An 8 s relax hold at 5 N, 40 °C, uncalibrated, with lossless frames and the object
     located (the closed chain reads from 5 s of the hold on): it replays bit for bit."""
-    path = tmp_path_factory.mktemp("png") / "relax.mcap"
-    with McapRecorder(path, rgb_format="png") as rec:
-        result = run_hold("relax", 5.0, 8.0, 40.0, 3, uncalibrated, recorder=rec,
-                          locate_object=True)
-    return path, result
+    return record_hold(tmp_path_factory.mktemp("png") / "relax.mcap", "relax", 5.0, 8.0, 40.0,
+                       3, uncalibrated, rgb_format="png", locate_object=True)
 
 
 @pytest.fixture(scope="session")
 def fixed_holds(tmp_path_factory: pytest.TempPathFactory, models: ModelBundle) -> list[Path]:
     """Three 6 s fixed-aperture holds (different seeds, targets, temperatures)."""
     folder = tmp_path_factory.mktemp("fixed")
-    paths = []
-    for seed, target, temp in ((0, 5.0, 40.0), (1, 4.0, 45.0), (2, 6.0, 35.0)):
-        path = folder / f"fixed-{seed}.mcap"
-        with McapRecorder(path) as rec:
-            run_hold("fixed", target, 6.0, temp, seed, models, recorder=rec)
-        paths.append(path)
-    return paths
+    return [record_hold(folder / f"fixed-{seed}.mcap", "fixed", target, 6.0, temp, seed,
+                        models)[0]
+            for seed, target, temp in ((0, 5.0, 40.0), (1, 4.0, 45.0), (2, 6.0, 35.0))]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from relaxgrip.experiments.band_calibration import calibrate_band
-from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
+from relaxgrip.experiments.controlled_hold import HoldResult
 from relaxgrip.experiments.hold_calibration import RECORDINGS_SOURCE, hold_row
 from relaxgrip.experiments.recorded_calibration import (
     calibrate_band_on_recordings,
@@ -25,19 +25,16 @@ from relaxgrip.learning.observer import (
 )
 from relaxgrip.learning.store import MANIFEST_NAME, ModelBundle, load_models
 from relaxgrip.learning.training import default_models_dir
-from relaxgrip.recording import McapRecorder
 from tests.clitools import assert_refused_unchanged, run_main
-from tests.recording.conftest import HOLD_S
+from tests.recording.conftest import HOLD_S, record_hold
 
 
 @pytest.fixture(scope="module")
 def second_hold(tmp_path_factory: pytest.TempPathFactory,
                 models: ModelBundle) -> tuple[Path, HoldResult]:
     """Another seed of the shared relax hold (5 N, 40 °C, JPEG frames): a condition's pair."""
-    path = tmp_path_factory.mktemp("second") / "relax-1.mcap"
-    with McapRecorder(path) as rec:
-        result = run_hold("relax", 5.0, HOLD_S, 40.0, 1, models, recorder=rec)
-    return path, result
+    return record_hold(tmp_path_factory.mktemp("second") / "relax-1.mcap", "relax", 5.0,
+                       HOLD_S, 40.0, 1, models)
 
 
 def test_a_recorded_hold_is_the_loops_hold(png_relax_hold: tuple[Path, HoldResult],
@@ -145,11 +142,8 @@ def test_cli_refuses_what_cannot_calibrate(args: list[str], expected: str,
 def png_observer_hold(tmp_path_factory: pytest.TempPathFactory, models: ModelBundle,
                       observer: ObserverModel) -> tuple[Path, HoldResult]:
     """An 8 s observer hold at 5 N, 40 °C (the standard scenario) with lossless frames."""
-    path = tmp_path_factory.mktemp("observer") / "observer.mcap"
-    with McapRecorder(path, rgb_format="png") as rec:
-        result = run_hold("observer", 5.0, 8.0, 40.0, 3, models, recorder=rec,
-                          observer=observer)
-    return path, result
+    return record_hold(tmp_path_factory.mktemp("observer") / "observer.mcap", "observer",
+                       5.0, 8.0, 40.0, 3, models, rgb_format="png", observer=observer)
 
 
 @pytest.fixture(scope="module")
