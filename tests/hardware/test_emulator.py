@@ -126,13 +126,23 @@ def test_wall_clock_emulator_serves_check_rig_over_its_socket(tmp_path: Path) ->
             rig, serial=dataclasses.replace(rig.serial, port=emu.port),
             emulator=dataclasses.replace(rig.emulator, socket=sock))
         found = check_rig(spec)
+        # A rig file that names another marker than the finger carries: the loop would
+        # never track it, so the check must not find it either.
+        other = (spec.marker.marker_id + 7) % 50
+        wrong = check_rig(dataclasses.replace(
+            spec, marker=dataclasses.replace(spec.marker, marker_id=other)))
     finally:
         emu.stop()
     assert found.firmware_id == "relaxgrip-emu 1"
     assert found.rgb_shape == (480, 640, 3)
     assert found.ir_shape == (192, 256)
     assert found.marker_found
+    assert found.marker_ids_seen == [spec.marker.marker_id]
     assert found.marker_offset_mm < 1.0
+    assert not wrong.marker_found
+    assert wrong.marker_id == other
+    assert wrong.marker_ids_seen == [spec.marker.marker_id]
+    assert np.isnan(wrong.marker_distance_mm)
     assert 20.0 < found.ir_temp_c[1] < 35.0
     assert not emu.endpoint.core.enabled  # the check never enables the outputs
 

@@ -35,6 +35,26 @@ def test_check_rig_bad_file_and_missing_device(tmp_path: Path) -> None:
     assert "cannot open serial port /dev/ttyACM0" in out.stderr
 
 
+def test_check_rig_exits_1_when_the_files_marker_is_not_on_the_frame(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    import relaxgrip.perception.rig_check as rig_check
+
+    def missing(rig: object) -> rig_check.RigCheck:
+        return rig_check.RigCheck("example", "/dev/ttyACM0", "fw 1", 200, 20.0, [], (480, 640, 3),
+                                  (192, 256), (24.0, 25.0, 26.0), 3, False, float("nan"),
+                                  float("nan"), float("nan"), [0])
+
+    monkeypatch.setattr(rig_check, "check_rig", missing)
+    code, out, err = run_main(["check-rig", DOCS / "rig-example.toml"], monkeypatch, capsys)
+    assert code == 1, err
+    assert "marker id 3" in out
+    assert "NOT FOUND (the frame shows id 0" in " ".join(out.split())
+    code, out, err = run_main(["check-rig", DOCS / "rig-example.toml", "--json"], monkeypatch,
+                              capsys)
+    assert code == 1
+    assert '"marker_ids_seen": [' in out
+
+
 def test_hold_rejects_an_unknown_backend() -> None:
     out = _run("hold", "--backend", "robot", "--duration-s", "10")
     assert out.returncode == 2

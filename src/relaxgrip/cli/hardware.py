@@ -9,13 +9,16 @@ import threading
 import time
 from pathlib import Path
 from types import FrameType
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.table import Table
 
 from relaxgrip.cli._app import app, console, emit_json
 from relaxgrip.errors import InputError
+
+if TYPE_CHECKING:
+    from relaxgrip.perception.rig_check import RigCheck
 
 #: The longest ``--duration-s``: a day. The emulator is a bench tool; a longer run is a typo
 #: (1e308, inf), and leaving ``--duration-s`` out runs it until it is stopped.
@@ -136,7 +139,10 @@ def check_rig_command(
     rig: Annotated[Path, typer.Argument(help="Rig file (TOML).")],
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """Load a rig file, handshake with its MCU, grab a frame per camera, find the marker."""
+    """Load a rig file, handshake with its MCU, grab a frame per camera, find the marker.
+
+    Exits 1 when the marker the rig file names is not on the RGB frame.
+    """
     from relaxgrip.hardware.rig_file import load_rig
     from relaxgrip.perception.rig_check import check_rig
 
@@ -144,7 +150,13 @@ def check_rig_command(
     result = check_rig(spec)
     if json_out:
         emit_json(result.to_dict())
-        return
+    else:
+        _print_rig_check(result)
+    if not result.marker_found:
+        raise typer.Exit(1)
+
+
+def _print_rig_check(result: RigCheck) -> None:
     table = Table(title=f"rig {result.rig}")
     table.add_column("item")
     table.add_column("found")
@@ -158,7 +170,9 @@ def check_rig_command(
         ("RGB frame", "x".join(str(n) for n in result.rgb_shape)),
         ("thermal frame", "x".join(str(n) for n in result.ir_shape)),
         ("thermal min / mean / max", f"{ir_min:.1f} / {ir_mean:.1f} / {ir_max:.1f} °C"),
-        ("marker", "found" if result.marker_found else "NOT FOUND"),
+        (f"marker id {result.marker_id}", "found" if result.marker_found else
+         "NOT FOUND" + (f" (the frame shows id {', '.join(map(str, result.marker_ids_seen))}: "
+                        "check [marker] id in the rig file)" if result.marker_ids_seen else "")),
     ]
     if result.marker_found:
         rows += [("marker distance", f"{result.marker_distance_mm:.1f} mm"),

@@ -451,14 +451,17 @@ def locate_marker(
     image: NDArray[np.uint8],
     detector: cv2.aruco.ArucoDetector,
     solver: PoseSolver,
+    marker_id: int | None = None,
 ) -> MarkerPose | None:
     """The first marker detected on the whole frame, edge-fitted corners, and its pose.
 
     No tracking and no region of interest: what a detector-only pipeline
-    (the paper's) does on every frame.  ``None`` if no marker is found.
+    (the paper's) does on every frame.  With ``marker_id``, only a marker of
+    that id counts.  ``None`` if no marker is found.
     """
     gray = to_gray(np.asarray(image, dtype=np.uint8))
-    found = detect_markers(gray, detector)
+    found = [d for d in detect_markers(gray, detector)
+             if marker_id is None or d.marker_id == marker_id]
     if not found:
         return None
     corners = refine_corners_by_edges(gray, found[0].corners_px, solver.intrinsics)

@@ -20,7 +20,13 @@ from relaxgrip.hardware.gripper import GuardedTransport, fault_names
 from relaxgrip.hardware.protocol.client import McuClient
 from relaxgrip.hardware.protocol.transport import SerialTransport
 from relaxgrip.hardware.rig_file import RigFile
-from relaxgrip.perception.marker import PoseSolver, locate_marker, make_detector
+from relaxgrip.perception.marker import (
+    PoseSolver,
+    detect_markers,
+    locate_marker,
+    make_detector,
+    to_gray,
+)
 
 __all__ = ["RigCheck", "check_rig", "grab_frame"]
 
@@ -47,8 +53,10 @@ class RigCheck:
         Frame shapes.
     ir_temp_c : tuple of float
         Minimum, mean and maximum of the thermal frame (°C).
+    marker_id : int
+        The marker the rig file names (its id in the file's dictionary).
     marker_found : bool
-        Whether a marker was detected on the RGB frame.
+        Whether that marker was detected on the RGB frame.
     marker_distance_mm : float
         Distance of the marker from the camera (mm; nan if not found).
     marker_offset_mm : float
@@ -56,6 +64,10 @@ class RigCheck:
         unloaded finger (mm; nan if not found).
     reprojection_px : float
         RMS corner reprojection error of the marker pose (pixels).
+    marker_ids_seen : list of int
+        The ids of every marker of the file's dictionary on the frame: another
+        id than the file's means the file names the wrong marker (the loop
+        tracks only the file's).
     """
 
     rig: str
@@ -67,10 +79,12 @@ class RigCheck:
     rgb_shape: tuple[int, ...]
     ir_shape: tuple[int, ...]
     ir_temp_c: tuple[float, float, float]
+    marker_id: int
     marker_found: bool
     marker_distance_mm: float
     marker_offset_mm: float
     reprojection_px: float
+    marker_ids_seen: list[int]
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-Python form (``--json``)."""
@@ -130,8 +144,10 @@ def check_rig(rig: RigFile, clock: Clock | None = None, *,
     if image.ndim != 3:
         raise CameraError(f"RGB camera gave a {image.shape} frame, expected (H, W, 3)")
     intr = rig.rgb.mount.intrinsics
-    pose = locate_marker(image, make_detector(rig.marker.aruco_dictionary),
-                         PoseSolver(rig.marker.size_m, intr))
+    detector = make_detector(rig.marker.aruco_dictionary)
+    seen = sorted({d.marker_id for d in detect_markers(to_gray(image), detector)})
+    pose = locate_marker(image, detector, PoseSolver(rig.marker.size_m, intr),
+                         rig.marker.marker_id)
     temps = np.asarray(ir.image, dtype=np.float64)
     if pose is None:
         distance = offset = reproj = math.nan
@@ -145,5 +161,5 @@ def check_rig(rig: RigFile, clock: Clock | None = None, *,
         ack.max_velocity_um_s / 1000.0, sorted(fault_names(status.fault_flags)),
         tuple(image.shape), tuple(temps.shape),
         (float(np.nanmin(temps)), float(np.nanmean(temps)), float(np.nanmax(temps))),
-        pose is not None, distance, offset, reproj,
+        rig.marker.marker_id, pose is not None, distance, offset, reproj, seen,
     )
