@@ -103,6 +103,8 @@ def test_seeds_report_each_seed_and_the_mean_over_them(monkeypatch, capsys):
     (["--estimator", "magic"], "--estimator"),
     (["--duration-s", "0"], "duration"),
     (["--duration-s", "1e9"], "--duration-s must be at most 3600 s"),
+    (["--duration-s", "0.001"], "--duration-s must be at least 1 s"),
+    (["--duration-s", "1e-300", "--record", "x.mcap"], "--duration-s must be at least 1 s"),
     (["--disturbance", "push:2:400", "--duration-s", "20"],
      "--disturbance starts at 400 s, not before the 20 s hold ends"),
     (["--temp-profile", "step:50:280"], "--temp-profile starts at 280 s"),

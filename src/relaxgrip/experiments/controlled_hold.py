@@ -58,6 +58,7 @@ _Out = TypeVar("_Out")
 __all__ = [
     "HOLD_TEMP_RANGE_C",
     "MAX_HOLD_S",
+    "MIN_HOLD_S",
     "HoldComparison",
     "HoldResult",
     "check_backend",
@@ -82,6 +83,9 @@ SETUP_ALLOWANCE_S = 120.0
 #: The longest hold the experiment runs (s): an hour, 108,000 periods at 30 Hz.  The
 #: models were fitted on holds of 100-280 s; a day's hold would keep 2.6 million rows.
 MAX_HOLD_S = 3600.0
+#: The shortest: its steady state, the last 64 % (100-280 s of 280 s), then spans 19
+#: periods at 30 Hz.  A shorter one scored on a frame or none.
+MIN_HOLD_S = 1.0
 
 
 def check_hold_temp_c(temp_c: float) -> float:
@@ -94,8 +98,11 @@ def check_hold_temp_c(temp_c: float) -> float:
 
 
 def check_hold_duration_s(duration_s: float, name: str = "hold duration") -> float:
-    """Return a hold length (s) if it is finite, > 0 and at most :data:`MAX_HOLD_S`."""
+    """Return a hold length (s) if it is finite and within :data:`MIN_HOLD_S`-:data:`MAX_HOLD_S`."""
     check_positive(duration_s, name)
+    if duration_s < MIN_HOLD_S:
+        raise InputError(f"{name} must be at least {MIN_HOLD_S:g} s, so that its steady state "
+                         f"(the last 64 %) holds frames to score, got {duration_s:g}")
     if duration_s > MAX_HOLD_S:
         raise InputError(f"{name} must be at most {MAX_HOLD_S:g} s (an hour), got {duration_s:g}")
     return float(duration_s)
