@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import errno
+import io
 import json
 import os
 import shutil
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import pytest
 from mcap.reader import make_reader
@@ -87,6 +90,49 @@ def test_recording_without_frames(tmp_path: Path, models: ModelBundle,
     code, out, err = run_main(["dataset", "from-recordings", path, "--out", tmp_path / "d"],
                               monkeypatch, capsys)
     assert_one_error_line(code, out, err, "no RGB frames")
+
+
+class _FillingDisk(io.BytesIO):
+    """A file on a disk that is full once ``room`` bytes are in it."""
+
+    def __init__(self, room: int) -> None:
+        super().__init__()
+        self.room = room
+
+    def write(self, data: Any) -> int:
+        if self.tell() + len(data) > self.room:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return super().write(data)
+
+
+def test_a_full_disk_names_the_recording_and_the_heaters_go_off(
+        tmp_path: Path, models: ModelBundle, monkeypatch: pytest.MonkeyPatch) -> None:
+    import relaxgrip.recording.recorder as recorder_module
+    from relaxgrip.twin import GripperTwin, TwinConfig
+
+    path = tmp_path / "grasp.mcap"
+    monkeypatch.setattr(recorder_module, "open", lambda *a, **k: _FillingDisk(2_000_000),
+                        raising=False)
+    cfg = TwinConfig()
+    clock = VirtualClock()
+    twin = GripperTwin(cfg, seed=0, clock=clock)
+    ctl = GraspController(cfg.rig, make_estimator("relax", models.icfn, models.rcfn))
+    with pytest.raises(OSError, match="No space left") as caught, McapRecorder(path) as rec:
+        run_loop(twin, ctl, clock, GraspPlan(target_n=5.0, temp_c=45.0), 30.0, recorder=rec)
+    assert caught.value.errno == errno.ENOSPC
+    assert caught.value.filename == str(path)  # the one line relaxgrip prints names it
+    assert rec.messages > 100  # it filled up mid-run, not at the start
+    assert twin.observe().heater_duty == (0.0, 0.0)  # the loop switched the heaters off
+
+
+def test_recording_without_infrared_frames(relax_hold: tuple[Path, HoldResult], tmp_path: Path,
+                                           monkeypatch: pytest.MonkeyPatch,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    good, _ = relax_hold
+    blind = tmp_path / "no-ir.mcap"
+    _without(good, blind, {"/ir"})
+    code, out, err = run_main(["replay", blind], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "no infrared frames")
 
 
 def test_recording_without_ground_truth(relax_hold: tuple[Path, HoldResult], tmp_path: Path,

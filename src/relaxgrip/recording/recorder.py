@@ -23,6 +23,8 @@ from __future__ import annotations
 import base64
 import json
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
 from dataclasses import asdict
 from pathlib import Path
 from types import TracebackType
@@ -131,14 +133,21 @@ class McapRecorder:
             raise InputError(f"{self.path}: cannot write ({exc.strerror})") from None
         self._writer: Writer = Writer(self._file, chunk_size=chunk_size_bytes,
                                       compression=kinds[compression])
-        self._writer.start(profile="", library=f"relaxgrip {__version__}")
         self._channels: dict[str, int] = {}
-        for topic, schema in CHANNELS.items():
-            schema_id = self._writer.register_schema(schema["title"], "jsonschema",
-                                                     schema_bytes(schema))
-            self._channels[topic] = self._writer.register_channel(topic, "json", schema_id)
-        self._writer.flush()  # type: ignore[no-untyped-call]
-        self._file.flush()
+        try:
+            with self._named():
+                self._writer.start(profile="", library=f"relaxgrip {__version__}")
+                for topic, schema in CHANNELS.items():
+                    schema_id = self._writer.register_schema(schema["title"], "jsonschema",
+                                                             schema_bytes(schema))
+                    self._channels[topic] = self._writer.register_channel(topic, "json",
+                                                                          schema_id)
+                self._writer.flush()  # type: ignore[no-untyped-call]
+                self._file.flush()
+        except OSError:
+            with suppress(OSError):  # its flush fails as the write did
+                self._file.close()
+            raise
         self._closed = False
         self._last_flush_s = -math.inf
         self._rgb_seq: int | None = None
@@ -204,10 +213,11 @@ class McapRecorder:
         self._write_controller(t, controller, command)
         self._write_truth(t, obs)
         self._write_events(t, controller)
-        if t - self._last_flush_s >= self.flush_every_s:
-            self._writer.flush()  # type: ignore[no-untyped-call]
-            self._last_flush_s = t
-        self._file.flush()
+        with self._named():
+            if t - self._last_flush_s >= self.flush_every_s:
+                self._writer.flush()  # type: ignore[no-untyped-call]
+                self._last_flush_s = t
+            self._file.flush()
 
     # -- parts -----------------------------------------------------------------------------
 
@@ -314,9 +324,20 @@ class McapRecorder:
             raise InputError(f"{self.path}: the recording is closed")
         data = json.dumps(json_safe(message), allow_nan=False, separators=(",", ":")).encode()
         ns = _ns(t_s)
-        self._writer.add_message(self._channels[topic], log_time=ns, data=data, publish_time=ns,
-                                 sequence=self.messages)
+        with self._named():  # a full chunk is written out here
+            self._writer.add_message(self._channels[topic], log_time=ns, data=data,
+                                     publish_time=ns, sequence=self.messages)
         self.messages += 1
+
+    @contextmanager
+    def _named(self) -> Iterator[None]:
+        """An error of the file system names the recording (a full disk names no file)."""
+        try:
+            yield
+        except OSError as exc:
+            if exc.filename is not None:
+                raise
+            raise OSError(exc.errno, exc.strerror or str(exc), str(self.path)) from exc
 
     # -- life ------------------------------------------------------------------------------
 
@@ -325,10 +346,11 @@ class McapRecorder:
         if self._closed:
             return
         self._closed = True
-        try:
-            self._writer.finish()  # type: ignore[no-untyped-call]
-        finally:
-            self._file.close()
+        with self._named():
+            try:
+                self._writer.finish()  # type: ignore[no-untyped-call]
+            finally:
+                self._file.close()
 
     def __enter__(self) -> McapRecorder:
         return self

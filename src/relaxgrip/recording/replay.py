@@ -88,7 +88,7 @@ def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
 
 def _replayed(path: Path, tolerant: bool, perception: Perception, est: ForceEstimator
               ) -> Iterator[tuple[Period, Percept, ForceEstimate]]:
-    frames = 0
+    frames = ir_frames = 0
     holding = False
     motor_mm = math.nan
 
@@ -119,8 +119,8 @@ def _replayed(path: Path, tolerant: bool, perception: Perception, est: ForceEsti
                 apply(event)
         obs = period.messages["/relaxgrip/observation"]
         motor_mm = float(obs["motor_position_mm"])
-        if period.rgb is not None:
-            frames += 1
+        frames += period.rgb is not None
+        ir_frames += period.ir is not None
         percept = perception.update(period.rgb, period.ir, motor_mm)
         estimate = est.update(percept, motor_mm)
         yield period, percept, estimate
@@ -129,6 +129,9 @@ def _replayed(path: Path, tolerant: bool, perception: Perception, est: ForceEsti
                 apply(event)
     if frames == 0:
         raise InputError(f"{path}: the recording has no RGB frames to replay")
+    if ir_frames == 0:
+        raise InputError(f"{path}: the recording has no infrared frames, which every estimator "
+                         "reads the fingers' temperature from")
 
 
 def _before_step(event: dict[str, Any], period_t_s: float) -> bool:
