@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -87,3 +88,22 @@ def test_a_missing_model_directory_is_named_and_the_port_freed(flag: str, expect
     again = socket.socket()
     again.bind(("127.0.0.1", port))  # the dashboard's listener was closed
     again.close()
+
+
+def test_a_recording_directory_is_checked_before_the_dashboard_serves(tmp_path) -> None:
+    # Recording starts at a click long after start-up: a folder it cannot write is named now.
+    a_file = tmp_path / "notes.txt"
+    a_file.write_text("not a folder\n")
+    import socket
+
+    probe = socket.socket()
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    for record_dir, expected in ((a_file, f"recording directory {a_file} is not a directory"),
+                                 (tmp_path / "none", "does not exist"),
+                                 (Path("/sys"), "cannot write in /sys")):
+        result = CliRunner().invoke(app, ["dashboard", "--port", str(port), "--record-dir",
+                                          str(record_dir)])
+        assert isinstance(result.exception, InputError), result.output
+        assert expected in str(result.exception)

@@ -50,6 +50,7 @@ from relaxgrip.control import (
 )
 from relaxgrip.control.runner import LoopRecorder
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import check_writable
 from relaxgrip.perception.marker import MarkerState
 from relaxgrip.rig import RigGeometry
 
@@ -492,7 +493,10 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
         raise InputError(f"--backend must be twin, emulator or serial:RIG.toml, got {backend!r}")
     get_object(object_name)
     if not record_dir.is_dir():
-        raise InputError(f"recording directory {record_dir} does not exist")
+        raise InputError(f"recording directory {record_dir} "
+                         + ("is not a directory" if record_dir.exists() else "does not exist"))
+    # A recording starts at the operator's click, long after this: find out now.
+    check_writable(record_dir / "relaxgrip-recording.mcap", InputError)
     bundle = load_default_models() if models_dir is None else load_models(
         models_dir, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
     observer = None if observer_dir is None else load_observer(observer_dir)
