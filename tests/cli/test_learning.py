@@ -101,6 +101,8 @@ def test_evaluate_table(
         (["evaluate", "--data", "{data}", "--models", "{tmp}"], "not a relaxgrip model directory"),
         (["evaluate", "--data", "{data}", "--split", "holdout"], "--split must be"),
         (["evaluate", "--data", "{data}", "--plot", "{tmp}/nowhere"], "no such directory"),
+        (["evaluate", "--data", "{data}", "--plot", "{tmp}/manifest.json"],
+         "not a directory (it names the folder for accuracy.png)"),
     ],
 )
 def test_bad_input(

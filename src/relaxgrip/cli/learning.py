@@ -147,7 +147,9 @@ def evaluate(
     if split not in ("train", "val", "test", "all"):
         raise InputError(f"--split must be train, val, test or all, got {split!r}")
     if plot is not None and not plot.is_dir():
-        raise InputError(f"--plot {plot}: no such directory")
+        raise InputError(f"--plot {plot}: " + ("not a directory (it names the folder for "
+                                              "accuracy.png)" if plot.exists()
+                                              else "no such directory"))
     dataset = load_dataset(data)
     bundle = load_default_models() if models is None else load_models(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
