@@ -15,6 +15,12 @@ Model directories (a ``manifest.json`` naming its format and version, and
 ``.npz`` arrays recorded by :func:`file_entry`) are read back through
 :func:`read_manifest` and :func:`read_npz_entry`, which raise the caller's
 one-line error on anything missing, foreign, too new, truncated or modified.
+
+Input files a command reads (a recording, a rig file, an image, a CSV) pass
+:func:`check_input_file` first: a FIFO, a device or a socket is refused by
+name rather than read (reading a FIFO without a writer blocks for ever,
+``/dev/zero`` never ends), and a file far larger than its kind can be is
+refused before it fills the memory.
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ import numpy as np
 
 __all__ = [
     "atomic_file",
+    "check_input_file",
     "check_output_dir",
     "check_replaceable",
     "check_writable",
@@ -145,12 +152,81 @@ def _special_kind(path: Path) -> str | None:
         mode = os.stat(path).st_mode
     except OSError:  # absent, or unreachable: the write itself reports that
         return None
+    return _kind_of(mode)
+
+
+def _kind_of(mode: int) -> str | None:
+    """What a file of ``st_mode`` ``mode`` is if not a regular file ("a FIFO"); else None."""
     if stat.S_ISREG(mode):
         return None
     kinds = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"),
              (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
              (stat.S_ISSOCK, "a socket"))
     return next((kind for test, kind in kinds if test(mode)), "a special file")
+
+
+def check_input_file(path: Path, what: str, error: type[Exception],
+                     max_bytes: int | None = None) -> Path:
+    """Check that ``path`` is a regular file to read (of at most ``max_bytes``), before opening it.
+
+    Symbolic links are followed: one to a regular file is a regular file.  A
+    FIFO (a shell's ``<(...)`` too), a device or a socket is refused, not
+    read: reading a FIFO without a writer blocks for ever, ``/dev/zero``
+    never ends, and a recording is read with seeks a pipe cannot make.
+
+    Parameters
+    ----------
+    path : Path
+        The file a command was given.
+    what : str
+        What it should be, for the messages ("recording", "rig file").
+    error : exception class
+        Raised, with one line naming ``path`` and the problem.
+    max_bytes : int, optional
+        The largest size taken (bytes); a larger file is refused before it is read.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    error
+        ``path`` is missing ("no such <what>"), unreachable, a directory, not a
+        regular file (saying what it is), or larger than ``max_bytes``.
+    """
+    path = Path(path)
+    try:
+        info = os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        raise error(f"{path}: no such {what}") from None
+    except OSError as exc:  # permission on a folder, a loop of links, a name too long
+        raise error(f"{path}: cannot read ({exc.strerror or one_line(exc)})") from None
+    kind = _kind_of(info.st_mode)
+    if kind == "a directory":
+        raise error(f"{path}: is a directory, not {_indefinite(what)}")
+    if kind is not None:
+        raise error(f"{path}: is {kind}, not a regular file")
+    if max_bytes is not None and info.st_size > max_bytes:
+        raise error(f"{path}: is {info.st_size:,} bytes, over the {_size_text(max_bytes)} "
+                    f"limit for {_indefinite(what)}")
+    return path
+
+
+def _indefinite(noun: str) -> str:
+    """``noun`` with its indefinite article ("a recording", "an image file")."""
+    return f"{'an' if noun[:1].lower() in ('a', 'e', 'i', 'o', 'u') else 'a'} {noun}"
+
+
+def _size_text(n_bytes: int) -> str:
+    """A size as people read it: "512 bytes", "1 MiB", "2.5 GiB"."""
+    size = float(n_bytes)
+    for unit in ("bytes", "KiB", "MiB", "GiB"):
+        if size < 1024.0:
+            return f"{n_bytes:,} bytes" if unit == "bytes" else f"{size:.4g} {unit}"
+        size /= 1024.0
+    return f"{size:.4g} TiB"
 
 
 def _check_replaceable(path: Path) -> None:

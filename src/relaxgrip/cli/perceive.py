@@ -14,6 +14,7 @@ from rich.table import Table
 
 from relaxgrip.cli._app import app, console, emit_json
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import check_input_file
 from relaxgrip.perception.marker import (
     PoseSolver,
     detect_markers,
@@ -38,8 +39,7 @@ def _read_gray(path: Path) -> np.ndarray[Any, np.dtype[np.uint8]]:
     """
     if path.is_dir():
         raise InputError(f"{path}: is a directory, not an image file")
-    if not path.is_file():
-        raise InputError(f"{path}: no such file")
+    check_input_file(path, "file", InputError)  # a FIFO or a device: named, not read
     data = np.fromfile(path, dtype=np.uint8)
     log = cv2.utils.logging
     previous = log.getLogLevel()

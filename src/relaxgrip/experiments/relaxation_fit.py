@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import check_input_file
 from relaxgrip.metrics import auc_rel, nrmse
 from relaxgrip.physics.fitting import (
     WEIGHTINGS,
@@ -183,17 +184,13 @@ def load_relaxation_csv(path: str | Path) -> RelaxationRecord:
     ------
     relaxgrip.errors.InputError
         With a one-line message naming the file and the problem: the file is
-        missing or unreadable, not a text CSV, lacks a column or has one twice
-        (named), has an
+        missing, unreadable or not a regular file (a FIFO, a device), not a
+        text CSV, lacks a column or has one twice (named), has an
         unparseable or non-finite value (column and line named), time that
         does not strictly increase (line named), or fewer than
         :data:`MIN_ROWS` data rows.
     """
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: no such file")
-    if not path.is_file():
-        raise InputError(f"{path}: not a file")
+    path = check_input_file(Path(path), "file", InputError)
     try:
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:

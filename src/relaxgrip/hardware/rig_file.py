@@ -14,6 +14,7 @@ inside they become metres.  See ``docs/rig-example.toml`` (a real rig) and
 
 from __future__ import annotations
 
+import io
 import math
 import tomllib
 from dataclasses import dataclass
@@ -21,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import check_input_file, one_line
 from relaxgrip.rig import (
     ARUCO_DICTIONARIES,
     CameraIntrinsics,
@@ -33,6 +35,7 @@ from relaxgrip.rig import (
 
 __all__ = [
     "IR_SOURCES",
+    "MAX_RIG_BYTES",
     "RGB_SOURCES",
     "EmulatorSpec",
     "IrCameraSpec",
@@ -50,6 +53,8 @@ RGB_SOURCES = ("opencv", "emulator")
 IR_SOURCES = ("uvc", "emulator")
 #: The widest ``open_aperture_mm`` taken (mm).
 MAX_APERTURE_MM = 1000.0
+#: The largest rig file read (bytes): one is a few KiB of TOML.
+MAX_RIG_BYTES = 1 << 20
 
 
 class _Table:
@@ -498,15 +503,29 @@ def load_rig(path: str | Path) -> RigFile:
     Raises
     ------
     InputError
-        The file is missing, is not TOML, or has a bad field (one line naming it).
+        The file is missing, not a regular file (a FIFO, a device), larger
+        than :data:`MAX_RIG_BYTES`, not UTF-8 text, not TOML, or has a bad
+        field (one line naming it).
     """
     p = Path(path)
+    if not p.exists():
+        raise InputError(f"rig file {p} not found")
+    check_input_file(p, "rig file", InputError, max_bytes=MAX_RIG_BYTES)
     try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
+        with open(p, "rb") as f:  # bounded: the file may have grown since the check
+            raw = f.read(MAX_RIG_BYTES + 1)
+    except FileNotFoundError:  # removed since the check
         raise InputError(f"rig file {p} not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read rig file {p}: {exc}") from None
+    except OSError as exc:
+        raise InputError(f"cannot read rig file {p}: {exc.strerror or one_line(exc)}") from None
+    if len(raw) > MAX_RIG_BYTES:
+        raise InputError(f"{p}: is over the {MAX_RIG_BYTES:,}-byte limit for a rig file")
+    try:
+        # Universal newlines, as a text-mode read gives: a file saved with CR line ends reads.
+        text = io.StringIO(raw.decode("utf-8"), newline=None).read()
+    except UnicodeDecodeError as exc:
+        raise InputError(f"rig file {p} is not UTF-8 text (byte {raw[exc.start]:#04x} at "
+                         f"offset {exc.start})") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

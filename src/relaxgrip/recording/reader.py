@@ -29,7 +29,7 @@ import numpy as np
 
 from relaxgrip.backend import Frame
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import atomic_file, check_writable, one_line
+from relaxgrip.fileio import atomic_file, check_input_file, check_writable, one_line
 from relaxgrip.recording.recorder import require_mcap
 from relaxgrip.recording.schemas import RECORDING_FORMAT, RECORDING_VERSION
 from relaxgrip.rig import RigGeometry
@@ -43,7 +43,13 @@ _FOOTER_RECORD = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, offset star
 
 
 def _check_file(path: Path, tolerant: bool) -> bool:
-    """Whether ``path`` is a complete MCAP file; raise on a missing or foreign one."""
+    """Whether ``path`` is a complete MCAP file; raise on a missing, foreign or special one.
+
+    A FIFO (a shell's ``<(cat rec.mcap)``) or a device is refused before it is
+    opened: the footer is found by a seek a pipe cannot make, and a FIFO
+    without a writer would block the open for ever.
+    """
+    check_input_file(path, "recording", InputError)
     try:
         size = path.stat().st_size
         with open(path, "rb") as f:
@@ -53,12 +59,10 @@ def _check_file(path: Path, tolerant: bool) -> bool:
                 f.seek(size - len(_MAGIC) - _FOOTER_RECORD)
                 tail = f.read()
                 complete = tail[0] == _FOOTER_OPCODE and tail.endswith(_MAGIC)
-    except FileNotFoundError:
+    except FileNotFoundError:  # removed since the check
         raise InputError(f"{path}: no such recording") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a directory, not a recording") from None
     except OSError as exc:
-        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
+        raise InputError(f"{path}: cannot read ({exc.strerror or one_line(exc)})") from None
     if head != _MAGIC:
         raise InputError(f"{path}: not an MCAP file")
     if not complete and not tolerant:
@@ -80,7 +84,8 @@ def iter_records(path: Path, tolerant: bool = False) -> Iterator[Any]:
     Raises
     ------
     InputError
-        Missing, foreign or (unless ``tolerant``) truncated or damaged file.
+        Missing, foreign or (unless ``tolerant``) truncated or damaged file,
+        or a path that is not a regular file (a directory, a FIFO, a device).
     """
     require_mcap()
     from mcap.exceptions import McapError
@@ -404,7 +409,8 @@ def recover(src: Path, dst: Path) -> RecoverReport:
     Raises
     ------
     InputError
-        Missing or foreign source, nothing readable, ``dst`` the same file,
+        Missing or foreign source, or one that is not a regular file (a
+        FIFO, a pipe, a device), nothing readable, ``dst`` the same file,
         a directory or another non-regular file (a FIFO, a device), or ``dst``
         not writable.
     """
