@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import socket
 from pathlib import Path
@@ -15,6 +16,7 @@ from relaxgrip.fileio import (
     check_replaceable,
     check_writable,
     file_entry,
+    made_directory,
     npz_bytes,
     write_files_atomically,
     write_text_atomically,
@@ -129,3 +131,42 @@ def test_check_output_dir_replaces_only_its_own_outputs(tmp_path) -> None:
         check_output_dir(out, "fmt", own, ValueError)
     with pytest.raises(ValueError, match="exists and is not a directory"):
         check_output_dir(out / "notes.txt", "fmt", own, ValueError)
+
+
+def test_a_full_disk_names_the_file_it_was_writing(tmp_path, monkeypatch) -> None:
+    def full(fd: int) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")  # names no file
+
+    write_text_atomically(tmp_path / "report.md", "old")
+    monkeypatch.setattr(os, "fsync", full)
+    with pytest.raises(OSError, match="No space left") as caught:
+        write_files_atomically(tmp_path, [("report.md", b"new")])
+    assert caught.value.filename == str(tmp_path / "report.md")
+    assert (tmp_path / "report.md").read_text() == "old"
+    with pytest.raises(OSError, match="No space left") as caught, \
+            atomic_file(tmp_path / "big.bin") as fh:
+        fh.write(b"x")
+    assert caught.value.filename == str(tmp_path / "big.bin")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report.md"]
+
+
+def test_a_failed_output_leaves_no_folder_it_made(tmp_path) -> None:
+    kept = tmp_path / "kept"
+    kept.mkdir()
+
+    def fail_in(folder: Path, theirs: bool = False) -> None:
+        with made_directory(folder) as out:
+            assert out.is_dir()
+            if theirs:
+                (out / "theirs").write_text("keep")
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+    with pytest.raises(OSError, match="No space left"):
+        fail_in(kept / "a" / "b")
+    assert list(kept.iterdir()) == []  # a and b are gone, the folder that was there stays
+    with made_directory(kept / "c") as out:
+        (out / "x").write_text("done")
+    assert (kept / "c" / "x").read_text() == "done"
+    with pytest.raises(OSError, match="No space left"):
+        fail_in(kept / "d", theirs=True)
+    assert (kept / "d" / "theirs").is_file()  # someone else's file keeps its folder

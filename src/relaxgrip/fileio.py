@@ -33,7 +33,7 @@ import os
 import secrets
 import stat
 from collections.abc import Collection, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +47,8 @@ __all__ = [
     "check_writable",
     "entries",
     "file_entry",
+    "made_directory",
+    "named_errors",
     "npz_bytes",
     "one_line",
     "read_manifest",
@@ -92,7 +94,7 @@ def write_files_atomically(directory: Path, files: Sequence[tuple[str, bytes]]) 
         for name, data in files:
             tmp, fd = _temporary(directory, name)
             temporaries.append((tmp, directory / name))
-            with os.fdopen(fd, "wb") as fh:
+            with named_errors(directory / name), os.fdopen(fd, "wb") as fh:
                 fh.write(data)
                 fh.flush()
                 os.fsync(fh.fileno())
@@ -102,6 +104,44 @@ def write_files_atomically(directory: Path, files: Sequence[tuple[str, bytes]]) 
         for tmp, _ in temporaries:
             tmp.unlink(missing_ok=True)
     _sync_directory(directory)
+
+
+@contextmanager
+def named_errors(path: Path) -> Iterator[None]:
+    """An error of the file system in the block names ``path`` where it names no file.
+
+    A full disk's ``OSError`` names none: the one line relaxgrip prints would
+    not say which output it was.
+    """
+    try:
+        yield
+    except OSError as exc:
+        if exc.filename is not None:
+            raise
+        raise OSError(exc.errno, exc.strerror or one_line(exc), str(path)) from exc
+
+
+@contextmanager
+def made_directory(directory: Path) -> Iterator[Path]:
+    """``directory``, made with its missing parents, for the block to write in.
+
+    If the block fails (a full disk), the folders this made are removed
+    again where they are empty: a failed output leaves nothing behind.
+    """
+    directory = Path(directory)
+    missing = []
+    folder = directory
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    directory.mkdir(parents=True, exist_ok=True)
+    try:
+        yield directory
+    except BaseException:
+        for folder in missing:  # the deepest first
+            with suppress(OSError):  # not empty: someone wrote there meanwhile
+                folder.rmdir()
+        raise
 
 
 def _temporary(directory: Path, name: str) -> tuple[Path, int]:
@@ -133,7 +173,7 @@ def atomic_file(path: Path) -> Iterator[io.BufferedWriter]:
     _check_replaceable(path)
     tmp, fd = _temporary(path.parent, path.name)
     try:
-        with os.fdopen(fd, "wb") as fh:
+        with named_errors(path), os.fdopen(fd, "wb") as fh:
             yield fh
             fh.flush()
             os.fsync(fh.fileno())

@@ -30,6 +30,7 @@ from relaxgrip.errors import InputError
 from relaxgrip.fileio import (
     check_writable,
     entries,
+    made_directory,
     write_files_atomically,
     write_text_atomically,
 )
@@ -528,12 +529,13 @@ def reproduce(
             if progress is not None:
                 progress(section, len(done), len(ordered))
         sections = [done[k] for k in SECTIONS if k in done]
-        out_dir.mkdir(exist_ok=True)
         figures = [s.figure for s in sections if s.figure is not None
                    and (work / s.figure).is_file()]
-        write_files_atomically(out_dir, [(name, (work / name).read_bytes()) for name in figures])
-    write_report(out_dir, sections, quick=quick, seed=seed,
-                 seconds=time.perf_counter() - start)
+        with made_directory(out_dir):
+            write_files_atomically(out_dir,
+                                   [(name, (work / name).read_bytes()) for name in figures])
+            write_report(out_dir, sections, quick=quick, seed=seed,
+                         seconds=time.perf_counter() - start)
     return sections
 
 

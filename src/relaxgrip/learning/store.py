@@ -34,6 +34,7 @@ from relaxgrip.fileio import (
     check_output_dir,
     check_writable,
     file_entry,
+    made_directory,
     npz_bytes,
     one_line,
     read_manifest,
@@ -253,11 +254,11 @@ def save_models(
         "training": dict(training),
     }
     text = _manifest_bytes(manifest, "training")
-    directory.mkdir(parents=True, exist_ok=True)
-    write_files_atomically(
-        directory,
-        [(ICFN_FILE, icfn_data), (RCFN_FILE, rcfn_data), *extra, (MANIFEST_NAME, text)],
-    )
+    with made_directory(directory):
+        write_files_atomically(
+            directory,
+            [(ICFN_FILE, icfn_data), (RCFN_FILE, rcfn_data), *extra, (MANIFEST_NAME, text)],
+        )
     return directory / MANIFEST_NAME
 
 

@@ -200,8 +200,10 @@ def malformed_fields(path: Path) -> Iterator[None]:
     """
     try:
         yield
-    except InputError:
-        raise
+    except InputError as exc:  # a frame or a value the readers refuse: say whose
+        if str(path) in str(exc):
+            raise
+        raise InputError(f"{path}: {exc}") from None
     except KeyError as exc:
         raise InputError(f"{path}: a message lacks the field {exc.args[0]!r}") from None
     except (TypeError, ValueError, AttributeError) as exc:  # binascii.Error is a ValueError

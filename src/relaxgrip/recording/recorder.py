@@ -23,8 +23,7 @@ from __future__ import annotations
 import base64
 import json
 import math
-from collections.abc import Iterator
-from contextlib import contextmanager, suppress
+from contextlib import suppress
 from dataclasses import asdict
 from pathlib import Path
 from types import TracebackType
@@ -37,6 +36,7 @@ from relaxgrip import __version__
 from relaxgrip.backend import BackendInfo, Command, Frame, Observation
 from relaxgrip.control.phases import GraspPhase, PhaseLog
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import named_errors
 from relaxgrip.perception.features import marker_pose
 from relaxgrip.perception.marker import TrackStatus
 from relaxgrip.recording.schemas import CHANNELS, RECORDING_FORMAT, RECORDING_VERSION, schema_bytes
@@ -135,7 +135,7 @@ class McapRecorder:
                                       compression=kinds[compression])
         self._channels: dict[str, int] = {}
         try:
-            with self._named():
+            with named_errors(self.path):
                 self._writer.start(profile="", library=f"relaxgrip {__version__}")
                 for topic, schema in CHANNELS.items():
                     schema_id = self._writer.register_schema(schema["title"], "jsonschema",
@@ -213,7 +213,7 @@ class McapRecorder:
         self._write_controller(t, controller, command)
         self._write_truth(t, obs)
         self._write_events(t, controller)
-        with self._named():
+        with named_errors(self.path):
             if t - self._last_flush_s >= self.flush_every_s:
                 self._writer.flush()  # type: ignore[no-untyped-call]
                 self._last_flush_s = t
@@ -324,20 +324,10 @@ class McapRecorder:
             raise InputError(f"{self.path}: the recording is closed")
         data = json.dumps(json_safe(message), allow_nan=False, separators=(",", ":")).encode()
         ns = _ns(t_s)
-        with self._named():  # a full chunk is written out here
+        with named_errors(self.path):  # a full chunk is written out here
             self._writer.add_message(self._channels[topic], log_time=ns, data=data,
                                      publish_time=ns, sequence=self.messages)
         self.messages += 1
-
-    @contextmanager
-    def _named(self) -> Iterator[None]:
-        """An error of the file system names the recording (a full disk names no file)."""
-        try:
-            yield
-        except OSError as exc:
-            if exc.filename is not None:
-                raise
-            raise OSError(exc.errno, exc.strerror or str(exc), str(self.path)) from exc
 
     # -- life ------------------------------------------------------------------------------
 
@@ -346,7 +336,7 @@ class McapRecorder:
         if self._closed:
             return
         self._closed = True
-        with self._named():
+        with named_errors(self.path):
             try:
                 self._writer.finish()  # type: ignore[no-untyped-call]
             finally:
