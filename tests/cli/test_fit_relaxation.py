@@ -166,9 +166,11 @@ def bad_case(tmp_path: Path, name: str) -> list[str | Path]:
             f"{t:.6f},99,{x:.6f},{f:.6f}\n" for t, x, f in rows), encoding="utf-8")
     elif name == "too-few-rows":
         write_csv(csv, rows[:5])
-    elif name == "bad-number":
+    elif name in ("bad-number", "underscore-number"):
         write_csv(csv, rows)
-        text = csv.read_text(encoding="utf-8").replace("0.020000,0.400000", "0.020000,0.4mm", 1)
+        typo = "0.4mm" if name == "bad-number" else "0_4"  # float("0_4") is 4.0
+        text = csv.read_text(encoding="utf-8").replace("0.020000,0.400000", f"0.020000,{typo}",
+                                                       1)
         csv.write_text(text, encoding="utf-8")
     else:
         write_csv(csv, rows)
@@ -212,6 +214,7 @@ def test_bad_input_subprocess(tmp_path: Path, name: str, expected: str) -> None:
         ("not-a-csv", "not a text CSV"),
         ("too-few-rows", "only 5 data rows"),
         ("bad-number", "line 3: displacement_mm value '0.4mm' is not a number"),
+        ("underscore-number", "line 3: displacement_mm value '0_4' is not a number"),
         ("window-too-short", "needs at least 10"),
         ("weighting-unknown", "--weighting must be one of time, sample"),
         ("plot-missing-dir", "does not exist"),

@@ -13,6 +13,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -47,6 +48,10 @@ __all__ = [
 COLUMNS: tuple[str, ...] = ("time_s", "displacement_mm", "force_n")
 # A hold needs at least 10 samples (find_hold), plus the ramp before it.
 MIN_ROWS = 12
+#: A number as instruments write one.  Python's float() also takes "1_000" (1000) and
+#: other scripts' digits, which in a measurement file are a typo, not a number.
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?:inf|nan)",
+                     re.ASCII | re.IGNORECASE)
 # Fewest hold samples a fit window may hold, whatever the number of parameters.
 MIN_FIT_SAMPLES = 10
 
@@ -233,12 +238,9 @@ def load_relaxation_csv(path: str | Path) -> RelaxationRecord:
             cell = row[k].strip()
             if delimiter != ",":
                 cell = cell.replace(",", ".")
-            try:
-                value = float(cell)
-            except ValueError:
-                raise InputError(
-                    f"{path}, line {line}: {col} value {cell!r} is not a number"
-                ) from None
+            if not _NUMBER.fullmatch(cell):
+                raise InputError(f"{path}, line {line}: {col} value {cell!r} is not a number")
+            value = float(cell)
             if not math.isfinite(value):
                 raise InputError(f"{path}, line {line}: {col} is {cell!r}, not a finite number")
             data[i, j] = value
