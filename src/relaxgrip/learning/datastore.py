@@ -23,21 +23,22 @@ import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import check_output_dir, read_manifest
+from relaxgrip.fileio import check_output_dir, one_line, read_manifest
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA, FeatureSchema
 from relaxgrip.physics.fitting import osculating_reduced
+from relaxgrip.validate import ABSOLUTE_ZERO_C
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["DATASET_FORMAT", "Dataset", "check_dataset_out", "load_dataset", "split_counts",
-           "training_gaps", "write_dataset"]
+__all__ = ["DATASET_FORMAT", "MAX_SET_TEMP_C", "Dataset", "check_dataset_out", "load_dataset",
+           "split_counts", "training_gaps", "write_dataset"]
 
 DATASET_FORMAT = "relaxgrip-dataset"
 DATASET_VERSION = 1
@@ -215,6 +216,9 @@ def write_dataset(out_dir: Path, tables: dict[str, pd.DataFrame], manifest: dict
             shutil.rmtree(old, ignore_errors=True)
         else:
             os.replace(tmp, out)
+    except OSError as exc:  # a full disk: pyarrow's text names no file
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise InputError(f"{out}: cannot write ({exc.strerror or one_line(exc)})") from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -280,6 +284,15 @@ class Dataset:
 
 #: The splits a row may belong to.
 _SPLITS = ("train", "val", "test")
+#: Hottest set temperature a dataset may hold (°C).  The heaters' own limits stop far below
+#: (``relaxgrip.control.temperature.ThermalLimits``: set points to 65 °C, cut-off at 70 °C by
+#: default); 200 °C leaves ample room for a rig configured otherwise, so a value past it is
+#: a damaged cell, not a recipe.
+MAX_SET_TEMP_C = 200.0
+#: Fewest rows per sequence, by table: a force curve needs two times to say how it relaxes
+#: (the Eq. 10 labels and the metrics take slopes and integrals over it); recordings may end
+#: a hold's features after one row.
+_MIN_ROWS = {"rcfn_features": 1, "rcfn_curves": 2}
 
 
 @dataclass(frozen=True)
@@ -416,11 +429,71 @@ def _read_table(path: Path, columns: _Columns) -> pd.DataFrame:
         if non_positive:
             raise InputError(f"{path}: column 'tau_s' has {non_positive} values <= 0; "
                              "rebuild the dataset")
+    if "temp_set_c" in columns.numbers:  # NaN: a recording whose plan set no temperature
+        _check_set_temperatures(path, table)
     return table
 
 
+def _check_set_temperatures(path: Path, table: pd.DataFrame) -> None:
+    """Every known set temperature above absolute zero and at most :data:`MAX_SET_TEMP_C`."""
+    temps = table["temp_set_c"].to_numpy(np.float64, na_value=np.nan)
+    with np.errstate(invalid="ignore"):  # NaN compares False: unknown set points pass
+        bad = (temps <= ABSOLUTE_ZERO_C) | (temps > MAX_SET_TEMP_C)
+    if bad.any():
+        where = np.flatnonzero(bad)
+        count = where.size
+        raise InputError(
+            f"{path}: column 'temp_set_c' has {count} set temperature{'s' if count > 1 else ''} "
+            f"at or below absolute zero or above {MAX_SET_TEMP_C:g} °C, e.g. "
+            f"{temps[where[0]]:g} °C (sequence {table['sequence'].iloc[where[0]]}); "
+            "rebuild the dataset"
+        )
+
+
+def _check_times(path: Path, table: pd.DataFrame, min_rows: int) -> None:
+    """Within each sequence ``t_s`` starts at >= 0 (the hold onset) and rises strictly in file
+    order, over at least ``min_rows`` rows.
+
+    Readers take each sequence's rows in file order (the builder writes them so): the
+    metrics and the Eq. 10 labels need strictly increasing times.  Vectorised: one stable
+    sort by sequence, which keeps file order within each.
+    """
+    if len(table) == 0:
+        return
+    order = np.argsort(table["sequence"].to_numpy(), kind="stable")
+    seq = table["sequence"].to_numpy()[order]
+    t = table["t_s"].to_numpy(np.float64)[order]
+    first = np.empty(seq.size, dtype=bool)
+    first[0] = True
+    np.not_equal(seq[1:], seq[:-1], out=first[1:])
+    starts = np.flatnonzero(first)
+
+    def fail(problem: str, rows: NDArray[np.intp]) -> NoReturn:
+        n_seq = np.unique(seq[rows]).size
+        others = f" ({n_seq - 1} other sequences too)" if n_seq > 1 else ""
+        raise InputError(f"{path}: {problem}{others}; rebuild the dataset")
+
+    early = starts[t[starts] < 0]
+    if early.size:
+        fail(f"t_s of sequence {seq[early[0]]} starts at {t[early[0]]:g} s, before the hold "
+             "onset at 0 s", early)
+    stuck = np.flatnonzero(~first[1:] & (t[1:] <= t[:-1])) + 1
+    if stuck.size:
+        i = stuck[0]
+        how = (f"repeats {t[i]:g} s" if t[i] == t[i - 1]
+               else f"falls from {t[i - 1]:g} to {t[i]:g} s")
+        fail(f"t_s of sequence {seq[i]} {how}, not strictly increasing", stuck)
+    counts = np.diff(np.append(starts, seq.size))
+    short = starts[counts < min_rows]
+    if short.size:
+        n = int(counts[counts < min_rows][0])
+        fail(f"sequence {seq[short[0]]} has only {n} row{'s' if n > 1 else ''}, needs at least "
+             f"{min_rows}", short)
+
+
 def _check_sequences(d: Path, tables: Mapping[str, pd.DataFrame]) -> None:
-    """Every sequence once, with feature rows and a curve; no rows of unknown sequences."""
+    """Every sequence once, with feature rows and a curve whose times are sound
+    (:func:`_check_times`); no rows of unknown sequences."""
     ids = tables["rcfn_sequences"]["sequence"]
     repeated = ids[ids.duplicated()]
     if len(repeated):
@@ -440,6 +513,7 @@ def _check_sequences(d: Path, tables: Mapping[str, pd.DataFrame]) -> None:
             raise InputError(f"{path}: no rows for {len(lacking)} of the {len(known)} sequences "
                              f"of rcfn_sequences.parquet (e.g. {lacking[0]}); "
                              "rebuild the dataset")
+        _check_times(path, tables[name], _MIN_ROWS[name])
 
 
 def load_dataset(directory: Path) -> Dataset:
@@ -451,8 +525,12 @@ def load_dataset(directory: Path) -> Dataset:
         On a missing directory or table, a foreign or damaged manifest, a
         dataset built with other feature schemas, or a damaged table: a column
         its readers use missing, text where numbers belong, a NaN or infinite
-        value, a split other than train, val or test, or rows of a sequence
-        that the other tables lack.
+        value, a split other than train, val or test, a set temperature
+        (``temp_set_c``, NaN where unknown) at or below absolute zero or above
+        :data:`MAX_SET_TEMP_C`, rows of a sequence that the other tables lack,
+        or a sequence of ``rcfn_features`` or ``rcfn_curves`` whose ``t_s``
+        starts before 0 or does not rise strictly in file order, or a curve of
+        fewer than two rows.
     """
     d = Path(directory)
     manifest_path = d / "manifest.json"

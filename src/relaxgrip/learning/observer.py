@@ -20,7 +20,9 @@ aperture after a loading at a known closing speed):
 1. The relaxation times at the reference temperature: a ``n_terms`` Prony
    series (:func:`relaxgrip.physics.fitting.fit_prony`) fitted to the mean
    normalised force curve of the sequences nearest the reference temperature.
-2. Per temperature group (sequences of one set temperature): for each
+2. Per temperature group (sequences of one set temperature; a sequence
+   without one, as recordings whose plan set no heater temperature give,
+   joins the group of its measured temperature, :func:`_group_key`): for each
    candidate shift ``ln a_T`` the branch responses ``h_i(t)`` to the
    sequence's deflection history (a ramp from contact to the onset
    deflection over the loading time, then the marker's measured deflection
@@ -61,6 +63,7 @@ from relaxgrip.errors import InputError
 from relaxgrip.fileio import (
     check_output_dir,
     file_entry,
+    made_directory,
     npz_bytes,
     one_line,
     read_manifest,
@@ -70,7 +73,7 @@ from relaxgrip.fileio import (
 from relaxgrip.learning.datastore import Dataset
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.perception.features import ICFN_SCHEMA
-from relaxgrip.physics.fitting import fit_prony
+from relaxgrip.physics.fitting import MAX_FORCE_N, fit_prony
 from relaxgrip.physics.viscoelastic import branch_update
 from relaxgrip.validate import check_finite, check_positive
 
@@ -101,6 +104,11 @@ _BAND_BIN_S = 20.0
 _FIT_DT_S = 1.0
 #: Steps of the loading ramp (the recursion is exact for a linear ramp; a few suffice).
 _RAMP_STEPS = 4
+#: Longest hold, and loading before it, identified (s): each hold is resampled every
+#: ``_FIT_DT_S`` and integrated step by step for every candidate shift, so its cost grows
+#: with its length.  The datasets' holds last at most an hour, their loadings seconds: a
+#: day is generous, and a time far beyond it is a damaged table, not a long hold.
+_MAX_HOLD_S = 86400.0
 #: Search window of a group's ``ln a_T`` below / above the next colder group's.
 _MAX_SHIFT_DROP = 3.0
 _SHIFT_SLACK = 0.1
@@ -143,7 +151,7 @@ class _Hold:
     """One RCFN sequence prepared for identification."""
 
     sequence: int
-    group: float
+    group: float  # the temperature group's key (:func:`_group_key`)
     temp_c: float
     setup: str
     split: str
@@ -263,7 +271,11 @@ class ObserverModel:
         Raises
         ------
         InputError
-            Too few usable sequences, or hyperparameters out of range.
+            Too few usable sequences, hyperparameters out of range, or holds the
+            identification cannot take: a hold or its loading longer than a day,
+            a force beyond :data:`relaxgrip.physics.fitting.MAX_FORCE_N`, forces
+            that fit no positive stiffness or no Prony series, or parameters that
+            come out non-finite.
         """
         if not (1 <= self.n_terms <= 5):
             raise InputError(f"n_terms must be 1-5, got {self.n_terms}")
@@ -304,6 +316,10 @@ class ObserverModel:
         self.log_stiffness_ = self._stiffness(train, groups, ref, shift_of)[order]
         self._fit_band(held, icfn)
         self.n_sequences_ = len(holds)
+        bad = [name for name, value in self.to_arrays().items() if not np.isfinite(value).all()]
+        if bad:  # load_observer would refuse the file: say so now, of the dataset
+            raise InputError(f"the dataset's RCFN holds give non-finite observer parameters "
+                             f"({', '.join(bad)}); check their forces and deflections")
         return self
 
     def _prepare(self, data: Dataset) -> list[_Hold]:
@@ -324,11 +340,21 @@ class ObserverModel:
             fe, cu = feats[seq], curves[seq]
             d0 = float(fe["onset_dx_m"].iloc[0])
             f0 = float(row["f0_n"])
-            if not (d0 > 0 and f0 > 0) or len(fe) < 2:
-                continue
             t_c = cu["t_s"].to_numpy(np.float64)
+            # Under one resampling step a hold shows no relaxation (and the Prony fit of the
+            # reference times needs two samples at least).
+            if not (d0 > 0 and f0 > 0) or len(fe) < 2 or not t_c[-1] >= _FIT_DT_S:
+                continue
+            if t_c[-1] > _MAX_HOLD_S:
+                raise InputError(f"RCFN sequence {seq}: a hold of {t_c[-1]:g} s; the observer "
+                                 f"identifies holds of at most {_MAX_HOLD_S:g} s (a day)")
+            f_c = cu["force_n"].to_numpy(np.float64)
+            peak = max(f0, float(np.max(np.abs(f_c))))
+            if peak > MAX_FORCE_N:
+                raise InputError(f"RCFN sequence {seq}: a force of {peak:g} N, beyond any "
+                                 f"relaxation test (at most {MAX_FORCE_N:g} N)")
             grid = np.arange(0.0, float(t_c[-1]) + 1e-9, _FIT_DT_S)
-            f = np.interp(grid, t_c, cu["force_n"].to_numpy(np.float64))
+            f = np.interp(grid, t_c, f_c)
             d_hold = np.interp(grid, fe["t_s"].to_numpy(np.float64),
                                fe["dx_m"].to_numpy(np.float64))
             d_hold[0] = d0
@@ -336,11 +362,17 @@ class ObserverModel:
             if not (math.isfinite(ratio) and ratio > 0):
                 ratio = fallback_ratio
             load_s = max(ratio * d0 * 1e3 / self.loading_speed_mm_s, 1e-3)
+            if not load_s <= _MAX_HOLD_S:
+                raise InputError(
+                    f"RCFN sequence {seq}: an onset deflection of {d0:g} m at closure ratio "
+                    f"{ratio:g} makes a loading of {load_s:g} s at {self.loading_speed_mm_s:g} "
+                    f"mm/s; the observer identifies loadings of at most {_MAX_HOLD_S:g} s")
             ramp_t = np.linspace(-load_s, 0.0, _RAMP_STEPS + 1)[:-1]
             ramp_d = np.linspace(0.0, d0, _RAMP_STEPS + 1)[:-1]
+            temp_c = float(np.nanmedian(fe["temp_c"].to_numpy(np.float64)))
             holds.append(_Hold(
-                sequence=seq, group=round(float(row["temp_set_c"]), 1),
-                temp_c=float(np.nanmedian(fe["temp_c"].to_numpy(np.float64))),
+                sequence=seq, group=_group_key(float(row["temp_set_c"]), temp_c),
+                temp_c=temp_c,
                 setup=f"{row['object']}@{float(row['contact_set_m']):.3f}",
                 split=str(row["split"]), f0_n=f0,
                 t_s=np.concatenate([ramp_t, grid]), d_m=np.concatenate([ramp_d, d_hold]),
@@ -373,7 +405,8 @@ class ObserverModel:
             resp = branch_responses(h.t_s, h.d_m, tau)[_RAMP_STEPS:]
             basis = np.column_stack([h.d_m[_RAMP_STEPS:], resp])
             theta, resid = nnls(basis, h.f_n)
-            err += float(resid / h.f0_n) ** 2
+            rel = float(resid) / h.f0_n
+            err += rel * rel  # not ** 2: a float power overflows with an exception
             total = float(theta.sum())
             stiff.append(total)
             shares.append(theta[1:] / total if total > 0 else np.zeros(self.n_terms))
@@ -408,6 +441,9 @@ class ObserverModel:
             row[len(groups) + setups.index(h.setup)] = 1.0
             rows.append(row)
             target.append(math.log(stiff[0]))
+        if not rows:
+            raise InputError("no RCFN sequence gives the observer a positive stiffness: their "
+                             "forces do not follow the marker's deflection")
         a = np.array(rows)
         a = np.delete(a, ref, axis=1)  # the reference group is the level
         coef, *_ = np.linalg.lstsq(a, np.array(target), rcond=None)
@@ -552,9 +588,9 @@ def save_observer(directory: Path, model: ObserverModel, training: Mapping[str, 
         "training": dict(training),
     }
     text = json.dumps(manifest, indent=2, allow_nan=False)
-    directory.mkdir(parents=True, exist_ok=True)
-    write_files_atomically(directory, [(OBSERVER_FILE, data),
-                                       (MANIFEST_NAME, (text + "\n").encode())])
+    with made_directory(directory):
+        write_files_atomically(directory, [(OBSERVER_FILE, data),
+                                           (MANIFEST_NAME, (text + "\n").encode())])
     return directory / MANIFEST_NAME
 
 
@@ -579,7 +615,8 @@ def load_observer(directory: Path) -> ObserverModel:
     try:
         return ObserverModel.from_arrays(arrays, section["params"])
     except Exception as exc:  # shape and value checks of the arrays and parameters
-        raise ObserverFileError(f"{npz_path}: {one_line(exc)}") from None
+        # The parameters are the manifest's, the arrays the npz file's: name both.
+        raise ObserverFileError(f"{path} and {npz_path.name}: {one_line(exc)}") from None
 
 
 def set_band_scale(directory: Path, band_scale: float, record: Mapping[str, Any],
@@ -631,6 +668,22 @@ def _finite_at_least(value: Any, low: float, strict: bool) -> bool:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         return False
     return value > low if strict else value >= low
+
+
+def _group_key(temp_set_c: float, temp_c: float) -> float:
+    """The temperature group of a hold: its set temperature to 0.1 °C, or without one its
+    measured temperature to 1 °C.
+
+    Recordings whose plan set no heater temperature give NaN set points, and NaN keys would
+    never compare equal.  ``temp_c`` is the median of the hold's ``temp_c`` feature (°C).
+    Holds of one heater setting read within about a kelvin of each other: rounded to whole
+    degrees they share a group, or two neighbouring ones, each then identified on its own
+    (a knot of the temperature tables).  A whole degree equal to a set temperature joins
+    that set temperature's group.
+    """
+    if math.isfinite(temp_set_c):
+        return round(temp_set_c, 1)
+    return float(round(temp_c))
 
 
 def _share_spread(totals: list[FloatArray]) -> FloatArray:

@@ -1,0 +1,179 @@
+"""Damaged times and set points are refused on loading; the observer fits holds without set
+points and turns whatever else a loadable dataset holds into one-line errors."""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from relaxgrip.errors import InputError
+from relaxgrip.learning.build import build_dataset
+from relaxgrip.learning.datasets import DatasetSpec
+from relaxgrip.learning.datastore import MAX_SET_TEMP_C, load_dataset
+from relaxgrip.learning.observer import ObserverModel
+from tests.clitools import assert_one_error_line, run_cli, run_main
+from tests.learning.test_datastore import edit_table, set_cell
+
+#: Four 10-s holds at 40, 50, 60 and 40 °C (all test) and two ICFN episodes: seconds.
+SMALL = DatasetSpec(icfn_samples=40, rcfn_sequences=4, hold_s=10.0, seed=1)
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("data") / "small"
+    build_dataset(out, SMALL, jobs=2)
+    return out
+
+
+def _damaged(source: Path, tmp_path: Path, *corruptions: Callable[[Path], None]) -> Path:
+    copy = tmp_path / "damaged"
+    shutil.copytree(source, copy)
+    for corrupt in corruptions:
+        corrupt(copy)
+    return copy
+
+
+def _times_reversed(sequence: int) -> Callable[[pd.DataFrame], pd.DataFrame]:
+    """One sequence's ``t_s`` in reverse order, every other cell and the row order kept."""
+    def change(table: pd.DataFrame) -> pd.DataFrame:
+        rows = table["sequence"] == sequence
+        table.loc[rows, "t_s"] = table.loc[rows, "t_s"].to_numpy()[::-1]
+        return table
+    return change
+
+
+def _one_row_curve(table: pd.DataFrame) -> pd.DataFrame:
+    keep = (table["sequence"] != 1) | (table.groupby("sequence").cumcount() == 0)
+    return table[keep]
+
+
+def _interleaved(table: pd.DataFrame) -> pd.DataFrame:
+    """Rows of the sequences taken in turn: each sequence's own rows still in time order."""
+    order = table.groupby("sequence").cumcount().to_numpy().argsort(kind="stable")
+    return table.iloc[order]
+
+
+DAMAGE: list[tuple[str, Callable[[Path], None], str]] = [
+    ("a curve time repeated", edit_table("rcfn_curves", set_cell("t_s", 0.4, row=5)),
+     "rcfn_curves.parquet: t_s of sequence 0 repeats 0.4 s, not strictly increasing; "
+     "rebuild the dataset"),
+    ("every curve time zero", edit_table("rcfn_curves", lambda t: t.assign(t_s=0.0)),
+     "rcfn_curves.parquet: t_s of sequence 0 repeats 0 s, not strictly increasing "
+     "(3 other sequences too)"),
+    ("curve times shifted negative",
+     edit_table("rcfn_curves", lambda t: t.assign(t_s=t["t_s"] - 1000.0)),
+     "rcfn_curves.parquet: t_s of sequence 0 starts at -1000 s, before the hold onset at 0 s "
+     "(3 other sequences too); rebuild the dataset"),
+    ("a curve reversed",
+     edit_table("rcfn_curves", _times_reversed(2)),
+     "rcfn_curves.parquet: t_s of sequence 2 falls from 10 to 9.9 s, not strictly increasing"),
+    ("a one-row curve", edit_table("rcfn_curves", _one_row_curve),
+     "rcfn_curves.parquet: sequence 1 has only 1 row, needs at least 2"),
+    ("feature times shifted negative",
+     edit_table("rcfn_features", lambda t: t.assign(t_s=t["t_s"] - 5.0)),
+     "rcfn_features.parquet: t_s of sequence 0 starts at -5 s, before the hold onset at 0 s"),
+    ("a feature time repeated", edit_table("rcfn_features", set_cell("t_s", 0.0, row=1)),
+     "rcfn_features.parquet: t_s of sequence 0 repeats 0 s, not strictly increasing"),
+    ("a set temperature of a million degrees",
+     edit_table("rcfn_sequences", set_cell("temp_set_c", 1e6)),
+     "rcfn_sequences.parquet: column 'temp_set_c' has 1 set temperature at or below absolute "
+     "zero or above 200 °C, e.g. 1e+06 °C (sequence 0); rebuild the dataset"),
+    ("set temperatures below absolute zero",
+     edit_table("rcfn_sequences", lambda t: t.assign(temp_set_c=-300.0)),
+     "column 'temp_set_c' has 4 set temperatures at or below absolute zero"),
+]
+
+
+@pytest.mark.parametrize(("corrupt", "expected"), [case[1:] for case in DAMAGE],
+                         ids=[case[0] for case in DAMAGE])
+def test_damaged_times_and_set_points_are_refused_in_one_line(
+        small: Path, tmp_path: Path, corrupt: Callable[[Path], None], expected: str) -> None:
+    with pytest.raises(InputError) as info:
+        load_dataset(_damaged(small, tmp_path, corrupt))
+    message = str(info.value)
+    assert expected in message
+    assert "\n" not in message
+
+
+def test_sound_times_in_any_row_order_and_edge_set_points_load(small: Path,
+                                                                tmp_path: Path) -> None:
+    """Readers take each sequence's rows in file order: sequences may interleave; NaN (no set
+    point) and the bound itself are no damage."""
+    copy = _damaged(small, tmp_path, edit_table("rcfn_curves", _interleaved),
+                    edit_table("rcfn_features", _interleaved),
+                    edit_table("rcfn_sequences", lambda t: t.assign(
+                        temp_set_c=[np.nan, MAX_SET_TEMP_C, -273.0, 40.0])))
+    data = load_dataset(copy)
+    assert not data.curves["sequence"].is_monotonic_increasing
+    assert len(data.sequences) == 4
+
+
+def test_evaluate_refuses_a_repeated_curve_time_in_one_line(small: Path, tmp_path: Path) -> None:
+    damaged = _damaged(small, tmp_path, edit_table("rcfn_curves", set_cell("t_s", 0.4, row=5)))
+    proc = run_cli("evaluate", "--data", damaged)
+    assert_one_error_line(proc.returncode, proc.stdout, proc.stderr,
+                          "rcfn_curves.parquet: t_s of sequence 0 repeats 0.4 s")
+
+
+def test_fit_observer_refuses_negative_times_in_one_line(
+        small: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    damaged = _damaged(small, tmp_path,
+                       edit_table("rcfn_curves", lambda t: t.assign(t_s=t["t_s"] - 1000.0)))
+    code, out, err = run_main(["fit-observer", "--data", damaged, "--out", tmp_path / "obs"],
+                              monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "starts at -1000 s, before the hold onset")
+    assert not (tmp_path / "obs").exists()
+
+
+def test_holds_without_set_points_are_grouped_by_measured_temperature(small: Path,
+                                                                      tmp_path: Path) -> None:
+    """A recordings dataset lacks set temperatures (NaN): each hold joins the group of its
+    measured temperature, which here groups them as their set points did."""
+    known = ObserverModel().fit(load_dataset(small))
+    unknown = _damaged(small, tmp_path,
+                       edit_table("rcfn_sequences", lambda t: t.assign(temp_set_c=np.nan)))
+    model = ObserverModel().fit(load_dataset(unknown))
+    assert model.temps_c_.size == 3  # 40, 50 and 60 °C
+    np.testing.assert_allclose(model.temps_c_, known.temps_c_)
+    assert np.isfinite(model.band_rel_).all()
+
+
+def test_one_hold_without_a_set_point_fits(small: Path, tmp_path: Path) -> None:
+    mixed = _damaged(small, tmp_path, edit_table("rcfn_sequences",
+                                                 set_cell("temp_set_c", np.nan, row=3)))
+    model = ObserverModel().fit(load_dataset(mixed))
+    assert model.n_sequences_ == 4
+    assert np.isfinite(model.temps_c_).all()
+
+
+OBSERVER_DAMAGE: list[tuple[str, Callable[[Path], None], str]] = [
+    ("holds under a second", edit_table("rcfn_curves", lambda t: t[t["t_s"] <= 0.5]),
+     "only 0 usable RCFN sequences"),
+    ("a hold of years", edit_table("rcfn_curves", lambda t: t.assign(t_s=t["t_s"] * 1e9)),
+     "RCFN sequence 0: a hold of 1e+10 s; the observer identifies holds of at most 86400 s"),
+    ("an absurd force", edit_table("rcfn_curves", set_cell("force_n", 1e300, row=3)),
+     "RCFN sequence 0: a force of 1e+300 N, beyond any relaxation test"),
+    ("an absurd closure ratio",
+     edit_table("rcfn_features", lambda t: t.assign(closure_ratio=1e300)),
+     "makes a loading of 1"),
+    ("forces of the wrong sign",
+     edit_table("rcfn_curves", lambda t: t.assign(force_n=-t["force_n"])),
+     "no RCFN sequence gives the observer a positive stiffness"),
+]
+
+
+@pytest.mark.parametrize(("corrupt", "expected"), [case[1:] for case in OBSERVER_DAMAGE],
+                         ids=[case[0] for case in OBSERVER_DAMAGE])
+def test_the_observer_refuses_loadable_nonsense_in_one_line(
+        small: Path, tmp_path: Path, corrupt: Callable[[Path], None], expected: str) -> None:
+    data = load_dataset(_damaged(small, tmp_path, corrupt))
+    with pytest.raises(InputError) as info:
+        ObserverModel().fit(data)
+    assert expected in str(info.value)
+    assert "\n" not in str(info.value)
