@@ -177,3 +177,19 @@ def test_the_observer_refuses_loadable_nonsense_in_one_line(
         ObserverModel().fit(data)
     assert expected in str(info.value)
     assert "\n" not in str(info.value)
+
+
+def test_fit_observer_takes_fewer_terms_for_short_holds(
+        small: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from relaxgrip.learning.observer import load_observer
+
+    code, out, err = run_main(["fit-observer", "--data", small, "--out", tmp_path / "one",
+                               "--terms", "1"], monkeypatch, capsys)
+    assert code == 0, err
+    assert "observer of 1 branches" in " ".join(out.split())
+    assert load_observer(tmp_path / "one").n_terms == 1
+    code, out, err = run_main(["fit-observer", "--data", small, "--out", tmp_path / "six",
+                               "--terms", "6"], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "--terms must be 1-5, got 6")
+    assert not (tmp_path / "six").exists()

@@ -199,12 +199,15 @@ def fit_observer_command(
                                        show_default=False)],
     out: Annotated[Path, typer.Option("--out", help="Observer directory to write.",
                                       show_default=False)],
+    terms: Annotated[int, typer.Option(
+        "--terms", help="Prony branches, 1-5 (fewer for holds too short to separate three "
+                        "relaxation times).")] = 3,
 ) -> None:
     """Identify the viscoelastic observer (``--estimator observer``) on a dataset's RCFN holds."""
     from relaxgrip.learning.observer import fit_observer
 
     start = time.perf_counter()
-    model = fit_observer(data, out)
+    model = fit_observer(data, out, n_terms=terms)
     if model.identified_on_ != "train":
         err_console.print(f"warning: {data} has no RCFN train sequences: the observer was "
                           f"identified on all {model.n_sequences_}, and its band has no held-out "

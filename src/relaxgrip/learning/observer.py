@@ -386,7 +386,13 @@ class ObserverModel:
         n = min(h.f_n.size for h in group)
         t = group[0].t_s[_RAMP_STEPS:][:n]
         y = np.mean([h.f_n[:n] / h.f0_n for h in group], axis=0)
-        fit = fit_prony(t, y, n_terms=self.n_terms)
+        try:
+            fit = fit_prony(t, y, n_terms=self.n_terms)
+        except InputError as exc:  # the holds are too short for this many times
+            if self.n_terms == 1:
+                raise
+            raise InputError(f"{exc} (relaxgrip fit-observer --terms {self.n_terms - 1})"
+                             ) from None
         return np.clip(np.asarray(fit.tau_s, dtype=np.float64), 0.05, 1e5)
 
     def _group_error(self, group: list[_Hold], log_shift: float
@@ -711,7 +717,8 @@ def load_default_observer() -> ObserverModel:
     return load_observer(default_observer_dir())
 
 
-def fit_observer(data_dir: Path, out_dir: Path, icfn: ICFN | None = None) -> ObserverModel:
+def fit_observer(data_dir: Path, out_dir: Path, icfn: ICFN | None = None,
+                 n_terms: int = 3) -> ObserverModel:
     """Identify the observer on a dataset directory and save it to ``out_dir``.
 
     ``relaxgrip fit-observer --data DIR --out DIR`` runs this; the shipped
@@ -727,6 +734,9 @@ def fit_observer(data_dir: Path, out_dir: Path, icfn: ICFN | None = None) -> Obs
         Observer directory to write.
     icfn : ICFN, optional
         The ICFN for the band's onset error (default: the shipped one).
+    n_terms : int
+        Prony branches, 1-5: holds too short to separate three relaxation
+        times identify fewer.
 
     Returns
     -------
@@ -735,10 +745,12 @@ def fit_observer(data_dir: Path, out_dir: Path, icfn: ICFN | None = None) -> Obs
     from relaxgrip.learning.datastore import load_dataset
     from relaxgrip.learning.training import load_default_models
 
+    if not 1 <= n_terms <= 5:
+        raise InputError(f"--terms must be 1-5, got {n_terms}")
     check_observer_out(out_dir)
     data = load_dataset(Path(data_dir))
     net = icfn if icfn is not None else load_default_models().icfn
-    model = ObserverModel().fit(data, net)
+    model = ObserverModel(n_terms=n_terms).fit(data, net)
     spec = data.manifest.get("spec", {})
     save_observer(Path(out_dir), model, {
         "dataset": {"path": str(data_dir), "spec": spec,
