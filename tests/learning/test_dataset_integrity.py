@@ -12,22 +12,10 @@ import pandas as pd
 import pytest
 
 from relaxgrip.errors import InputError
-from relaxgrip.learning.build import build_dataset
-from relaxgrip.learning.datasets import DatasetSpec
 from relaxgrip.learning.datastore import MAX_SET_TEMP_C, load_dataset
 from relaxgrip.learning.observer import ObserverModel
 from tests.clitools import assert_one_error_line, run_cli, run_main
 from tests.learning.test_datastore import edit_table, set_cell
-
-#: Four 10-s holds at 40, 50, 60 and 40 °C (all test) and two ICFN episodes: seconds.
-SMALL = DatasetSpec(icfn_samples=40, rcfn_sequences=4, hold_s=10.0, seed=1)
-
-
-@pytest.fixture(scope="module")
-def small(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("data") / "small"
-    build_dataset(out, SMALL, jobs=2)
-    return out
 
 
 def _damaged(source: Path, tmp_path: Path, *corruptions: Callable[[Path], None]) -> Path:
@@ -92,19 +80,19 @@ DAMAGE: list[tuple[str, Callable[[Path], None], str]] = [
 @pytest.mark.parametrize(("corrupt", "expected"), [case[1:] for case in DAMAGE],
                          ids=[case[0] for case in DAMAGE])
 def test_damaged_times_and_set_points_are_refused_in_one_line(
-        small: Path, tmp_path: Path, corrupt: Callable[[Path], None], expected: str) -> None:
+        tiny: Path, tmp_path: Path, corrupt: Callable[[Path], None], expected: str) -> None:
     with pytest.raises(InputError) as info:
-        load_dataset(_damaged(small, tmp_path, corrupt))
+        load_dataset(_damaged(tiny, tmp_path, corrupt))
     message = str(info.value)
     assert expected in message
     assert "\n" not in message
 
 
-def test_sound_times_in_any_row_order_and_edge_set_points_load(small: Path,
+def test_sound_times_in_any_row_order_and_edge_set_points_load(tiny: Path,
                                                                 tmp_path: Path) -> None:
     """Readers take each sequence's rows in file order: sequences may interleave; NaN (no set
     point) and the bound itself are no damage."""
-    copy = _damaged(small, tmp_path, edit_table("rcfn_curves", _interleaved),
+    copy = _damaged(tiny, tmp_path, edit_table("rcfn_curves", _interleaved),
                     edit_table("rcfn_features", _interleaved),
                     edit_table("rcfn_sequences", lambda t: t.assign(
                         temp_set_c=[np.nan, MAX_SET_TEMP_C, -273.0, 40.0])))
@@ -113,17 +101,17 @@ def test_sound_times_in_any_row_order_and_edge_set_points_load(small: Path,
     assert len(data.sequences) == 4
 
 
-def test_evaluate_refuses_a_repeated_curve_time_in_one_line(small: Path, tmp_path: Path) -> None:
-    damaged = _damaged(small, tmp_path, edit_table("rcfn_curves", set_cell("t_s", 0.4, row=5)))
+def test_evaluate_refuses_a_repeated_curve_time_in_one_line(tiny: Path, tmp_path: Path) -> None:
+    damaged = _damaged(tiny, tmp_path, edit_table("rcfn_curves", set_cell("t_s", 0.4, row=5)))
     proc = run_cli("evaluate", "--data", damaged)
     assert_one_error_line(proc.returncode, proc.stdout, proc.stderr,
                           "rcfn_curves.parquet: t_s of sequence 0 repeats 0.4 s")
 
 
 def test_fit_observer_refuses_negative_times_in_one_line(
-        small: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
-    damaged = _damaged(small, tmp_path,
+    damaged = _damaged(tiny, tmp_path,
                        edit_table("rcfn_curves", lambda t: t.assign(t_s=t["t_s"] - 1000.0)))
     code, out, err = run_main(["fit-observer", "--data", damaged, "--out", tmp_path / "obs"],
                               monkeypatch, capsys)
@@ -131,12 +119,12 @@ def test_fit_observer_refuses_negative_times_in_one_line(
     assert not (tmp_path / "obs").exists()
 
 
-def test_holds_without_set_points_are_grouped_by_measured_temperature(small: Path,
+def test_holds_without_set_points_are_grouped_by_measured_temperature(tiny: Path,
                                                                       tmp_path: Path) -> None:
     """A recordings dataset lacks set temperatures (NaN): each hold joins the group of its
     measured temperature, which here groups them as their set points did."""
-    known = ObserverModel().fit(load_dataset(small))
-    unknown = _damaged(small, tmp_path,
+    known = ObserverModel().fit(load_dataset(tiny))
+    unknown = _damaged(tiny, tmp_path,
                        edit_table("rcfn_sequences", lambda t: t.assign(temp_set_c=np.nan)))
     model = ObserverModel().fit(load_dataset(unknown))
     assert model.temps_c_.size == 3  # 40, 50 and 60 °C
@@ -144,8 +132,8 @@ def test_holds_without_set_points_are_grouped_by_measured_temperature(small: Pat
     assert np.isfinite(model.band_rel_).all()
 
 
-def test_one_hold_without_a_set_point_fits(small: Path, tmp_path: Path) -> None:
-    mixed = _damaged(small, tmp_path, edit_table("rcfn_sequences",
+def test_one_hold_without_a_set_point_fits(tiny: Path, tmp_path: Path) -> None:
+    mixed = _damaged(tiny, tmp_path, edit_table("rcfn_sequences",
                                                  set_cell("temp_set_c", np.nan, row=3)))
     model = ObserverModel().fit(load_dataset(mixed))
     assert model.n_sequences_ == 4
@@ -171,8 +159,8 @@ OBSERVER_DAMAGE: list[tuple[str, Callable[[Path], None], str]] = [
 @pytest.mark.parametrize(("corrupt", "expected"), [case[1:] for case in OBSERVER_DAMAGE],
                          ids=[case[0] for case in OBSERVER_DAMAGE])
 def test_the_observer_refuses_loadable_nonsense_in_one_line(
-        small: Path, tmp_path: Path, corrupt: Callable[[Path], None], expected: str) -> None:
-    data = load_dataset(_damaged(small, tmp_path, corrupt))
+        tiny: Path, tmp_path: Path, corrupt: Callable[[Path], None], expected: str) -> None:
+    data = load_dataset(_damaged(tiny, tmp_path, corrupt))
     with pytest.raises(InputError) as info:
         ObserverModel().fit(data)
     assert expected in str(info.value)
@@ -180,16 +168,16 @@ def test_the_observer_refuses_loadable_nonsense_in_one_line(
 
 
 def test_fit_observer_takes_fewer_terms_for_short_holds(
-        small: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
     from relaxgrip.learning.observer import load_observer
 
-    code, out, err = run_main(["fit-observer", "--data", small, "--out", tmp_path / "one",
+    code, out, err = run_main(["fit-observer", "--data", tiny, "--out", tmp_path / "one",
                                "--terms", "1"], monkeypatch, capsys)
     assert code == 0, err
     assert "observer of 1 branches" in " ".join(out.split())
     assert load_observer(tmp_path / "one").n_terms == 1
-    code, out, err = run_main(["fit-observer", "--data", small, "--out", tmp_path / "six",
+    code, out, err = run_main(["fit-observer", "--data", tiny, "--out", tmp_path / "six",
                                "--terms", "6"], monkeypatch, capsys)
     assert_one_error_line(code, out, err, "--terms must be 1-5, got 6")
     assert not (tmp_path / "six").exists()

@@ -13,20 +13,8 @@ import pandas as pd
 import pytest
 
 from relaxgrip.errors import InputError
-from relaxgrip.learning.build import build_dataset
-from relaxgrip.learning.datasets import DatasetSpec
 from relaxgrip.learning.datastore import TABLES, load_dataset
 from relaxgrip.perception.features import ICFN_SCHEMA
-
-#: Four short holds (the repeatability ones, all test) and two ICFN episodes: seconds.
-TINY = DatasetSpec(icfn_samples=40, rcfn_sequences=4, hold_s=10.0, seed=1)
-
-
-@pytest.fixture(scope="module")
-def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("data") / "tiny"
-    build_dataset(out, TINY, jobs=2)
-    return out
 
 
 def _copy(source: Path, tmp_path: Path) -> Path:
