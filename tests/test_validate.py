@@ -5,7 +5,13 @@ from __future__ import annotations
 import pytest
 
 from relaxgrip.errors import InputError
-from relaxgrip.validate import parse_floats, parse_names, parse_seeds
+from relaxgrip.validate import (
+    parse_floats,
+    parse_integer,
+    parse_names,
+    parse_number,
+    parse_seeds,
+)
 
 
 @pytest.mark.parametrize(("text", "seeds"), [("10-15", [10, 11, 12, 13, 14, 15]),
@@ -55,3 +61,25 @@ def test_bad_name_lists_are_refused(text: str, match: str) -> None:
     with pytest.raises(InputError, match=match) as info:
         parse_names(text, "--scenarios")
     assert str(info.value).startswith("--scenarios")
+
+
+@pytest.mark.parametrize(("text", "value"), [
+    ("5", 5.0), ("-1.5", -1.5), (" 2. ", 2.0), (".5", 0.5), ("1e-3", 1e-3), ("+2.5E+04", 2.5e4),
+    ("inf", float("inf")), ("-Infinity", float("-inf")),
+])
+def test_numbers_as_people_write_them(text: str, value: float) -> None:
+    assert parse_number(text) == value
+
+
+@pytest.mark.parametrize("text", ["0_5", "1_000", "\u0663", "\uff15", "1,5", "", ".", "1e",
+                                  "e3", "0x10", "5N", "1.2.3"])
+def test_what_float_takes_but_no_one_means_is_not_a_number(text: str) -> None:
+    with pytest.raises(ValueError, match="not a number"):
+        parse_number(text)
+
+
+def test_integers_are_ascii_digits() -> None:
+    assert parse_integer(" -12 ") == -12
+    for text in ("1_0", "\u0663", "1.0", "", "+"):
+        with pytest.raises(ValueError, match="not an integer"):
+            parse_integer(text)

@@ -5,13 +5,49 @@
 from __future__ import annotations
 
 import math
+import re
 
 from relaxgrip.errors import InputError
 
 ABSOLUTE_ZERO_C = -273.15
 
 __all__ = ["check_duty", "check_finite", "check_jobs", "check_positive", "check_temp_c",
-           "parse_floats", "parse_names", "parse_seeds"]
+           "parse_floats", "parse_integer", "parse_names", "parse_number", "parse_seeds"]
+
+#: A number as people and instruments write one: ASCII digits, an optional sign, point and
+#: exponent, or inf / nan (which the range checks then name).  Python's float() and int()
+#: also take "1_000" and other scripts' digits: "0_5" for a force would be 5 N.
+_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?:inf(?:inity)?|nan)",
+                     re.ASCII | re.IGNORECASE)
+_INTEGER = re.compile(r"[+-]?\d+", re.ASCII)
+
+
+def parse_number(text: str) -> float:
+    """``float(text)`` for a number written the usual way (``_NUMBER``).
+
+    Raises
+    ------
+    ValueError
+        As ``float`` does, also for ``1_000`` and non-ASCII digits.
+    """
+    stripped = text.strip()
+    if not _NUMBER.fullmatch(stripped):
+        raise ValueError(f"{text!r} is not a number")
+    return float(stripped)
+
+
+def parse_integer(text: str) -> int:
+    """``int(text)`` for ASCII digits with an optional sign.
+
+    Raises
+    ------
+    ValueError
+        As ``int`` does, also for ``1_0`` and non-ASCII digits.
+    """
+    stripped = text.strip()
+    if not _INTEGER.fullmatch(stripped):
+        raise ValueError(f"{text!r} is not an integer")
+    return int(stripped)
 
 
 def check_finite(value: float, name: str) -> float:
@@ -96,7 +132,7 @@ def parse_floats(text: str, name: str) -> list[float]:
     values: list[float] = []
     for part in text.split(","):
         try:
-            value = float(part.strip())
+            value = parse_number(part)
         except ValueError:
             raise InputError(f"{name} must be numbers like 1,3,5,8, got {text!r}") from None
         if not math.isfinite(value):

@@ -104,6 +104,10 @@ def test_seeds_report_each_seed_and_the_mean_over_them(monkeypatch, capsys):
     (["--duration-s", "0"], "duration"),
     (["--duration-s", "1e9"], "--duration-s must be at most 3600 s"),
     (["--duration-s", "0.001"], "--duration-s must be at least 1 s"),
+    # Python's float() and int() read these as 5 N and seed 10.
+    (["--target-n", "0_5"], "Invalid value for '--target-n': '0_5' is not a number"),
+    (["--seed", "1_0"], "Invalid value for '--seed': '1_0' is not an integer"),
+    (["--temp-profile", "ramp:40:5_5:150:30"], "not a number in it"),
     (["--duration-s", "1e-300", "--record", "x.mcap"], "--duration-s must be at least 1 s"),
     (["--disturbance", "push:2:400", "--duration-s", "20"],
      "--disturbance starts at 400 s, not before the 20 s hold ends"),

@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import json
 import sys
+from collections.abc import Callable
 from typing import Any
 
 import typer
 from rich.console import Console
 
 from relaxgrip.serialize import json_safe
+from relaxgrip.validate import parse_integer, parse_number
 
 app = typer.Typer(
     name="relaxgrip",
@@ -27,3 +29,29 @@ def emit_json(obj: dict[str, Any]) -> None:
     """Print exactly one JSON object on standard output."""
     sys.stdout.write(json.dumps(json_safe(obj), allow_nan=False) + "\n")
     sys.stdout.flush()
+
+
+def _strictly(parse: Callable[[str], Any], kind: type) -> Callable[[Any], Any]:
+    """A typer parser: ``parse`` on the text, its ValueError a bad parameter (one line)."""
+
+    def convert(value: Any) -> Any:
+        if isinstance(value, kind) and not isinstance(value, bool):  # a default
+            return value
+        try:
+            return parse(str(value))
+        except ValueError as exc:
+            raise typer.BadParameter(str(exc)) from None
+
+    return convert
+
+
+def float_option(*decls: str, **kwargs: Any) -> Any:
+    """``typer.Option`` for a number: typer's own float() would take ``0_5`` as 5."""
+    kwargs.setdefault("metavar", "<float>")
+    return typer.Option(*decls, parser=_strictly(parse_number, float), **kwargs)
+
+
+def int_option(*decls: str, **kwargs: Any) -> Any:
+    """``typer.Option`` for an integer: typer's own int() would take ``1_0`` as 10."""
+    kwargs.setdefault("metavar", "<int>")
+    return typer.Option(*decls, parser=_strictly(parse_integer, int), **kwargs)

@@ -8,7 +8,7 @@ import typer
 from rich.table import Table
 
 from relaxgrip.bench import BENCHMARKS, DEFAULT_BENCHMARKS, run_benchmarks
-from relaxgrip.cli._app import app, console, emit_json
+from relaxgrip.cli._app import app, console, emit_json, int_option
 from relaxgrip.errors import InputError
 
 #: The most timed runs per benchmark: a median of more is no surer, and the slower benchmarks
@@ -22,7 +22,7 @@ def bench(
         list[str] | None, typer.Argument(help=f"Benchmarks to run: {', '.join(BENCHMARKS)} "
                                    f"(default: {', '.join(DEFAULT_BENCHMARKS)}).")
     ] = None,
-    repeat: Annotated[int, typer.Option("--repeat", help="Timed runs per benchmark.")] = 5,
+    repeat: Annotated[int, int_option("--repeat", help="Timed runs per benchmark.")] = 5,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Measure how fast the twin and the pipeline run (all benchmarks by default)."""

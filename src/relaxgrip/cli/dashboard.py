@@ -11,7 +11,7 @@ from typing import Annotated, Any
 
 import typer
 
-from relaxgrip.cli._app import app, console
+from relaxgrip.cli._app import app, console, int_option
 from relaxgrip.errors import InputError
 
 
@@ -59,7 +59,7 @@ def dashboard(
         "--backend", help="twin, emulator (the twin behind the MCU emulator) or "
                           "serial:RIG.toml (a real gripper).")] = "twin",
     host: Annotated[str, typer.Option("--host", help="Address to bind.")] = "127.0.0.1",
-    port: Annotated[int, typer.Option("--port", help="TCP port.")] = 8000,
+    port: Annotated[int, int_option("--port", help="TCP port.")] = 8000,
     allow_remote: Annotated[bool, typer.Option(
         "--allow-remote", help="Allow a non-loopback --host; the page then needs the printed "
                                "access token.")] = False,
@@ -67,7 +67,7 @@ def dashboard(
         "--estimator", help="fixed, icfn, relax or observer (the default: it follows a "
                             "mode switch while holding, which relax's Eq. 10 does not).")
     ] = "observer",
-    seed: Annotated[int, typer.Option("--seed", help="Twin seed.")] = 0,
+    seed: Annotated[int, int_option("--seed", help="Twin seed.")] = 0,
     record_dir: Annotated[Path, typer.Option(
         "--record-dir", help="Where MCAP recordings go.")] = Path("."),
     models: Annotated[Path | None, typer.Option(

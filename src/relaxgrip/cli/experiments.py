@@ -9,7 +9,7 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 from rich.table import Table
 
-from relaxgrip.cli._app import app, console, emit_json, err_console
+from relaxgrip.cli._app import app, console, emit_json, err_console, int_option
 from relaxgrip.errors import InputError
 
 
@@ -18,7 +18,7 @@ def task(
     name: Annotated[str, typer.Argument(
         help="hammer, orange, balloon, feather, brush, wrench, pinch-1kg, can, adhesive or cup.",
         show_default=False)],
-    seed: Annotated[int, typer.Option("--seed", help="Twin seed.")] = 0,
+    seed: Annotated[int, int_option("--seed", help="Twin seed.")] = 0,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Run one of the paper's grasping tasks on the twin and check its success criteria."""
@@ -47,8 +47,8 @@ def reproduce(
     quick: Annotated[bool, typer.Option(
         "--quick", help="Smaller datasets, shorter grids and holds "
                         "(about 1.5 min on 2 cores).")] = False,
-    seed: Annotated[int, typer.Option("--seed", help="Twin seed.")] = 0,
-    jobs: Annotated[int, typer.Option("--jobs", help="Sections run at once.")] = 2,
+    seed: Annotated[int, int_option("--seed", help="Twin seed.")] = 0,
+    jobs: Annotated[int, int_option("--jobs", help="Sections run at once.")] = 2,
     section: Annotated[list[str] | None, typer.Option(
         "--section", help="Run only this section (repeatable).", show_default=False)] = None,
 ) -> None:

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from relaxgrip.cli._app import app, console, emit_json
+from relaxgrip.cli._app import app, console, emit_json, float_option, int_option
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.relaxation_fit import (
     RelaxationFitResult,
@@ -34,7 +34,7 @@ def fit_relaxation_command(
     ],
     window_s: Annotated[
         float | None,
-        typer.Option(
+        float_option(
             "--window-s",
             metavar="H",
             help="Fit only the first H seconds of the hold (default: the whole hold).",
@@ -43,7 +43,7 @@ def fit_relaxation_command(
     ] = None,
     terms: Annotated[
         int,
-        typer.Option(
+        int_option(
             "--terms", metavar="N", help=f"Number of Prony terms (1-{MAX_PRONY_TERMS})."
         ),
     ] = 3,

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 from rich.table import Table
 
-from relaxgrip.cli._app import app, console, emit_json
+from relaxgrip.cli._app import app, console, emit_json, float_option, int_option
 from relaxgrip.errors import InputError
 
 if TYPE_CHECKING:
@@ -35,10 +35,10 @@ def emulator(
         "--rig", help="Rig file whose geometry the twin takes; its [serial] port becomes a "
                       "link to the pty and its [emulator] socket the frame channel.",
         show_default=False)] = None,
-    seed: Annotated[int | None, typer.Option(
+    seed: Annotated[int | None, int_option(
         "--seed", help="Twin seed (default: the rig file's, else 0).", show_default=False)
     ] = None,
-    duration_s: Annotated[float | None, typer.Option(
+    duration_s: Annotated[float | None, float_option(
         "--duration-s", help="Stop after this long, at most a day (default: until Ctrl-C).",
         show_default=False)] = None,
 ) -> None:

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 from rich.table import Table
 
-from relaxgrip.cli._app import app, console, emit_json, err_console
+from relaxgrip.cli._app import app, console, emit_json, err_console, float_option, int_option
 from relaxgrip.errors import InputError
 
 if TYPE_CHECKING:
@@ -37,11 +37,11 @@ def _paper(name: str, key: str) -> str:
 def hold(
     estimator: Annotated[str, typer.Option(
         "--estimator", help="fixed, icfn, relax or observer.")] = "relax",
-    target_n: Annotated[float, typer.Option("--target-n", help="Target force (N), 0-10.")] = 5.0,
-    duration_s: Annotated[float, typer.Option("--duration-s", help="Hold length (s).")] = 280.0,
-    temp_c: Annotated[float, typer.Option("--temp-c", help="Finger temperature (°C).")] = 40.0,
-    seed: Annotated[int | None, typer.Option(
-        "--seed", help="Twin seed [default: 0].", show_default=False)] = None,
+    target_n: Annotated[float, float_option("--target-n", help="Target force (N), 0-10.")] = 5.0,
+    duration_s: Annotated[float, float_option("--duration-s", help="Hold length (s).")] = 280.0,
+    temp_c: Annotated[float, float_option("--temp-c", help="Finger temperature (°C).")] = 40.0,
+    seed: Annotated[int | None, int_option(
+        "--seed", help="Twin seed (default: 0).", show_default=False)] = None,
     seeds: Annotated[str | None, typer.Option(
         "--seeds", help="Run every one of these twin seeds (0-23, 3,5,8 or a mix) and report "
                         "each figure's mean over them, with its 95 % interval.",
@@ -58,7 +58,7 @@ def hold(
     plot: Annotated[Path | None, typer.Option(
         "--plot", help=f"Figure file (.png/.pdf/.svg); --compare default: {DEFAULT_COMPARE_PLOT}.",
         show_default=False)] = None,
-    jobs: Annotated[int, typer.Option(
+    jobs: Annotated[int, int_option(
         "--jobs", help="Parallel holds with --compare or --seeds.")] = 2,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     backend: Annotated[str, typer.Option(
@@ -326,13 +326,13 @@ def _print_table(rows: dict[str, dict[str, Any]], reductions: dict[str, float],
 def budget_survey(
     seeds: Annotated[str, typer.Option(
         "--seeds", help="Twin seeds: 0-23, 3,5,8 or a mix.")] = "0-23",
-    target_n: Annotated[float, typer.Option("--target-n", help="Target force (N), 0-10.")] = 5.0,
-    temp_c: Annotated[float, typer.Option("--temp-c", help="Finger temperature (°C).")] = 40.0,
-    duration_s: Annotated[float, typer.Option("--duration-s", help="Hold length (s).")] = 280.0,
+    target_n: Annotated[float, float_option("--target-n", help="Target force (N), 0-10.")] = 5.0,
+    temp_c: Annotated[float, float_option("--temp-c", help="Finger temperature (°C).")] = 40.0,
+    duration_s: Annotated[float, float_option("--duration-s", help="Hold length (s).")] = 280.0,
     models: Annotated[Path | None, typer.Option(
         "--models", help="Model directory (default: the shipped models).", show_default=False)
     ] = None,
-    jobs: Annotated[int, typer.Option("--jobs", help="Holds in parallel.")] = 2,
+    jobs: Annotated[int, int_option("--jobs", help="Holds in parallel.")] = 2,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """relax's error budget over seeds: each part's bias and spread, what the draw explains."""

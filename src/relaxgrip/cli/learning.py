@@ -13,7 +13,7 @@ import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
 from rich.table import Table
 
-from relaxgrip.cli._app import app, console, emit_json, err_console
+from relaxgrip.cli._app import app, console, emit_json, err_console, float_option, int_option
 from relaxgrip.errors import InputError
 
 dataset_app = typer.Typer(help="Generate and convert training datasets.", no_args_is_help=True)
@@ -24,15 +24,15 @@ app.add_typer(dataset_app, name="dataset")
 def dataset_build(
     out: Annotated[Path, typer.Option("--out", help="Dataset directory to write.",
                                       show_default=False)],
-    icfn_samples: Annotated[int | None, typer.Option(
+    icfn_samples: Annotated[int | None, int_option(
         "--icfn-samples", show_default=False,
         help="ICFN samples (default 10,700, up to 11 N; the paper's 8,258 reach 8 N).")] = None,
-    rcfn_sequences: Annotated[int, typer.Option("--rcfn-sequences",
+    rcfn_sequences: Annotated[int, int_option("--rcfn-sequences",
                                                 help="RCFN relaxation sequences.")] = 810,
-    seed: Annotated[int, typer.Option("--seed", help="Master seed.")] = 0,
-    hold_s: Annotated[float, typer.Option(
+    seed: Annotated[int, int_option("--seed", help="Master seed.")] = 0,
+    hold_s: Annotated[float, float_option(
         "--hold-s", help="Length of each RCFN hold (s); the paper recorded 100 s.")] = 280.0,
-    jobs: Annotated[int, typer.Option("--jobs", help="Parallel workers.")] = 2,
+    jobs: Annotated[int, int_option("--jobs", help="Parallel workers.")] = 2,
     backend: Annotated[str, typer.Option("--backend", help="joblib backend: loky, dask or ray.")
                        ] = "loky",
     json_out: Annotated[bool, typer.Option("--json", help="Print the manifest as JSON.")] = False,
@@ -75,7 +75,7 @@ def train(
     data: Annotated[Path, typer.Option("--data", help="Dataset directory.", show_default=False)],
     out: Annotated[Path, typer.Option("--out", help="Model directory to write.",
                                       show_default=False)],
-    seed: Annotated[int, typer.Option("--seed", help="Random state of the training.")] = 0,
+    seed: Annotated[int, int_option("--seed", help="Random state of the training.")] = 0,
     observer: Annotated[Path | None, typer.Option(
         "--observer", help="Observer directory whose branch parameters give the loading "
         "history's retained shares (default: the shipped observer).", show_default=False)
@@ -199,7 +199,7 @@ def fit_observer_command(
                                        show_default=False)],
     out: Annotated[Path, typer.Option("--out", help="Observer directory to write.",
                                       show_default=False)],
-    terms: Annotated[int, typer.Option(
+    terms: Annotated[int, int_option(
         "--terms", help="Prony branches, 1-5 (fewer for holds too short to separate three "
                         "relaxation times).")] = 3,
 ) -> None:
@@ -239,15 +239,15 @@ def calibrate_band_command(
         "--seeds", help="Twin seeds: 3000-3035, 3,5,8 or a mix (take ones not used to check "
                         "or to design with; the shipped band: 3000-3035). "
                         "Each run counts about once: 12 seeds leave the scale about ±20 % "
-                        "unsure, 36 about ±13 % (the reported interval). [default: "
-                        f"{_TWIN_BAND['--seeds']}]", show_default=False)] = None,
+                        "unsure, 36 about ±13 % (the reported interval). (default: "
+                        f"{_TWIN_BAND['--seeds']})", show_default=False)] = None,
     scenarios: Annotated[str | None, typer.Option(
         "--scenarios", help="Comma-separated: standard, ramp (40 -> 55 °C from 150 s), "
-                            "step (5 -> 3 N at 150 s), push (2 N from 200 s). [default: "
-                            f"{_TWIN_BAND['--scenarios']}]", show_default=False)] = None,
-    duration_s: Annotated[float | None, typer.Option(
-        "--duration-s", help="Hold length (s); profile times scale with it. [default: "
-                             f"{_TWIN_BAND['--duration-s']}]", show_default=False)] = None,
+                            "step (5 -> 3 N at 150 s), push (2 N from 200 s). (default: "
+                            f"{_TWIN_BAND['--scenarios']})", show_default=False)] = None,
+    duration_s: Annotated[float | None, float_option(
+        "--duration-s", help="Hold length (s); profile times scale with it. (default: "
+                             f"{_TWIN_BAND['--duration-s']})", show_default=False)] = None,
     recordings: Annotated[list[Path] | None, typer.Option(
         "--recordings", help="Calibrate on recorded holds instead of the twin: recordings "
                              "(.mcap) or directories of them, relax or observer holds with a "
@@ -256,7 +256,7 @@ def calibrate_band_command(
     models: Annotated[Path | None, typer.Option(
         "--models", help="ICFN/RCFN directory (default: the shipped models).",
         show_default=False)] = None,
-    jobs: Annotated[int, typer.Option("--jobs", help="Holds in parallel.")] = 2,
+    jobs: Annotated[int, int_option("--jobs", help="Holds in parallel.")] = 2,
     dry_run: Annotated[bool, typer.Option(
         "--dry-run", help="Measure and report; do not rewrite the directory.")] = False,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
@@ -355,24 +355,24 @@ def calibrate_hold_command(
         help="Model directory (relaxgrip train); relax's calibrated error is written into its "
              "manifest.", show_default=False)],
     targets: Annotated[str | None, typer.Option(
-        "--targets", help="Target forces of the grid (N), comma-separated. [default: "
-                          f"{_TWIN_GRID['--targets']}]", show_default=False)] = None,
+        "--targets", help="Target forces of the grid (N), comma-separated. (default: "
+                          f"{_TWIN_GRID['--targets']})", show_default=False)] = None,
     temps: Annotated[str | None, typer.Option(
-        "--temps", help="Finger temperatures of the grid (°C), comma-separated. [default: "
-                        f"{_TWIN_GRID['--temps']}]", show_default=False)] = None,
+        "--temps", help="Finger temperatures of the grid (°C), comma-separated. (default: "
+                        f"{_TWIN_GRID['--temps']})", show_default=False)] = None,
     seeds: Annotated[str | None, typer.Option(
         "--seeds", help="Twin seeds per condition: 1000-1007, 3,5,8 or a mix (take ones not "
-                        "used to check). Each run counts about once. [default: "
-                        f"{_TWIN_GRID['--seeds']}]", show_default=False)] = None,
-    duration_s: Annotated[float | None, typer.Option(
-        "--duration-s", help="Hold length (s); the grid's times reach it. [default: "
-                             f"{_TWIN_GRID['--duration-s']}]", show_default=False)] = None,
+                        "used to check). Each run counts about once. (default: "
+                        f"{_TWIN_GRID['--seeds']})", show_default=False)] = None,
+    duration_s: Annotated[float | None, float_option(
+        "--duration-s", help="Hold length (s); the grid's times reach it. (default: "
+                             f"{_TWIN_GRID['--duration-s']})", show_default=False)] = None,
     recordings: Annotated[list[Path] | None, typer.Option(
         "--recordings", help="Measure on recorded holds instead of the twin: recordings "
                              "(.mcap) or directories of them, relax or observer holds with a "
                              "force reference, two or more per target and temperature; "
                              "repeat the option for more.", show_default=False)] = None,
-    jobs: Annotated[int, typer.Option("--jobs", help="Holds in parallel.")] = 2,
+    jobs: Annotated[int, int_option("--jobs", help="Holds in parallel.")] = 2,
     add: Annotated[bool, typer.Option(
         "--add", help="Add these holds to the directory's calibration (more seeds at a "
                       "condition, or conditions more) instead of replacing it.")] = False,

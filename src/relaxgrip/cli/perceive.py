@@ -12,7 +12,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from relaxgrip.cli._app import app, console, emit_json
+from relaxgrip.cli._app import app, console, emit_json, float_option
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import check_input_file
 from relaxgrip.perception.marker import (
@@ -103,14 +103,14 @@ def _parse_dist(text: str | None) -> tuple[float, ...]:
 def perceive(
     image: Annotated[Path, typer.Argument(metavar="IMAGE", help="Any image file (PNG, JPEG, ...).",
                                           show_default=False)],
-    fx: Annotated[float, typer.Option("--fx", help="Focal length x (pixels).")] = 600.0,
-    fy: Annotated[float | None, typer.Option("--fy", help="Focal length y (pixels; default fx).",
+    fx: Annotated[float, float_option("--fx", help="Focal length x (pixels).")] = 600.0,
+    fy: Annotated[float | None, float_option("--fy", help="Focal length y (pixels; default fx).",
                                              show_default=False)] = None,
-    cx: Annotated[float | None, typer.Option("--cx", help="Principal point x (default centre).",
+    cx: Annotated[float | None, float_option("--cx", help="Principal point x (default centre).",
                                              show_default=False)] = None,
-    cy: Annotated[float | None, typer.Option("--cy", help="Principal point y (default centre).",
+    cy: Annotated[float | None, float_option("--cy", help="Principal point y (default centre).",
                                              show_default=False)] = None,
-    marker_mm: Annotated[float, typer.Option("--marker-mm", help="Marker side (mm).")] = 12.0,
+    marker_mm: Annotated[float, float_option("--marker-mm", help="Marker side (mm).")] = 12.0,
     dictionary: Annotated[str, typer.Option("--dict", help="ArUco dictionary, e.g. 4X4_50.")] = (
         "4X4_50"
     ),

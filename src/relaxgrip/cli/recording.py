@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import typer
 
-from relaxgrip.cli._app import app, console, emit_json, err_console
+from relaxgrip.cli._app import app, console, emit_json, err_console, float_option, int_option
 from relaxgrip.cli.learning import dataset_app
 from relaxgrip.errors import InputError
 
@@ -133,8 +133,8 @@ def dataset_from_recordings_cmd(
         help="Recordings (.mcap) or directories of them.", show_default=False)],
     out: Annotated[Path, typer.Option("--out", help="Dataset directory to write.",
                                       show_default=False)],
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the split by recording.")] = 0,
-    icfn_every_s: Annotated[float, typer.Option(
+    seed: Annotated[int, int_option("--seed", help="Seed of the split by recording.")] = 0,
+    icfn_every_s: Annotated[float, float_option(
         "--icfn-every-s", help="Loop time between ICFN samples (s).")] = 0.5,
     json_out: Annotated[bool, typer.Option("--json", help="Print the manifest as JSON.")] = False,
 ) -> None:

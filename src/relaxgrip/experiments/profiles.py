@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
+from relaxgrip.validate import parse_number
 
 __all__ = ["Profile", "band_coverage", "parse_disturbance", "parse_target_profile",
            "parse_temp_profile"]
@@ -70,7 +71,7 @@ def _numbers(text: str, what: str, kinds: dict[str, tuple[int, ...]]) -> tuple[s
     if kind not in kinds or len(parts) - 1 not in kinds[kind]:
         raise InputError(f"{what} {text!r}: expected {grammar}")
     try:
-        values = [float(p) for p in parts[1:]]
+        values = [parse_number(p) for p in parts[1:]]
     except ValueError:
         raise InputError(f"{what} {text!r}: not a number in it (expected {grammar})") from None
     if not all(math.isfinite(v) for v in values):

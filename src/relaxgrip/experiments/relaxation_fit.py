@@ -13,7 +13,6 @@ from __future__ import annotations
 import csv
 import io
 import math
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,6 +31,7 @@ from relaxgrip.physics.fitting import (
     fit_prony,
     fit_reduced,
 )
+from relaxgrip.validate import parse_number
 
 FloatArray = NDArray[np.float64]
 
@@ -48,10 +48,6 @@ __all__ = [
 COLUMNS: tuple[str, ...] = ("time_s", "displacement_mm", "force_n")
 # A hold needs at least 10 samples (find_hold), plus the ramp before it.
 MIN_ROWS = 12
-#: A number as instruments write one.  Python's float() also takes "1_000" (1000) and
-#: other scripts' digits, which in a measurement file are a typo, not a number.
-_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?:inf|nan)",
-                     re.ASCII | re.IGNORECASE)
 # Fewest hold samples a fit window may hold, whatever the number of parameters.
 MIN_FIT_SAMPLES = 10
 
@@ -238,9 +234,12 @@ def load_relaxation_csv(path: str | Path) -> RelaxationRecord:
             cell = row[k].strip()
             if delimiter != ",":
                 cell = cell.replace(",", ".")
-            if not _NUMBER.fullmatch(cell):
-                raise InputError(f"{path}, line {line}: {col} value {cell!r} is not a number")
-            value = float(cell)
+            try:  # not float(): it takes "0_4" for 4
+                value = parse_number(cell)
+            except ValueError:
+                raise InputError(
+                    f"{path}, line {line}: {col} value {cell!r} is not a number"
+                ) from None
             if not math.isfinite(value):
                 raise InputError(f"{path}, line {line}: {col} is {cell!r}, not a finite number")
             data[i, j] = value
