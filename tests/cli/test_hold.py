@@ -222,3 +222,15 @@ def test_bare_command_shows_its_help(monkeypatch, capsys):
     code, out, _ = run_main([], monkeypatch, capsys)
     assert code == 2
     assert out.count("Usage: ") == 1
+
+
+@pytest.mark.parametrize(("command", "shown"), [
+    (["hold"], "Twin seed (default: 0)."),
+    (["calibrate-band"], "(default: 3000-3035)"),
+    (["calibrate-hold"], "(default: 1000-1005)"),
+])
+def test_help_shows_the_defaults_it_states(monkeypatch, capsys, command, shown):
+    # rich read "[default: ...]" in a help text as markup and dropped it.
+    code, out, _ = run_main([*command, "--help"], monkeypatch, capsys)
+    assert code == 0
+    assert shown in " ".join(out.replace("│", " ").split())

@@ -117,6 +117,13 @@ def test_save_load_round_trip_and_bad_files(tmp_path: Path) -> None:
     manifest.write_text("{not json")
     with pytest.raises(ObserverFileError, match="unreadable manifest"):
         load_observer(tmp_path / "m")
+    save_observer(tmp_path / "m2", model, {})
+    manifest = tmp_path / "m2" / "manifest.json"
+    data = json.loads(manifest.read_text())
+    data["observer"]["params"]["band_scale"] = -1.0  # a manifest's parameter, not an array
+    manifest.write_text(json.dumps(data))
+    with pytest.raises(ObserverFileError, match=r"manifest\.json and observer\.npz: band_scale"):
+        load_observer(tmp_path / "m2")
 
 
 def test_shipped_observer_loads_with_physical_parameters() -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import errno
 import io
 import json
@@ -292,3 +293,20 @@ def test_a_malformed_message_is_one_line(command: str, topic: str, change, words
     code, out, err = run_main(args, monkeypatch, capsys)
     assert_one_error_line(code, out, err, words)
     assert not (tmp_path / "d").exists()
+
+
+@pytest.mark.parametrize(("topic", "change", "words"), [
+    ("/rgb", lambda m: {**m, "data": base64.b64encode(b"no jpeg here").decode()},
+     "an RGB frame (jpeg) does not decode"),
+    ("/relaxgrip/observation", lambda m: {**m, "motor_position_mm": float("nan")},
+     "motor_position_mm must be a finite number"),
+])
+def test_a_bad_frame_or_value_names_its_recording(topic: str, change, words: str,
+                                                  relax_hold: tuple[Path, HoldResult],
+                                                  tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.mcap"
+    _rewritten(relax_hold[0], bad, lambda t, m: change(m) if t == topic else None)
+    code, out, err = run_main(["replay", bad], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, f"{bad}: {words}")
