@@ -206,6 +206,8 @@ def fit_observer_command(
     """Identify the viscoelastic observer (``--estimator observer``) on a dataset's RCFN holds."""
     from relaxgrip.learning.observer import fit_observer
 
+    if not 1 <= terms <= 5:  # before the dataset loads (the fit checks it too, by its name)
+        raise InputError(f"--terms must be 1-5, got {terms}")
     start = time.perf_counter()
     model = fit_observer(data, out, n_terms=terms)
     if model.identified_on_ != "train":

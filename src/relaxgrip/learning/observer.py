@@ -745,8 +745,6 @@ def fit_observer(data_dir: Path, out_dir: Path, icfn: ICFN | None = None,
     from relaxgrip.learning.datastore import load_dataset
     from relaxgrip.learning.training import load_default_models
 
-    if not 1 <= n_terms <= 5:
-        raise InputError(f"--terms must be 1-5, got {n_terms}")
     check_observer_out(out_dir)
     data = load_dataset(Path(data_dir))
     net = icfn if icfn is not None else load_default_models().icfn
