@@ -17,11 +17,12 @@ dataset where a complete one is expected.
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import tempfile
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -32,7 +33,7 @@ from numpy.typing import NDArray
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import check_output_dir, one_line, read_manifest
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA, FeatureSchema
-from relaxgrip.physics.fitting import osculating_reduced
+from relaxgrip.physics.fitting import MAX_FORCE_N, osculating_reduced
 from relaxgrip.validate import ABSOLUTE_ZERO_C
 
 FloatArray = NDArray[np.float64]
@@ -295,6 +296,28 @@ MAX_SET_TEMP_C = 200.0
 _MIN_ROWS = {"rcfn_features": 1, "rcfn_curves": 2}
 
 
+#: What a value in each unit can be on any gripper, bounds included: past them a cell is
+#: damaged or a unit slipped (millimetres in a metre column), and values like 1e300 would
+#: overflow the scalers and fits downstream.  Wide on purpose: the twin's and a lab's
+#: measurements lie orders of magnitude inside.  A unit not listed is only checked finite.
+_UNIT_RANGES: dict[str, tuple[float, float]] = {
+    "m": (-1.0, 1.0),  # the marker within a metre of its zero pose
+    "m^2": (0.0, 1.0),
+    "rad": (-2.0 * math.pi, 2.0 * math.pi),  # a rotation vector's components lie within pi
+    "m/s": (-100.0, 100.0),
+    "rad/s": (-1000.0, 1000.0),
+    "degC": (ABSOLUTE_ZERO_C, 1000.0),  # past any infrared camera's range
+    "K": (0.0, 1000.0),  # a spread of temperatures
+    "K/m": (-1e6, 1e6),  # a thousand kelvin over a millimetre
+    "s": (0.0, math.inf),  # hold_time_s: time since the hold onset
+    "N": (-MAX_FORCE_N, MAX_FORCE_N),  # what a relaxation fit takes
+}
+
+
+def _units(schema: FeatureSchema, prefix: str = "") -> dict[str, str]:
+    return {prefix + name: unit for name, unit in zip(schema.names, schema.units, strict=True)}
+
+
 @dataclass(frozen=True)
 class _Columns:
     """The columns of a table that its readers (``Dataset``, training, evaluation, the
@@ -303,6 +326,7 @@ class _Columns:
     finite: tuple[str, ...]  # numbers, every one finite
     numbers: tuple[str, ...] = ()  # numbers, NaN where unknown (recordings lack set points)
     other: tuple[str, ...] = ()  # any type
+    units: Mapping[str, str] = field(default_factory=dict)  # finite ones: within _UNIT_RANGES
 
     @property
     def names(self) -> list[str]:
@@ -311,14 +335,17 @@ class _Columns:
 
 
 _COLUMNS: dict[str, _Columns] = {
-    "icfn": _Columns(finite=("episode", "t_s", "force_n", *ICFN_SCHEMA.names), other=("split",)),
+    "icfn": _Columns(finite=("episode", "t_s", "force_n", *ICFN_SCHEMA.names), other=("split",),
+                     units={"force_n": "N", **_units(ICFN_SCHEMA)}),
     "rcfn_sequences": _Columns(
         finite=("sequence", "f0_n", "kappa", "tau_s", *(f"onset_{n}" for n in ICFN_SCHEMA.names)),
         numbers=("temp_set_c", "contact_set_m", "force_set_n", "repeat"),
         other=("split", "object"),
+        units={"f0_n": "N", **_units(ICFN_SCHEMA, "onset_")},
     ),
-    "rcfn_features": _Columns(finite=("sequence", "t_s", *RCFN_SCHEMA.names)),
-    "rcfn_curves": _Columns(finite=("sequence", "t_s", "force_n")),
+    "rcfn_features": _Columns(finite=("sequence", "t_s", *RCFN_SCHEMA.names),
+                              units=_units(RCFN_SCHEMA)),
+    "rcfn_curves": _Columns(finite=("sequence", "t_s", "force_n"), units={"force_n": "N"}),
 }
 
 
@@ -415,6 +442,7 @@ def _read_table(path: Path, columns: _Columns) -> pd.DataFrame:
         count = int(bad[where[0]])
         raise InputError(f"{path}: {count} NaN or infinite value{'s' if count > 1 else ''} in "
                          f"column {columns.finite[where[0]]!r}{others}; rebuild the dataset")
+    _check_ranges(path, table, columns.units)
     if "split" in columns.other:
         foreign = ~table["split"].isin(_SPLITS)
         if foreign.any():
@@ -432,6 +460,26 @@ def _read_table(path: Path, columns: _Columns) -> pd.DataFrame:
     if "temp_set_c" in columns.numbers:  # NaN: a recording whose plan set no temperature
         _check_set_temperatures(path, table)
     return table
+
+
+def _check_ranges(path: Path, table: pd.DataFrame, units: Mapping[str, str]) -> None:
+    """Every value of a column with a unit in :data:`_UNIT_RANGES` within its range."""
+    for unit, (low, high) in _UNIT_RANGES.items():
+        names = [name for name, u in units.items() if u == unit]
+        if not names:
+            continue
+        values = table[names].to_numpy(np.float64)
+        outside = (values < low) | (values > high)
+        if not outside.any():
+            continue
+        row, col = (int(i[0]) for i in np.nonzero(outside))
+        count = int(np.count_nonzero(outside[:, col]))
+        span = f"below {low:g}" if high == math.inf else f"outside {low:g} to {high:g}"
+        raise InputError(
+            f"{path}: column {names[col]!r} has {count} value{'s' if count > 1 else ''} "
+            f"{span} {unit} (e.g. {values[row, col]:g}, row {row}), which no gripper gives: "
+            "a damaged cell or another unit; rebuild the dataset"
+        )
 
 
 def _check_set_temperatures(path: Path, table: pd.DataFrame) -> None:
@@ -525,7 +573,9 @@ def load_dataset(directory: Path) -> Dataset:
         On a missing directory or table, a foreign or damaged manifest, a
         dataset built with other feature schemas, or a damaged table: a column
         its readers use missing, text where numbers belong, a NaN or infinite
-        value, a split other than train, val or test, a set temperature
+        value, a value no gripper gives (past the ranges of its unit: a damaged
+        cell, or millimetres in a metre column), a split other than train, val or
+        test, a set temperature
         (``temp_set_c``, NaN where unknown) at or below absolute zero or above
         :data:`MAX_SET_TEMP_C`, rows of a sequence that the other tables lack,
         or a sequence of ``rcfn_features`` or ``rcfn_curves`` whose ``t_s``

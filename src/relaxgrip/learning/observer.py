@@ -73,7 +73,7 @@ from relaxgrip.fileio import (
 from relaxgrip.learning.datastore import Dataset
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.perception.features import ICFN_SCHEMA
-from relaxgrip.physics.fitting import MAX_FORCE_N, fit_prony
+from relaxgrip.physics.fitting import fit_prony
 from relaxgrip.physics.viscoelastic import branch_update
 from relaxgrip.validate import check_finite, check_positive
 
@@ -273,8 +273,7 @@ class ObserverModel:
         InputError
             Too few usable sequences, hyperparameters out of range, or holds the
             identification cannot take: a hold or its loading longer than a day,
-            a force beyond :data:`relaxgrip.physics.fitting.MAX_FORCE_N`, forces
-            that fit no positive stiffness or no Prony series, or parameters that
+            forces that fit no positive stiffness or no Prony series, or parameters that
             come out non-finite.
         """
         if not (1 <= self.n_terms <= 5):
@@ -348,11 +347,7 @@ class ObserverModel:
             if t_c[-1] > _MAX_HOLD_S:
                 raise InputError(f"RCFN sequence {seq}: a hold of {t_c[-1]:g} s; the observer "
                                  f"identifies holds of at most {_MAX_HOLD_S:g} s (a day)")
-            f_c = cu["force_n"].to_numpy(np.float64)
-            peak = max(f0, float(np.max(np.abs(f_c))))
-            if peak > MAX_FORCE_N:
-                raise InputError(f"RCFN sequence {seq}: a force of {peak:g} N, beyond any "
-                                 f"relaxation test (at most {MAX_FORCE_N:g} N)")
+            f_c = cu["force_n"].to_numpy(np.float64)  # within MAX_FORCE_N: load_dataset checks
             grid = np.arange(0.0, float(t_c[-1]) + 1e-9, _FIT_DT_S)
             f = np.interp(grid, t_c, f_c)
             d_hold = np.interp(grid, fe["t_s"].to_numpy(np.float64),
