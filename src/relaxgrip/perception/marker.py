@@ -46,6 +46,7 @@ __all__ = [
     "PoseSolver",
     "TrackStatus",
     "detect_markers",
+    "detection_pose",
     "estimate_pose",
     "locate_marker",
     "make_detector",
@@ -451,21 +452,23 @@ def locate_marker(
     image: NDArray[np.uint8],
     detector: cv2.aruco.ArucoDetector,
     solver: PoseSolver,
-    marker_id: int | None = None,
 ) -> MarkerPose | None:
     """The first marker detected on the whole frame, edge-fitted corners, and its pose.
 
     No tracking and no region of interest: what a detector-only pipeline
-    (the paper's) does on every frame.  With ``marker_id``, only a marker of
-    that id counts.  ``None`` if no marker is found.
+    (the paper's) does on every frame.  ``None`` if no marker is found.
     """
     gray = to_gray(np.asarray(image, dtype=np.uint8))
-    found = [d for d in detect_markers(gray, detector)
-             if marker_id is None or d.marker_id == marker_id]
-    if not found:
-        return None
-    corners = refine_corners_by_edges(gray, found[0].corners_px, solver.intrinsics)
-    return solver.solve(found[0].corners_px if corners is None else corners)
+    found = detect_markers(gray, detector)
+    return detection_pose(gray, found[0], solver) if found else None
+
+
+def detection_pose(gray: NDArray[np.uint8], detection: MarkerDetection,
+                   solver: PoseSolver) -> MarkerPose:
+    """A detected marker's pose, from its edge-fitted corners where its edges fit (else the
+    detector's corners)."""
+    corners = refine_corners_by_edges(gray, detection.corners_px, solver.intrinsics)
+    return solver.solve(detection.corners_px if corners is None else corners)
 
 
 def rotation_angle(rotation: FloatArray) -> float:

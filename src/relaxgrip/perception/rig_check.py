@@ -23,7 +23,7 @@ from relaxgrip.hardware.rig_file import RigFile
 from relaxgrip.perception.marker import (
     PoseSolver,
     detect_markers,
-    locate_marker,
+    detection_pose,
     make_detector,
     to_gray,
 )
@@ -145,9 +145,12 @@ def check_rig(rig: RigFile, clock: Clock | None = None, *,
         raise CameraError(f"RGB camera gave a {image.shape} frame, expected (H, W, 3)")
     intr = rig.rgb.mount.intrinsics
     detector = make_detector(rig.marker.aruco_dictionary)
-    seen = sorted({d.marker_id for d in detect_markers(to_gray(image), detector)})
-    pose = locate_marker(image, detector, PoseSolver(rig.marker.size_m, intr),
-                         rig.marker.marker_id)
+    gray = to_gray(image)
+    detections = detect_markers(gray, detector)
+    seen = sorted({d.marker_id for d in detections})
+    ours = [d for d in detections if d.marker_id == rig.marker.marker_id]
+    pose = (detection_pose(gray, ours[0], PoseSolver(rig.marker.size_m, intr)) if ours
+            else None)
     temps = np.asarray(ir.image, dtype=np.float64)
     if pose is None:
         distance = offset = reproj = math.nan
