@@ -324,3 +324,37 @@ def test_a_session_runs_the_models_and_observer_it_is_given(make_session, tmp_pa
         session.close()
     with pytest.raises(InputError, match="not an observer model directory"):
         make_session(observer_dir=tmp_path / "none")
+
+
+def test_a_full_disk_stops_the_recording_not_the_loop(make_session, monkeypatch) -> None:
+    """The recording ends sealed and says why on the page; the grasp goes on, and the next
+    recording (another file) starts clean."""
+    pytest.importorskip("mcap")
+    from relaxgrip.recording.reader import iter_messages
+    from tests.recording.test_bad_input import filling_disk
+
+    filling_disk(monkeypatch, 1_500_000)
+    session = make_session()
+    session.start()
+    try:
+        path = session.set_recording(True)
+        deadline = time.monotonic() + 60.0
+        while session.record_error is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert session.record_error is not None, "the recording never filled the disk"
+        assert session.record_error.startswith(f"recording {path} stopped: No space left on "
+                                               "device; the recording stops, sealed at its "
+                                               "last complete chunk (")
+        periods = session.periods
+        state = session.state()
+        assert state["recording"] is None
+        assert state["error"] == session.record_error
+        time.sleep(0.3)
+        assert session.alive
+        assert session.periods > periods
+        assert sum(1 for _ in iter_messages(path)) > 10  # sealed: complete, read strictly
+        assert session.set_recording(True) != path
+        assert session.record_error is None
+        assert session.state()["error"] is None
+    finally:
+        session.close()

@@ -93,27 +93,43 @@ def test_recording_without_frames(tmp_path: Path, models: ModelBundle,
     assert_one_error_line(code, out, err, "no RGB frames")
 
 
-class _FillingDisk(io.BytesIO):
-    """A file on a disk that is full once ``room`` bytes are in it."""
+class _FillingFile(io.FileIO):
+    """A file on a disk that is full once ``room`` bytes are in it: a write past that
+    writes what fits, then fails, as the system's ``write`` does."""
 
-    def __init__(self, room: int) -> None:
-        super().__init__()
+    def __init__(self, path: Path, room: int) -> None:
+        super().__init__(path, "w")
         self.room = room
 
     def write(self, data: Any) -> int:
-        if self.tell() + len(data) > self.room:
+        fits = max(0, self.room - self.tell())
+        if len(data) > fits:
+            super().write(bytes(data)[:fits])
             raise OSError(errno.ENOSPC, "No space left on device")
         return super().write(data)
 
 
-def test_a_full_disk_names_the_recording_and_the_heaters_go_off(
-        tmp_path: Path, models: ModelBundle, monkeypatch: pytest.MonkeyPatch) -> None:
+def filling_disk(monkeypatch: pytest.MonkeyPatch, room: int) -> None:
+    """The recorder's new files fill up at ``room`` bytes; other opens are real."""
+    import builtins
+
     import relaxgrip.recording.recorder as recorder_module
+
+    def fake_open(path: Any, mode: str = "r", *args: Any, **kwargs: Any) -> Any:
+        if mode == "wb":
+            return io.BufferedWriter(_FillingFile(path, room))
+        return builtins.open(path, mode, *args, **kwargs)
+
+    monkeypatch.setattr(recorder_module, "open", fake_open, raising=False)
+
+
+def test_a_full_disk_seals_the_recording_names_it_and_the_heaters_go_off(
+        tmp_path: Path, models: ModelBundle, monkeypatch: pytest.MonkeyPatch) -> None:
+    from relaxgrip.recording.reader import iter_messages, read_session
     from relaxgrip.twin import GripperTwin, TwinConfig
 
     path = tmp_path / "grasp.mcap"
-    monkeypatch.setattr(recorder_module, "open", lambda *a, **k: _FillingDisk(2_000_000),
-                        raising=False)
+    filling_disk(monkeypatch, 2_000_000)
     cfg = TwinConfig()
     clock = VirtualClock()
     twin = GripperTwin(cfg, seed=0, clock=clock)
@@ -124,6 +140,50 @@ def test_a_full_disk_names_the_recording_and_the_heaters_go_off(
     assert caught.value.filename == str(path)  # the one line relaxgrip prints names it
     assert rec.messages > 100  # it filled up mid-run, not at the start
     assert twin.observe().heater_duty == (0.0, 0.0)  # the loop switched the heaters off
+    # Sealed: a complete file, read without tolerance, up to the time the error states.
+    assert path.stat().st_size <= 2_000_000
+    times = [t for _, t, _ in iter_messages(path)]
+    assert len(times) > 100
+    assert f"sealed at its last complete chunk ({max(times) / 1e9:.2f} s of loop time)" \
+        in str(caught.value.strerror)
+    assert read_session(path)["estimator"] == "relax"
+    rec.close()  # closing again does nothing
+
+
+def test_a_disk_full_from_the_start_leaves_no_file_or_an_empty_sealed_one(
+        tmp_path: Path, models: ModelBundle, monkeypatch: pytest.MonkeyPatch) -> None:
+    from relaxgrip.recording.reader import iter_messages
+    from relaxgrip.twin import GripperTwin, TwinConfig
+
+    path = tmp_path / "grasp.mcap"
+    filling_disk(monkeypatch, 30)  # not even the MCAP header fits
+    with pytest.raises(OSError, match="No space left") as caught:
+        McapRecorder(path)
+    assert caught.value.filename == str(path)
+    assert not path.exists()
+    filling_disk(monkeypatch, 1000)  # the header fits, the first chunk does not
+    cfg = TwinConfig()
+    clock = VirtualClock()
+    twin = GripperTwin(cfg, seed=0, clock=clock)
+    ctl = GraspController(cfg.rig, make_estimator("fixed", models.icfn, models.rcfn))
+    with pytest.raises(OSError, match="sealed before its first chunk was complete: it holds "
+                                      "no messages"), McapRecorder(path) as rec:
+        run_loop(twin, ctl, clock, GraspPlan(target_n=2.0), 5.0, recorder=rec)
+    assert list(iter_messages(path)) == []  # a complete, empty recording
+
+
+def test_a_full_disk_on_the_command_line_is_one_line_and_the_file_reads(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "hold.mcap"
+    filling_disk(monkeypatch, 1_500_000)
+    code, out, err = run_main(["hold", "--duration-s", "20", "--record", path],
+                              monkeypatch, capsys)
+    assert_one_error_line(code, out, err, f"{path}: No space left on device; the recording "
+                                          "stops, sealed at its last complete chunk (")
+    code, out, err = run_main(["replay", path, "--json"], monkeypatch, capsys)
+    assert code == 0, err
+    assert json.loads(out)["periods"] > 10
 
 
 def test_recording_without_infrared_frames(relax_hold: tuple[Path, HoldResult], tmp_path: Path,

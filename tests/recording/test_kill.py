@@ -86,3 +86,40 @@ def test_sigkill_leaves_the_flushed_part_readable(tmp_path: Path) -> None:
     assert summary.statistics is not None
     assert summary.statistics.message_count == n_tolerant
     assert [p.t_s for p in iter_periods(out)] == times
+
+
+def test_sealing_a_file_cut_anywhere_keeps_what_recover_keeps(
+        relax_hold: tuple[Path, object], tmp_path: Path) -> None:
+    """A recording cut at any byte (a full disk) and sealed in place reads as a complete
+    file, with every message a tolerant reading of the cut file finds, and no more."""
+    from relaxgrip.recording.recorder import seal_recording
+
+    whole = relax_hold[0].read_bytes()
+    all_messages = sum(1 for _ in iter_messages(relax_hold[0]))
+    cuts = [len(whole) * k // 23 + k for k in range(1, 23)] + [len(whole)]
+    kept_counts = []
+    for cut in cuts:
+        path = tmp_path / f"cut{cut}.mcap"
+        path.write_bytes(whole[:cut])
+        expected = sum(1 for _ in iter_messages(path, tolerant=True))
+        end_s = seal_recording(path)
+        got = [t for _, t, _ in iter_messages(path)]  # no tolerance: a complete file
+        assert len(got) == expected, cut
+        assert end_s == (max(got) / 1e9 if got else None)
+        assert path.stat().st_size <= cut + 50  # footer, data end and magic
+        kept_counts.append(len(got))
+    assert kept_counts == sorted(kept_counts)
+    assert kept_counts[0] > 0
+    assert kept_counts[-1] == all_messages  # a complete file loses only its summary
+
+
+@pytest.mark.parametrize("cut", [0, 5, 8, 20])
+def test_sealing_refuses_a_file_without_a_complete_header(
+        relax_hold: tuple[Path, object], tmp_path: Path, cut: int) -> None:
+    from relaxgrip.recording.recorder import seal_recording
+
+    path = tmp_path / "stub.mcap"
+    path.write_bytes(relax_hold[0].read_bytes()[:cut])
+    with pytest.raises(OSError, match="MCAP header"):
+        seal_recording(path)
+    assert path.stat().st_size == cut  # left as it was

@@ -161,6 +161,8 @@ class LiveSession:
         self._recorder: LoopRecorder | None = None
         self.record_path: Path | None = None
         self.error: str | None = None
+        #: Why the last recording stopped by itself (a full disk); the loop goes on.
+        self.record_error: str | None = None
         self.periods = 0
         self.overruns = 0
         self._closed = False
@@ -237,7 +239,11 @@ class LiveSession:
         command = self.controller.step(obs)
         self.backend.act(command)
         if self._recorder is not None:
-            self._recorder.step(obs, self.controller, command)
+            try:
+                self._recorder.step(obs, self.controller, command)
+            except OSError as exc:  # a full disk ends the recording (sealed), not the grasp
+                self.record_error = f"recording {self.record_path} stopped: {exc.strerror}"
+                self._recorder = self.record_path = None
         self._obs = obs
         self.periods += 1
 
@@ -314,7 +320,7 @@ class LiveSession:
             "events": [f"{e.t_s:.1f} s {e.kind.value} {e.detail}".strip()
                        for e in c.log.events[-6:]],
             "alive": self.alive,
-            "error": self.error,
+            "error": self.error or self.record_error,
             "periods": self.periods,
         }
 
@@ -433,14 +439,18 @@ class LiveSession:
 
                 recorder = McapRecorder(path)
             recorder.start(self.backend.info, self.controller, self._now())
-            self._recorder, self.record_path = recorder, path
+            self._recorder, self.record_path, self.record_error = recorder, path, None
             return path
 
     def _stop_recording(self) -> None:
-        recorder, self._recorder, self.record_path = self._recorder, None, None
+        recorder, path = self._recorder, self.record_path
+        self._recorder = self.record_path = None
         close = getattr(recorder, "close", None)
         if close is not None:
-            close()
+            try:
+                close()
+            except OSError as exc:  # its summary did not fit: sealed without it
+                self.record_error = f"recording {path} stopped: {exc.strerror}"
 
 
 def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,

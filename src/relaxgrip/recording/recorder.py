@@ -16,6 +16,12 @@ summary or footer; :func:`relaxgrip.recording.reader.read_recording` reads it
 with ``tolerant=True`` and :func:`relaxgrip.recording.reader.recover` (``relaxgrip
 recover``) rewrites it as a complete file.  Losing power needs an ``fsync`` as
 well, which the recorder does not do (it would stall the loop).
+
+**A full disk.**  A write that fails (no space left, a quota, a device gone)
+ends the recording, not the data: the file is cut back to its last complete
+record and given an MCAP footer without a summary (:func:`seal_recording`),
+so it reads as it is, without ``relaxgrip recover`` (which would need space
+for a second file).  The error that stops the loop says so.
 """
 
 from __future__ import annotations
@@ -23,11 +29,14 @@ from __future__ import annotations
 import base64
 import json
 import math
-from contextlib import suppress
+import os
+import struct
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
 from dataclasses import asdict
 from pathlib import Path
 from types import TracebackType
-from typing import IO, TYPE_CHECKING, Any
+from typing import IO, TYPE_CHECKING, Any, NoReturn
 
 import cv2
 import numpy as np
@@ -47,7 +56,7 @@ if TYPE_CHECKING:
 
     from relaxgrip.control.controller import GraspController
 
-__all__ = ["RGB_FORMATS", "McapRecorder", "require_mcap"]
+__all__ = ["RGB_FORMATS", "McapRecorder", "require_mcap", "seal_recording"]
 
 #: Encodings of the RGB channel: ``jpeg`` (small) or ``png`` (lossless).
 RGB_FORMATS = ("jpeg", "png")
@@ -61,6 +70,63 @@ def require_mcap() -> None:
     except ImportError:
         raise InputError("recording needs the mcap package: pip install 'relaxgrip[record]'"
                          ) from None
+
+
+def seal_recording(path: Path) -> float | None:
+    """Make a recording cut short (a full disk) a complete MCAP file, in place.
+
+    The file is cut back to the end of its last complete top-level record (a
+    record whose length runs past the end of the file, or a byte that is no
+    MCAP opcode, ends the reading), then a data end record and a footer
+    without a summary are appended: readers then scan the data, as they do
+    for any MCAP file without a summary.  Cutting the unfinished record off
+    frees the few bytes the footer needs.
+
+    Returns
+    -------
+    float or None
+        Log time of the last message in a kept chunk (s), None if no chunk
+        was complete.
+
+    Raises
+    ------
+    OSError
+        The file cannot be opened, cut or written; or it has no complete
+        MCAP header to keep.
+    """
+    from mcap.data_stream import RecordBuilder
+    from mcap.opcode import Opcode
+    from mcap.records import DataEnd, Footer
+    from mcap.writer import MCAP0_MAGIC
+
+    opcodes = {int(op) for op in Opcode}
+    with open(path, "r+b") as f:
+        size = os.fstat(f.fileno()).st_size
+        if f.read(len(MCAP0_MAGIC)) != MCAP0_MAGIC:
+            raise OSError(f"{path}: no MCAP header to keep")
+        pos = len(MCAP0_MAGIC)
+        end_ns: int | None = None
+        while pos + 9 <= size:
+            f.seek(pos)
+            opcode, length = struct.unpack("<BQ", f.read(9))
+            if (opcode not in opcodes or opcode in (Opcode.DATA_END, Opcode.FOOTER)
+                    or pos + 9 + length > size
+                    or (pos == len(MCAP0_MAGIC)) != (opcode == Opcode.HEADER)):
+                break
+            if opcode == Opcode.CHUNK and length >= 16:
+                end_ns = struct.unpack("<8xQ", f.read(16))[0]  # message start, end time
+            pos += 9 + length
+        if pos == len(MCAP0_MAGIC):
+            raise OSError(f"{path}: no complete MCAP header to keep")
+        f.truncate(pos)
+        f.seek(pos)
+        builder = RecordBuilder()
+        DataEnd(data_section_crc=0).write(builder)  # 0: not computed
+        Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
+        f.write(builder.end() + MCAP0_MAGIC)  # type: ignore[no-untyped-call]
+        f.flush()
+        os.fsync(f.fileno())
+    return None if end_ns is None else end_ns / 1e9
 
 
 def _ns(t_s: float) -> int:
@@ -144,9 +210,11 @@ class McapRecorder:
                                                                           schema_id)
                 self._writer.flush()  # type: ignore[no-untyped-call]
                 self._file.flush()
-        except OSError:
+        except OSError:  # nothing recorded yet: no file is left
             with suppress(OSError):  # its flush fails as the write did
                 self._file.close()
+            with suppress(OSError):
+                self.path.unlink()
             raise
         self._closed = False
         self._last_flush_s = -math.inf
@@ -213,7 +281,7 @@ class McapRecorder:
         self._write_controller(t, controller, command)
         self._write_truth(t, obs)
         self._write_events(t, controller)
-        with named_errors(self.path):
+        with self._writing():
             if t - self._last_flush_s >= self.flush_every_s:
                 self._writer.flush()  # type: ignore[no-untyped-call]
                 self._last_flush_s = t
@@ -324,7 +392,7 @@ class McapRecorder:
             raise InputError(f"{self.path}: the recording is closed")
         data = json.dumps(json_safe(message), allow_nan=False, separators=(",", ":")).encode()
         ns = _ns(t_s)
-        with named_errors(self.path):  # a full chunk is written out here
+        with self._writing():  # a full chunk is written out here
             self._writer.add_message(self._channels[topic], log_time=ns, data=data,
                                      publish_time=ns, sequence=self.messages)
         self.messages += 1
@@ -335,12 +403,38 @@ class McapRecorder:
         """Write the summary and footer and close the file (idempotent)."""
         if self._closed:
             return
-        self._closed = True
-        with named_errors(self.path):
+        with self._writing():
             try:
                 self._writer.finish()  # type: ignore[no-untyped-call]
             finally:
+                self._closed = True
                 self._file.close()
+
+    @contextmanager
+    def _writing(self) -> Iterator[None]:
+        """A block that writes to the file: if the system refuses (a full disk), the
+        recording ends there, sealed as far as it was written (:func:`seal_recording`)."""
+        try:
+            with named_errors(self.path):
+                yield
+        except OSError as exc:
+            self._abandon(exc)
+
+    def _abandon(self, exc: OSError) -> NoReturn:
+        self._closed = True
+        with suppress(OSError):  # its buffer's flush fails as the write did
+            self._file.close()
+        try:
+            end_s = seal_recording(self.path)
+        except OSError:
+            kept = ("cut short: free some space, then run "
+                    f"`relaxgrip recover {self.path} OUT.mcap`")
+        else:
+            kept = ("sealed before its first chunk was complete: it holds no messages"
+                    if end_s is None else
+                    f"sealed at its last complete chunk ({end_s:.2f} s of loop time)")
+        raise OSError(exc.errno, f"{exc.strerror or exc}; the recording stops, {kept}",
+                      str(self.path)) from exc
 
     def __enter__(self) -> McapRecorder:
         return self
