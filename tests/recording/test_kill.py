@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import pytest
@@ -86,6 +87,55 @@ def test_sigkill_leaves_the_flushed_part_readable(tmp_path: Path) -> None:
     assert summary.statistics is not None
     assert summary.statistics.message_count == n_tolerant
     assert [p.t_s for p in iter_periods(out)] == times
+
+
+def _recording_hold(path: Path, ignore_hangup: bool = False) -> subprocess.Popen[bytes]:
+    """``relaxgrip hold --record path`` in a child, once its recording has grown past 1 MB."""
+    def ignoring() -> None:
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)  # as nohup starts it
+
+    child = subprocess.Popen(
+        [sys.executable, "-m", "relaxgrip", "hold", "--duration-s", "120", "--record", str(path)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+        preexec_fn=ignoring if ignore_hangup else None)
+    deadline = time.monotonic() + 120.0
+    while not (path.exists() and path.stat().st_size > 1_000_000):
+        assert child.poll() is None, "the hold ended before it was signalled"
+        assert time.monotonic() < deadline, "the recording did not start"
+        time.sleep(0.05)
+    return child
+
+
+@pytest.mark.parametrize("stop", [signal.SIGTERM, signal.SIGHUP])
+def test_kill_and_a_closed_terminal_stop_a_hold_as_ctrl_c_does(tmp_path: Path,
+                                                                stop: signal.Signals) -> None:
+    """The command's clean-up runs: the recording is closed, complete, with its summary."""
+    path = tmp_path / "stopped.mcap"
+    child = _recording_hold(path)
+    child.send_signal(stop)
+    _, err = child.communicate(timeout=60)
+    assert child.returncode == 130, err  # as Ctrl-C: interrupted, no traceback
+    assert b"Traceback" not in err
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    assert summary.statistics is not None
+    assert summary.statistics.message_count == sum(1 for _ in iter_messages(path)) > 100
+
+
+def test_a_hold_started_under_nohup_keeps_running_through_a_hangup(tmp_path: Path) -> None:
+    path = tmp_path / "nohup.mcap"
+    child = _recording_hold(path, ignore_hangup=True)
+    child.send_signal(signal.SIGHUP)
+    size = path.stat().st_size
+    deadline = time.monotonic() + 60.0
+    while path.stat().st_size < size + 1_000_000:  # still recording
+        assert child.poll() is None, "a hangup stopped a hold that ignores it"
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    child.send_signal(signal.SIGTERM)
+    child.communicate(timeout=60)
+    assert child.returncode == 130
 
 
 def test_sealing_a_file_cut_anywhere_keeps_what_recover_keeps(

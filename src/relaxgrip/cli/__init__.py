@@ -5,12 +5,18 @@ Every command lives in its own module and registers itself on
 :class:`relaxgrip.errors.InputError`; :func:`main` turns it into one line on
 standard error and exit code 2, and likewise an ``OSError`` the file system
 raises (no space left, a read-only or missing folder) and a flag typer cannot
-parse (an unknown option, ``--target-n abc``).
+parse (an unknown option, ``--target-n abc``).  ``kill`` (SIGTERM) and a closed
+terminal (SIGHUP) stop a command as Ctrl-C does, so that its clean-up runs: a
+recording gets its footer, temporary files go, the loop's heaters go off.
 """
 
 from __future__ import annotations
 
+import signal
 import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import NoReturn
 
 from typer import Abort
@@ -32,17 +38,40 @@ from relaxgrip.cli import (  # noqa: F401  (registers commands)
     perceive,
     recording,
 )
-from relaxgrip.cli._app import app, err_console
+from relaxgrip.cli._app import app, err_console, interrupt
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import one_line
 
 __all__ = ["app", "main"]
 
 
+#: Signals that stop a command as Ctrl-C does (SIGINT is Python's own already).
+_STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+
+
+@contextmanager
+def _signals_interrupt() -> Iterator[None]:
+    """SIGTERM and SIGHUP raise ``KeyboardInterrupt`` in the block, where they are not
+    ignored (``nohup`` ignores SIGHUP: that stays); only the main thread can set them."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {sig: signal.getsignal(sig) for sig in _STOP_SIGNALS}
+    for sig, handler in previous.items():
+        if handler is not signal.SIG_IGN:
+            signal.signal(sig, interrupt)
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
 def main() -> None:
     """Entry point of the ``relaxgrip`` command."""
     try:
-        code = app(standalone_mode=False)
+        with _signals_interrupt():
+            code = app(standalone_mode=False)
     except NoArgsIsHelpError:  # bare ``relaxgrip`` (or a group): typer has shown its help
         sys.exit(2)
     except ClickException as exc:  # a flag typer could not parse: one line, like ours

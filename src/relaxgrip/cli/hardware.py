@@ -8,13 +8,12 @@ import signal
 import threading
 import time
 from pathlib import Path
-from types import FrameType
 from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.table import Table
 
-from relaxgrip.cli._app import app, console, emit_json, float_option, int_option
+from relaxgrip.cli._app import app, console, emit_json, float_option, int_option, interrupt
 from relaxgrip.errors import InputError
 
 if TYPE_CHECKING:
@@ -75,7 +74,7 @@ def emulator(
     link: Path | None = None
     # Handlers can only be set from the main thread (not, say, from a test runner's thread).
     stop_signals = _STOP_SIGNALS if threading.current_thread() is threading.main_thread() else ()
-    previous = {sig: signal.signal(sig, _interrupt) for sig in stop_signals}
+    previous = {sig: signal.signal(sig, interrupt) for sig in stop_signals}
     try:
         if make_dir:
             EMULATOR_DIR.mkdir()
@@ -108,11 +107,6 @@ def emulator(
                 EMULATOR_DIR.rmdir()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-
-
-def _interrupt(signum: int, frame: FrameType | None) -> None:
-    """Stop the emulator's loop as Ctrl-C does."""
-    raise KeyboardInterrupt
 
 
 def _link_port(link: Path, port: str) -> Path:
