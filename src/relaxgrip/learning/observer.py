@@ -273,8 +273,8 @@ class ObserverModel:
         InputError
             Too few usable sequences, hyperparameters out of range, or holds the
             identification cannot take: a hold or its loading longer than a day,
-            forces that fit no positive stiffness or no Prony series, or parameters that
-            come out non-finite.
+            forces that fit no positive stiffness or no Prony series, or
+            parameters that come out non-finite.
         """
         if not (1 <= self.n_terms <= 5):
             raise InputError(f"n_terms must be 1-5, got {self.n_terms}")
