@@ -8,6 +8,7 @@ import io
 import json
 import os
 import shutil
+import struct
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -170,6 +171,37 @@ def test_a_disk_full_from_the_start_leaves_no_file_or_an_empty_sealed_one(
                                       "no messages"), McapRecorder(path) as rec:
         run_loop(twin, ctl, clock, GraspPlan(target_n=2.0), 5.0, recorder=rec)
     assert list(iter_messages(path)) == []  # a complete, empty recording
+
+
+def test_a_summary_that_does_not_fit_leaves_every_message_sealed(
+        tmp_path: Path, models: ModelBundle, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The disk fills while close() writes the summary: the data is all there, sealed."""
+    from relaxgrip.recording.reader import iter_messages
+    from relaxgrip.twin import GripperTwin, TwinConfig
+
+    def record(path: Path) -> McapRecorder:
+        cfg = TwinConfig()
+        clock = VirtualClock()
+        twin = GripperTwin(cfg, seed=0, clock=clock)
+        ctl = GraspController(cfg.rig, make_estimator("fixed", models.icfn, models.rcfn))
+        rec = McapRecorder(path)
+        run_loop(twin, ctl, clock, GraspPlan(target_n=2.0), 3.0, recorder=rec)
+        return rec
+
+    whole = tmp_path / "whole.mcap"
+    record(whole).close()
+    data = whole.read_bytes()
+    size = len(data)
+    # The footer (29 bytes, then the closing magic) starts with where the summary does.
+    (summary_start,) = struct.unpack("<Q", data[size - 37 + 9: size - 37 + 17])
+    assert 0 < summary_start < size - 37
+    filling_disk(monkeypatch, (summary_start + size) // 2)
+    path = tmp_path / "cut.mcap"
+    rec = record(path)  # every message went out in chunks; the summary is still to come
+    with pytest.raises(OSError, match="No space left on device; the recording stops, sealed"):
+        rec.close()
+    assert path.stat().st_size < size
+    assert list(iter_messages(path)) == list(iter_messages(whole))
 
 
 def test_a_full_disk_on_the_command_line_is_one_line_and_the_file_reads(
