@@ -66,6 +66,25 @@ def test_rate_limit_bounds_the_output_change_per_second():
     assert outs == pytest.approx([0.2, 0.4, 0.6, 0.8, 1.0])
 
 
+def test_a_rate_limited_output_ramps_to_where_the_gains_put_it():
+    # P only: the ramp ends at kp * error, not where it began.
+    pid = PID(PIDGains(kp=1.0, rate_limit=1.0))
+    outs = [pid.update(10.0, 0.0, 0.1) for _ in range(150)]
+    assert outs[:3] == pytest.approx([0.1, 0.2, 0.3])
+    assert outs[-1] == pytest.approx(10.0)
+    assert pid.integral == 0.0
+
+
+def test_the_integral_waits_while_the_rate_limit_holds_the_output():
+    # Integrated through the ramp, the error would push the output past kp * error after it.
+    pid = PID(PIDGains(kp=1.0, ki=1.0, out_min=-20, out_max=20, rate_limit=1.0))
+    outs = [pid.update(5.0, 0.0, 0.1) for _ in range(10)]
+    assert outs == pytest.approx([0.1 * k for k in range(1, 11)])
+    assert pid.integral == 0.0
+    pid.update(5.0, 4.05, 0.1)  # the measurement catches up: within the rate limit
+    assert pid.integral == pytest.approx(0.095)
+
+
 def test_time_is_injected_and_checked():
     pid = PID(PIDGains(kp=1.0, ki=1.0))
     a = [pid.update(1.0, 0.0, 0.5) for _ in range(4)]

@@ -70,8 +70,9 @@ class PID:
     -----
     ``u = kp e + I - kd dy_f/dt`` with ``e = setpoint - measurement`` and
     ``dy_f`` the filtered measurement.  After limiting, the integral is moved
-    back by the part of ``u`` the limits cut off (back-calculation), so it
-    holds what the output can actually deliver.
+    back by the part of ``u`` the output limits cut off (back-calculation), so
+    it holds what the output can actually deliver.  While the rate limit
+    holds the output back, the integral does not change.
     """
 
     def __init__(self, gains: PIDGains) -> None:
@@ -112,13 +113,15 @@ class PID:
             previous = self._y_filtered
             self._y_filtered = previous + alpha * (measurement - previous)
             self.derivative = (self._y_filtered - previous) / dt_s
-        self.integral += g.ki * error * dt_s
-        raw = g.kp * error + self.integral - g.kd * self.derivative
-        limited = min(max(raw, g.out_min), g.out_max)
+        integral = self.integral + g.ki * error * dt_s
+        raw = g.kp * error + integral - g.kd * self.derivative
+        bounded = min(max(raw, g.out_min), g.out_max)
         step = g.rate_limit * dt_s
-        limited = min(max(limited, self.output - step), self.output + step)
-        # Back-calculation: the integral keeps only what the limits let through.
-        self.integral += limited - raw
-        self.integral = min(max(self.integral, g.out_min), g.out_max)
+        limited = min(max(bounded, self.output - step), self.output + step)
+        if limited == bounded:
+            # Back-calculation: the integral keeps only what the limits let through.
+            self.integral = min(max(integral + bounded - raw, g.out_min), g.out_max)
+        # Rate-limited: the integral waits, for the output is still on its way (taking
+        # the cut into the integral would hold the output where the ramp began).
         self.output = limited
         return limited
