@@ -271,6 +271,51 @@ def test_the_force_loop_waits_for_the_infrared_and_resumes(models):
     assert np.abs(res["estimate_n"][after] - 3.0).max() < 0.3  # regulating again
 
 
+def frozen_rgb(start_s: float, end_s: float) -> Callable[[Observation], Observation]:
+    """The RGB frame of ``start_s`` delivered again until ``end_s`` (a stalled camera)."""
+    frozen: dict[str, Frame] = {}
+
+    def stall(obs: Observation) -> Observation:
+        if obs.rgb is not None and start_s <= obs.t_s < end_s:
+            return replace(obs, rgb=frozen.setdefault("rgb", obs.rgb))
+        return obs
+
+    return stall
+
+
+def test_a_stalled_rgb_camera_holds_the_motor_until_frames_come_again(models):
+    # Frozen while closing on the object: on the frozen estimate the PID would close on
+    # to the stroke's end (about 20 N on this seed), for the estimate never rises.
+    res, _ = grasp(models, "icfn", change=frozen_rgb(15.0, 22.0), seed=5,
+                   plan=GraspPlan(target_n=3.0, temp_c=40.0, hold_s=10.0))
+    lost, back, gone = held_while_lost(res, EventKind.MARKER_LOST, EventKind.MARKER_BACK)
+    assert 15.2 <= lost.t_s <= 15.3
+    assert "no RGB frame for" in lost.detail
+    assert 22.0 <= back.t_s < 22.1
+    assert np.ptp(res["motor_mm"][gone]) < 0.1  # the motor coasts to a stop
+    assert np.nanmax(res["truth_force_n"]) < 3.5
+    assert res.log.first(EventKind.HOLD_ONSET) is not None  # the grasp goes on
+
+
+def test_an_infrared_frame_stamped_ahead_of_the_clock_is_no_reading(models):
+    # A clock fault: fresh by its age (none), yet the temperature loop has cut the
+    # heaters on it, so the force loop must not regulate on it either.
+    def ahead(obs: Observation) -> Observation:
+        if obs.ir is not None and obs.t_s >= 25.0:
+            return replace(obs, ir=replace(obs.ir, t_s=obs.ir.t_s + 1000.0))
+        return obs
+
+    res, _ = grasp(models, "relax", change=ahead, seed=6, temp_c=45.0,
+                   plan=GraspPlan(target_n=3.0, temp_c=45.0, hold_s=30.0), max_s=45.0)
+    stale, lost = res.log.first(EventKind.IR_STALE), res.log.first(EventKind.ESTIMATE_LOST)
+    assert stale is not None
+    assert lost is not None
+    assert 25.0 <= stale.t_s == lost.t_s <= 26.1
+    assert "stamped" in lost.detail
+    assert "ahead of the loop's clock" in lost.detail
+    assert np.all(res["velocity_cmd_mm_s"][res["t_s"] > lost.t_s] == 0.0)
+
+
 def test_lift_and_sustain_carry_the_object(models):
     plan = GraspPlan(target_n=5.0, temp_c=40.0, hold_s=2.0, lift_mm=30.0, sustain_s=2.0)
     res, _ = grasp(models, "relax", plan=plan, seed=7)
@@ -301,6 +346,26 @@ def test_runner_leaves_motor_and_heaters_off_after_an_error(models):
         run_loop(backend, controller, clock, GraspPlan(temp_c=45.0), 60.0)
     assert any(c.heater_duty != (0.0, 0.0) for c in backend.commands[:-1])
     assert backend.commands[-1] == Command()
+
+
+@pytest.mark.parametrize("work_s", [0.0, 0.1])
+def test_runner_ends_by_the_clock_when_its_periods_run_late(models, work_s):
+    # Each period's work takes work_s of the clock's time (a slow host in wall-clock
+    # time): the run ends at its time limit, not after its count of periods.
+    cfg = TwinConfig(initial_temp_c=40.0)
+    clock = VirtualClock()
+    backend = Wrapped(GripperTwin(cfg, seed=0, clock=clock))
+    original = backend.observe
+
+    def slow() -> Observation:
+        clock.advance(work_s)
+        return original()
+
+    backend.observe = slow  # type: ignore[method-assign]
+    controller = GraspController(cfg.rig, make_estimator("icfn", models.icfn, models.rcfn))
+    res = run_loop(backend, controller, clock, GraspPlan(temp_c=40.0), 2.0)
+    assert res["t_s"][-1] <= 2.0 + 2.0 / 30.0 + work_s  # the deadline, and one period late
+    assert res["t_s"].size == (61 if work_s == 0.0 else 21)
 
 
 @pytest.mark.parametrize("bad", [{"target_n": 0.0}, {"target_n": 10.5},
@@ -355,8 +420,9 @@ def test_the_per_frame_icfn_is_a_second_force_limit(models):
     percept = type("P", (), {})()  # only what _motor reads before the limit
     from relaxgrip.perception.marker import MarkerState, TrackStatus
 
-    percept.marker = MarkerState(0.0, TrackStatus.TRACKING)
-    percept.ir_age_s = 0.5
+    percept.t_s = 10.0
+    percept.marker = MarkerState(10.0, TrackStatus.TRACKING)
+    percept.thermal = type("T", (), {"t_s": 9.5})()
     for icfn_n, backs in ((cfg.max_force_n + cfg.icfn_margin_n - 0.1, False),
                           (cfg.max_force_n + cfg.icfn_margin_n + 0.1, True)):
         ctl.estimate = ForceEstimate(5.0, icfn_n)

@@ -131,6 +131,23 @@ def test_a_finger_out_of_view_is_not_heated_blind():
     assert duty[1] == 0.0
 
 
+@pytest.mark.parametrize("mode", [StiffnessMode.ADHESIVE, StiffnessMode.COMPLIANT])
+def test_a_finger_out_of_view_while_grasping_is_not_heated_blind(mode):
+    # The adhesive pads under an object are read as before the grasp, moved by the
+    # proximal beams: with none of them in view, that reading is no reading.
+    loop = TemperatureLoop(HEAT)
+    loop.set_mode(mode)
+    temps = np.full((2, HEAT.n_nodes), 45.0)
+    loop.update(features(0.0, temps), 0.0)
+    loop.set_grasping(True)
+    blind = FingerThermal((np.nan,) * HEAT.n_nodes, np.nan, np.nan, np.nan, np.nan, np.nan)
+    frame = ThermalFeatures(1.0, (features(1.0, temps).fingers[0], blind), AMBIENT_C, ())
+    assert np.isnan(loop.readings_c(frame)[1])
+    duty = loop.update(frame, 1.0)
+    assert duty[0] > 0.0
+    assert duty[1] == 0.0
+
+
 @pytest.mark.parametrize("bad", [80.0, 10.0, float("nan")])
 def test_setpoints_outside_the_safe_range_are_refused(bad):
     loop = TemperatureLoop(HEAT)

@@ -48,6 +48,7 @@ from relaxgrip.control.temperature import (
     TemperatureLoop,
     TemperatureStatus,
     ThermalLimits,
+    fresh,
 )
 from relaxgrip.errors import InputError
 from relaxgrip.perception.features import marker_pose
@@ -195,6 +196,12 @@ class ForceControlConfig:
         The loading's stiffness is fitted over the frames whose estimate is
         above this share of the estimate at the hold (motor travel against
         estimate, least squares).
+    rgb_stale_after_s : float
+        Under force control, an RGB frame older than this on the loop's clock
+        counts as a lost marker (s): the motor holds until a new frame comes.
+        A camera that stops, or a backend that hands over the same frame
+        again, would otherwise leave the loop on a frozen estimate.  Six frame
+        periods at 30 Hz; the serial gripper's cameras stall at 200 ms too.
     """
 
     gains: PIDGains = field(default_factory=lambda: PIDGains(
@@ -216,8 +223,11 @@ class ForceControlConfig:
     target_move_mm_s: float = 10.0
     target_move_share: float = 0.9
     loading_share: float = SLOPE_FORCE_SHARE
+    rgb_stale_after_s: float = 0.2
 
     def __post_init__(self) -> None:
+        if not self.rgb_stale_after_s > 0:
+            raise ValueError(f"RGB staleness limit must be > 0 s, got {self.rgb_stale_after_s}")
         if not (math.isfinite(self.target_move_mm_s) and self.target_move_mm_s >= 0):
             raise ValueError(f"target move speed must be >= 0 mm/s, got {self.target_move_mm_s}")
         if not 0.0 < self.target_move_share <= 1.0:
@@ -417,21 +427,27 @@ class GraspController:
         self.log.enter(t, phase)
         self.temperature.set_grasping(phase in _GRASPING)
 
-    def _sensing_lost(self, percept: Percept, est: ForceEstimate
+    def _sensing_lost(self, t: float, percept: Percept, est: ForceEstimate
                       ) -> tuple[EventKind, str] | None:
-        """Why the force cannot be read now (an event to log), or None if it can.
+        """Why the force cannot be read at ``t`` (an event to log), or None if it can.
 
-        The marker must be tracked and the estimate valid; and the infrared
-        fresh, for every estimate reads the finger's temperature: a stalled
+        The marker must be tracked on a current RGB frame (a camera that
+        stopped would leave the force loop closing on a frozen estimate) and
+        the estimate valid; and the infrared current by the temperature loop's
+        rule, for every estimate reads the finger's temperature: a stalled
         thermal camera would leave them on a temperature the fingers left
         (cooling fingers stiffen, and the force held would climb unseen).
         """
+        rgb_limit = self.config.rgb_stale_after_s
+        if not fresh(percept.t_s, t, rgb_limit):
+            return EventKind.MARKER_LOST, _stale("RGB", percept.t_s, t, rgb_limit)
         if percept.marker.status is not TrackStatus.TRACKING:
             return EventKind.MARKER_LOST, percept.marker.message or percept.marker.status.value
         limit = self.temperature.limits.stale_after_s
-        if not percept.ir_age_s <= limit:
-            return EventKind.ESTIMATE_LOST, (f"no infrared frame for {percept.ir_age_s:.1f} s "
-                                             f"(limit {limit:g} s)")
+        thermal = percept.thermal
+        if thermal is None or not fresh(thermal.t_s, t, limit):
+            seen = -math.inf if thermal is None else thermal.t_s
+            return EventKind.ESTIMATE_LOST, _stale("infrared", seen, t, limit)
         if not est.valid:
             return EventKind.ESTIMATE_LOST, "no valid estimate"
         return None
@@ -501,7 +517,7 @@ class GraspController:
                 return 0.0, 0.0
             return -cfg.release_mm_s, 0.0
         est = self.estimate
-        lost = self._sensing_lost(percept, est)
+        lost = self._sensing_lost(t, percept, est)
         if lost is not None:
             kind, detail = lost
             if self._lost is None:
@@ -638,6 +654,13 @@ class GraspController:
             self.log.event(t, EventKind.SLIP, f"estimate fell {peak - est.force_n:.2f} N "
                            f"in {self.config.slip_window_s:g} s")
             self._recent.clear()
+
+
+def _stale(stream: str, frame_t_s: float, t_s: float, limit_s: float) -> str:
+    """Why a frame of ``stream`` stamped ``frame_t_s`` is not current at ``t_s``."""
+    if frame_t_s > t_s:
+        return f"{stream} frame stamped {frame_t_s - t_s:.1f} s ahead of the loop's clock"
+    return f"no {stream} frame for {t_s - frame_t_s:.1f} s (limit {limit_s:g} s)"
 
 
 def _loading_stiffness(loading: list[tuple[float, float]], hold_n: float,

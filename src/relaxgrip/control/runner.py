@@ -161,8 +161,13 @@ def run_loop(
         recorder.start(backend.info, controller, t0)
     rows: list[tuple[float, ...]] = []
     n_steps = math.ceil(max_duration_s * rate_hz)
+    # A period's work longer than the period (wall-clock time) makes the steps late:
+    # the run ends by the clock, one period past its last step's time at most.
+    deadline = t0 + (n_steps + 1) * dt
     try:
         for k in range(n_steps + 1):
+            if k > 0 and clock.now() > deadline:
+                break
             obs = backend.observe()
             command = controller.step(obs)
             backend.act(command)

@@ -52,6 +52,7 @@ __all__ = [
     "TemperatureLoop",
     "TemperatureStatus",
     "ThermalLimits",
+    "fresh",
 ]
 
 
@@ -140,9 +141,19 @@ class ThermalLimits:
         return float(temp_c)
 
 
-#: How far ahead of the loop's clock an infrared frame's stamp may be (s): more is a
-#: clock fault, and the frame counts as none.
+#: How far ahead of the loop's clock a frame's stamp may be (s): more is a clock
+#: fault, and the frame counts as none.
 _FUTURE_S = 0.5
+
+
+def fresh(frame_t_s: float, t_s: float, stale_after_s: float) -> bool:
+    """Whether a frame stamped ``frame_t_s`` is current at ``t_s`` on the loop's clock.
+
+    It is if its stamp is finite, at most ``stale_after_s`` old and not ahead
+    of the clock by more than a clock's jitter: a frame stamped far ahead is a
+    clock fault, which would otherwise read as fresh until the clock caught up.
+    """
+    return math.isfinite(frame_t_s) and -_FUTURE_S <= t_s - frame_t_s <= stale_after_s
 
 #: Default gains: duty per kelvin, per kelvin-second.  A finger heats with a time
 #: constant of about 2.5 min and about 80 K per unit duty (the default heat
@@ -311,9 +322,7 @@ class TemperatureLoop:
         tuple of float
             Duty of each finger's heater, in [0, 1].
         """
-        fresh = thermal is not None and math.isfinite(thermal.t_s) and (
-            -_FUTURE_S <= t_s - thermal.t_s <= self.limits.stale_after_s)
-        if thermal is None or not fresh:
+        if thermal is None or not fresh(thermal.t_s, t_s, self.limits.stale_after_s):
             self.status = TemperatureStatus.STALE if self.setpoint_c is not None else \
                 TemperatureStatus.OFF
             self._duty = (0.0, 0.0)
@@ -386,13 +395,15 @@ class TemperatureLoop:
 
 
 def _median_change(now: Sequence[float], then: Sequence[float], skip: Sequence[bool]) -> float:
-    """The median change of the beams since ``then``, the ``skip`` ones left out (K; 0: none).
+    """The median change of the beams since ``then``, the ``skip`` ones left out (K).
 
     The median, for a beam an object half covers drops with it, not with the finger.
+    NaN if no beam is seen in both: a finger out of view now is not read as it
+    was then (its heater would be driven blind, past the over-temperature cut).
     """
     moved = [b - a for b, a, s in zip(now, then, skip, strict=True)
              if not s and math.isfinite(b) and math.isfinite(a)]
-    return statistics.median(moved) if moved else 0.0
+    return statistics.median(moved) if moved else math.nan
 
 
 def _shifted(gains: PIDGains, feedforward: float) -> PIDGains:
