@@ -297,6 +297,11 @@ def test_malformed_controls_get_a_reply_and_keep_the_viewer(served) -> None:
         assert reply(ws)["error"] == "a control is a JSON object {id, op, value}"
         ws.send_bytes(b'{"id": 3, "op": "stop"}')
         assert reply(ws)["error"] == "a control is JSON text, not a binary frame"
+        # An id nested too deep to encode in the reply: refused before it acts.
+        ws.send_text('{"id": %s, "op": "target", "value": 6}' % ("[" * 800 + "]" * 800))
+        assert reply(ws) == {"type": "reply", "id": None, "ok": False,
+                             "error": "a control's id is a number, a string or null"}
+        assert _state(ws)["target_n"] != 6.0
         for value in ("false", 0, None):
             assert "record needs true or false" in _control(ws, "record", value, 4)["error"]
         assert _state(ws)["recording"] is None

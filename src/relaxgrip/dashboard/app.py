@@ -210,6 +210,9 @@ def create_app(session: LiveSession, *, token: str | None = None,
                     request = json.loads(message["text"])
                     if not isinstance(request, dict):
                         raise InputError("a control is a JSON object {id, op, value}")
+                    if not isinstance(request.get("id"), str | int | float | None):
+                        # Echoed in the reply: nested JSON could be too deep to encode.
+                        raise InputError("a control's id is a number, a string or null")
                     ident = request.get("id")
                     extra = await asyncio.to_thread(_control, session, str(request.get("op")),
                                                     request.get("value"))
