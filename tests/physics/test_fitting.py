@@ -441,6 +441,17 @@ def test_an_unloading_at_the_end_is_cut() -> None:
     assert t[stop - 1] == pytest.approx(590.0, abs=0.15)
 
 
+@pytest.mark.parametrize("creep_rel", [0.002, 0.005, 0.009])
+def test_a_hold_that_creeps_a_little_holds_from_the_step(creep_rel: float) -> None:
+    # A clamp that gives a little: held along the trend, not from where the creep has
+    # brought the displacement within 0.1 % of its final value (minutes late).
+    t, x = _step_and_hold()
+    clean = find_hold(t, x)
+    held = t >= t[clean[0]]
+    x[held] += creep_rel * 2.0 * (t[held] - t[clean[0]]) / (t[-1] - t[clean[0]])
+    assert find_hold(t, x) == clean
+
+
 def test_a_prony_series_with_more_terms_than_the_hold_shows_is_refused() -> None:
     """The first second of a VHB-like hold (modes of 5.5, 55 and 540 s) with 1 mN of
     noise: the best three-term fits merge two relaxation times into a pair of amplitudes

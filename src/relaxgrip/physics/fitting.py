@@ -235,7 +235,9 @@ def find_hold(
 ) -> tuple[int, int]:
     """The hold phase of a step-and-hold record: ``(start, stop)`` sample indices.
 
-    The plateau is the median of the last quarter of the samples.  A sample
+    The plateau is the median of the last quarter of the samples, along
+    their trend where the displacement creeps by at most 1 % of the step over
+    the record (a clamp that gives a little).  A sample
     is *in band* when the running median of the displacement (five samples:
     one glitching sample is not a change of displacement) lies within
     ``rel_tol |step| + noise_factor sigma`` of it, where ``step`` is the
@@ -289,16 +291,27 @@ def find_hold(
     if n < min_samples:
         raise InputError(f"no hold phase: only {n} samples, need at least {min_samples}")
 
-    tail = x[-max(min_samples, n // 4) :]
+    m = max(min_samples, n // 4)
+    tail, tail_t = x[-m:], t[-m:]
     plateau = float(np.median(tail))
+    step = plateau - float(x[0])
+    # A hold whose displacement creeps (a fixture or a clamp that gives a little) is
+    # held along its trend: the slope between the medians of the tail's two halves,
+    # taken where it moves the level by at most _NEAR_PLATEAU of the step over the
+    # whole record (more is a displacement still on its way, which never settles).
+    half = m // 2
+    rate = ((float(np.median(tail[half:])) - float(np.median(tail[:half])))
+            / (float(np.median(tail_t[half:])) - float(np.median(tail_t[:half]))))
+    if not abs(rate) * float(t[-1] - t[0]) <= _NEAR_PLATEAU * abs(step):
+        rate = 0.0
+    level = plateau + rate * (t - float(np.median(tail_t)))
     d_tail = np.diff(tail)
     # MAD of first differences: insensitive to a slow drift, sqrt(2) undoes the differencing.
     sigma = 1.4826 * float(np.median(np.abs(d_tail - np.median(d_tail)))) / math.sqrt(2.0)
-    step = plateau - float(x[0])
     # A displacement logged in counts mostly does not change from one sample to the
     # next on the plateau, and when it does, by a count: the resolution, below which
     # the noise estimate cannot go (a ramp changes at every sample, and is no plateau).
-    near = np.abs(tail - plateau) <= _NEAR_PLATEAU * abs(step)
+    near = np.abs(tail - level[-m:]) <= _NEAR_PLATEAU * abs(step)
     changes = np.abs(d_tail[near[1:] & near[:-1]])
     counts = changes[changes > 0.0]
     if counts.size and counts.size <= 0.5 * changes.size:
@@ -312,7 +325,7 @@ def find_hold(
             f"({x[0]:.6g}); there is no step to hold"
         )
     band = rel_tol * abs(step) + noise_band
-    inside = np.abs(_running_median(x, 5) - plateau) <= band
+    inside = np.abs(_running_median(x, 5) - level) <= band
     if not inside.any():
         raise InputError(
             f"no hold phase: the displacement never settles (last sample {x[-1]:.6g}, "
