@@ -82,6 +82,20 @@ def test_a_step_retains_everything_then_relaxes_as_the_prony_series() -> None:
     assert math.isnan(h.unit_force_m())
 
 
+def test_warmed_at_a_fixed_deflection_a_finger_keeps_its_branch_forces() -> None:
+    # Eq. 2 as the twin: the branches carry their forces over a change of k_i(T), while
+    # the instantaneous stiffness falls, so the share passes 1 (documented).
+    h = LoadingHistory(_model())
+    h.advance(0.0, 1e-3, 30.0)
+    assert h.branches_m is not None
+    before = h.branches_m.copy()
+    h.advance(1e-6, 1e-3, 55.0)
+    after = h.branches_m
+    assert after is not None
+    np.testing.assert_allclose(after, before, rtol=1e-5)  # 1 µs of relaxation
+    assert h.retained() > 1.0
+
+
 @pytest.mark.parametrize("temp_c", [30.0, 45.0])
 def test_a_slower_closing_retains_less_at_the_same_deflection(temp_c: float) -> None:
     def closing(speed_m_s: float) -> float:

@@ -147,7 +147,11 @@ class LoadingHistory:
         return float(k_i.sum()) * self.deflection_m - float(self.branches_m.sum())
 
     def retained(self) -> float:
-        """The share of the unrelaxed force the finger carries now (1 before contact)."""
+        """The share of the unrelaxed force the finger carries now (1 before contact).
+
+        At most 1 at a constant temperature; above it after warming at a fixed
+        deflection (see :func:`retained_shares`).
+        """
         if self.branches_m is None or not self.deflection_m > self.contact_deflection_m:
             return 1.0
         k_e, k_i, _ = self._parameters(self.temp_c)
@@ -192,7 +196,10 @@ def retained_shares(rows: pd.DataFrame, model: ObserverModel,
     Returns
     -------
     ndarray, shape (len(rows),)
-        The share, in ``(0, 1]`` (1 for samples before contact).
+        The share: in ``(0, 1]`` at a constant temperature (1 for samples
+        before contact).  Warmed at a fixed deflection, a finger keeps its
+        branch forces while its instantaneous stiffness falls (Eq. 2 of the
+        foundation, as the twin's physics), so the share can then pass 1.
     """
     x = rows[list(columns)].to_numpy(np.float64)
     t = rows["t_s"].to_numpy(np.float64)
