@@ -60,6 +60,11 @@ __all__ = [
 _EDGE_SAMPLES = 24
 _PROFILE_HALF_PX = 3.0
 _PROFILE_STEP_PX = 0.5
+#: The tracker's edge fit: a first pass that moves a corner this far (px) is repeated
+#: until a pass moves none by ``_CONVERGED_PX``, in ``_EDGE_PASSES`` passes at most.
+_FIRST_PASS_PX = 0.5
+_CONVERGED_PX = 0.05
+_EDGE_PASSES = 4
 #: Fraction of each edge left out at both ends, where the corner bends the profile.
 _EDGE_MARGIN = 0.12
 _EDGE_S = np.linspace(_EDGE_MARGIN, 1.0 - _EDGE_MARGIN, _EDGE_SAMPLES)
@@ -614,6 +619,15 @@ class MarkerTracker:
         """``(R0, t0)`` of the unloaded finger, once averaged."""
         return self._zero
 
+    @property
+    def zero_samples(self) -> int:
+        """Accepted frames taken towards the zero pose since the last reset or rezero.
+
+        0 before the first one; the zero pose is their average once there are
+        ``zero_frames`` of them, and the count stops there.
+        """
+        return len(self._zero_samples)
+
     def update(self, frame: Frame) -> MarkerState:
         """Track the marker in one frame; never raises on a bad frame."""
         if not math.isfinite(frame.t_s) or (self._last_t is not None
@@ -690,18 +704,31 @@ class MarkerTracker:
         if x1 - x0 < 16 or y1 - y0 < 16:  # predicted out of the frame
             return None
         gray = to_gray(image[y0:y1, x0:x1])
-        origin = (x0, y0)
         shift = np.array([x0, y0], dtype=np.float64)
-        guess = predicted - shift
-        for _ in range(2):  # a second pass when the first moved the corners noticeably
+        fitted = self._fit_edges(gray, predicted - shift, (x0, y0))
+        return None if fitted is None else fitted + shift
+
+    def _fit_edges(self, gray: GrayImage, guess: FloatArray, origin: tuple[int, int]
+                   ) -> FloatArray | None:
+        """The edge fit from ``guess``; again from its result while it still moves.
+
+        The edge profiles reach ``_PROFILE_HALF_PX`` either side of the guess,
+        so a guess a few pixels off (a constant-velocity prediction, a corner
+        the region-of-interest detector placed 3 px off) fits a biased line
+        that moves the corner only part of the way.  A first pass that moved a
+        corner by half a pixel or more is a better guess, not the answer: the
+        fit is repeated until a pass moves no corner by a twentieth of a pixel
+        (four passes at most).  A first pass under half a pixel is kept.
+        """
+        for passes in range(_EDGE_PASSES):
             fitted = refine_corners_by_edges(gray, guess, self.intrinsics, origin, self._modules)
             if fitted is None:
                 return None
             moved = float(np.abs(fitted - guess).max())
             guess = fitted
-            if moved < 0.5:
+            if moved < (_FIRST_PASS_PX if passes == 0 else _CONVERGED_PX):
                 break
-        return guess + shift
+        return guess
 
     def _search_roi(self, image: NDArray[np.uint8], corners: FloatArray) -> FloatArray | None:
         h, w = image.shape[:2]
@@ -720,8 +747,7 @@ class MarkerTracker:
 
     def _refined(self, gray: GrayImage, corners: FloatArray, origin: tuple[int, int]) -> FloatArray:
         if self.edge_refine:
-            refined = refine_corners_by_edges(gray, corners, self.intrinsics, origin,
-                                              self._modules)
+            refined = self._fit_edges(gray, corners, origin)
             if refined is not None:
                 corners = refined
         return corners + np.asarray(origin, dtype=np.float64)
