@@ -234,3 +234,27 @@ def test_a_frame_delivered_again_after_later_ones_is_not_processed() -> None:
     assert perception.ir.latest is not None
     assert last.thermal is not None
     assert perception.ir.latest.t_s == last.thermal.t_s
+
+
+def test_an_infrared_frame_beside_a_repeated_rgb_frame_reaches_the_percept() -> None:
+    """The RGB camera hands over its last frame again while a new infrared frame comes:
+    the percept keeps the marker and carries the new temperatures (the temperature loop
+    reads them: they were held back until the next RGB frame, or for good on a stall)."""
+    clock = VirtualClock()
+    twin = GripperTwin(TwinConfig(), seed=0, clock=clock)
+    perception = Perception(twin.config.rig)
+    obs = twin.observe()
+    assert obs.rgb is not None
+    assert obs.ir is not None
+    first = perception.update(obs.rgb, obs.ir, obs.motor_position_mm)
+    assert first.thermal is not None
+    hot = Frame(obs.ir.t_s + 1.0, obs.ir.seq + 1, np.asarray(obs.ir.image, np.float32) + 20.0)
+    again = perception.update(obs.rgb, hot, obs.motor_position_mm)
+    assert again.marker is first.marker
+    assert again.t_s == first.t_s
+    assert again.thermal is perception.ir.latest
+    assert again.thermal is not None
+    assert again.thermal.t_s == hot.t_s
+    assert again.thermal.fingers[0].max_c == pytest.approx(first.thermal.fingers[0].max_c + 20.0,
+                                                           abs=0.5)
+    assert perception.update(obs.rgb, hot, obs.motor_position_mm) is again  # nothing new

@@ -158,7 +158,8 @@ class Perception:
         """
         # A frame is processed once, and only if it is newer than the last of its stream
         # (a frame delivered again after a later one would set the clock back).
-        if ir is not None and ir.seq != self._last_ir_seq and _newer(ir, self._last_ir_t):
+        new_ir = ir is not None and ir.seq != self._last_ir_seq and _newer(ir, self._last_ir_t)
+        if ir is not None and new_ir:
             self._last_ir_seq, self._last_ir_t = ir.seq, ir.t_s
             try:
                 self.ir.hold(self.thermal.extract(ir, motor_position_mm))
@@ -170,6 +171,9 @@ class Perception:
             return self._percept(marker, None, None)
         if self._last is not None and (rgb.seq == self._last_rgb_seq
                                        or not _newer(rgb, self._last_rgb_t)):
+            if new_ir:  # the marker as it was, with the infrared frame just read
+                last = self._last
+                self._last = self._percept(last.marker, last.proximity, last.t_s)
             return self._last
         self._last_rgb_seq, self._last_rgb_t = rgb.seq, rgb.t_s
         marker = self.tracker.update(rgb)
