@@ -291,3 +291,130 @@ def test_a_camera_stuck_in_read_is_released_after_the_read_not_beside_it() -> No
         time.sleep(0.01)
     assert cap.released
     assert not cap.released_in_read
+
+
+def test_starting_a_running_camera_opens_nothing_and_a_given_up_reader_still_stops() -> None:
+    """start() while the reader runs leaves it alone; a reader that close() gave up waiting
+    for (stuck in the driver) stops when its read returns, even after a new start()."""
+    import threading
+
+    class StuckCapture(FakeCapture):
+        def __init__(self) -> None:
+            super().__init__([])
+            self.in_read = threading.Event()
+            self.unblock = threading.Event()
+
+        def read(self) -> tuple[bool, np.ndarray[Any, Any] | None]:
+            self.in_read.set()
+            self.unblock.wait(10.0)
+            return False, None
+
+    caps: list[FakeCapture] = []
+
+    def factory(dev: int | str) -> FakeCapture:
+        caps.append(StuckCapture() if not caps else FakeCapture([]))
+        return caps[-1]
+
+    source = OpenCvRgbSource(load_rig(DOCS / "rig-example.toml").rgb, VirtualClock(),
+                             capture_factory=factory)
+    source.start()
+    source.start()
+    assert len(caps) == 1  # one device, one reader
+    stuck = caps[0]
+    assert isinstance(stuck, StuckCapture)
+    assert stuck.in_read.wait(5.0)
+    first = source._thread
+    assert first is not None
+    source.close()  # gives up waiting for the stuck reader
+    source.start()  # the camera again, with a reader of its own
+    try:
+        assert len(caps) == 2
+        stuck.unblock.set()
+        first.join(timeout=5.0)
+        assert not first.is_alive()
+        assert stuck.released
+    finally:
+        source.close()
+    assert caps[1].released
+
+
+@pytest.mark.parametrize("channels", [2, 4])
+def test_an_rgb_frame_with_another_channel_count_is_named(channels: int) -> None:
+    rig = load_rig(DOCS / "rig-example.toml")
+    clock = VirtualClock()
+    grey = FakeCapture([np.full((480, 640, 1), 90, np.uint8)])
+    source = OpenCvRgbSource(rig.rgb, clock, capture_factory=lambda dev: grey)
+    source.start()
+    try:
+        frame = _wait_frame(source, clock)
+        assert frame.image.shape == (480, 640, 3)  # grey (one channel) becomes grey RGB
+        assert int(frame.image[5, 5, 0]) == int(frame.image[5, 5, 2]) == 90
+    finally:
+        source.close()
+    cap = FakeCapture([np.zeros((480, 640, channels), np.uint8)])
+    source = OpenCvRgbSource(rig.rgb, clock, capture_factory=lambda dev: cap)
+    source.start()
+    try:
+        for _ in range(2000):
+            if source._error is not None:
+                break
+            time.sleep(0.001)
+        with pytest.raises(CameraError, match=f"RGB camera: frame has {channels} channels, "
+                                              r"expected 3 \(BGR\) or 1 \(grey\)"):
+            source.read(0.0)
+    finally:
+        source.close()
+
+
+def test_a_camera_whose_read_raises_is_reported_not_stalled() -> None:
+    class BrokenCapture(FakeCapture):
+        def read(self) -> tuple[bool, np.ndarray[Any, Any] | None]:
+            raise cv2.error("(-2:Unspecified error) in function 'read'\n> driver gone")
+
+    cap = BrokenCapture([])
+    source = OpenCvRgbSource(load_rig(DOCS / "rig-example.toml").rgb, VirtualClock(),
+                             capture_factory=lambda dev: cap)
+    source.start()
+    try:
+        thread = source._thread
+        assert thread is not None
+        thread.join(timeout=5.0)
+        assert not thread.is_alive()
+        assert cap.released
+        with pytest.raises(CameraError) as info:
+            source.read(0.0)
+    finally:
+        source.close()
+    message = str(info.value)
+    assert message == ("RGB camera: error: (-2:Unspecified error) in function 'read' "
+                       "> driver gone")
+
+
+def test_force_readings_nobody_takes_are_bounded() -> None:
+    """A rig-file host has no truth consumer: the channel keeps only the newest readings."""
+    import socket
+
+    from relaxgrip.backend import ForceSamples
+    from relaxgrip.clock import WallClock
+    from relaxgrip.hardware.cameras import _FORCE_CHUNKS, EmulatorChannel
+
+    n = _FORCE_CHUNKS + 100
+    mine, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_STREAM)
+    channel = EmulatorChannel(theirs, WallClock())
+    channel.start()
+    try:
+        for k in range(n):
+            mine.sendall(encode_tick(k, k * 0.01, None,
+                                     ForceSamples(np.array([k * 0.01]), np.array([float(k)]))))
+        deadline = time.monotonic() + 10.0
+        while channel._tick_s < (n - 1) * 0.01 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert channel._tick_s == (n - 1) * 0.01
+        assert len(channel._force) == _FORCE_CHUNKS
+        _, force = channel.take_truth()
+        assert force is not None
+        assert force.force_n.tolist() == [float(k) for k in range(n - _FORCE_CHUNKS, n)]
+        assert channel.take_truth()[1] is None
+    finally:
+        channel.close()
+        mine.close()

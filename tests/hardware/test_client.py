@@ -218,3 +218,42 @@ def test_client_parameters_are_checked() -> None:
         McuClient(link.host, link.clock, reply_timeout_s=0.0)
     with pytest.raises(InputError, match="first_seq 70000 is outside"):
         McuClient(link.host, link.clock, first_seq=70_000)
+
+
+def test_a_fault_status_after_the_answer_in_the_same_read_reaches_poll() -> None:
+    """The MCU answers, then a heater trips: both frames arrive in one read."""
+    rig = Rig()
+    rig.start()
+    trip = [True]
+
+    def answer_then_trip() -> None:
+        sent = rig.mcu.frames_sent
+        rig.mcu.poll()
+        if rig.mcu.frames_sent > sent and trip:
+            trip.clear()
+            rig.mcu._send(rig.mcu.core.raise_fault(c.FaultFlag.OVERTEMP, rig.clock.now()))
+
+    rig.link.host.set_service(answer_then_trip)
+    assert rig.client.command(1.0, (0.5, 0.5)).enabled
+    assert not trip
+    polled = rig.client.poll(0.0)
+    assert [(s.unsolicited, "OVERTEMP" in s.faults, s.enabled) for s in polled] == [
+        (True, True, False)]
+    assert rig.client.stats.unsolicited == 1
+
+
+def test_an_mcu_reboot_is_not_counted_as_lost_frames() -> None:
+    rig = Rig()
+    rig.start()
+    for _ in range(5):
+        rig.client.command(1.0, (0.0, 0.0))
+    rig.mcu = McuEndpoint(rig.link.device, rig.clock)  # power cycle: its seq restarts at 0
+    rig.link.host.set_service(rig.mcu.poll)
+    rig.client.handshake()
+    rig.client.set_enabled(True)
+    assert rig.client.stats.mcu_frames_lost == 0
+    rig.link.cut()  # and a real loss is still counted
+    rig.mcu._send([rig.mcu.core.status(0)])
+    rig.link.restore()
+    rig.client.command(1.0, (0.0, 0.0))
+    assert rig.client.stats.mcu_frames_lost == 1

@@ -203,3 +203,75 @@ def test_stopping_twice_closes_no_descriptor_it_does_not_own(tmp_path: Path) -> 
     finally:
         os.close(slave)
     assert (tmp_path / "log.txt").read_text(encoding="utf-8") == "still open\n"
+
+
+def test_wall_clock_watchdog_trips_when_the_host_stops_reading_the_port() -> None:
+    """A host that sends but never reads fills the pty: the emulator drops its answers, as
+    a UART overflows, instead of waiting for ever, and its watchdog stops the outputs."""
+    from relaxgrip.hardware.protocol.client import McuClient
+    from relaxgrip.hardware.protocol.codec import GetStatus, encode_frame
+    from relaxgrip.hardware.protocol.transport import SerialTransport
+
+    clock = WallClock()
+    emu = McuEmulator(TwinConfig(), seed=0, clock=clock).start()
+    port = SerialTransport(emu.port)
+    try:
+        client = McuClient(port, clock)
+        client.handshake()
+        client.set_enabled(True)
+        client.command(1.0, (1.0, 1.0))
+        # From now on only GetStatus (which does not feed the watchdog), answers never read.
+        for batch in range(30):
+            try:
+                port.write(b"".join(encode_frame(GetStatus(), 3 + 100 * batch + k,
+                                                 leading_delimiter=True) for k in range(100)))
+            except Exception:  # an MCU that stopped reading: the port's write timed out
+                break
+        core = emu.endpoint.core
+        deadline = time.monotonic() + 3.0
+        while core.enabled and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert core.fault_flags & FaultFlag.WATCHDOG
+        assert core.outputs.velocity_um_s == 0
+        assert core.outputs.heater_duty_permyriad == (0, 0)
+        assert emu.transport.tx_overflows > 0
+        assert emu.error is None
+    finally:
+        port.close()
+        emu.stop()
+
+
+def test_a_second_emulator_is_refused_however_it_names_the_socket(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """docs/emulator.md: the socket belongs to one emulator, whether the second names it
+    by a relative path or through a linked folder; its socket is never replaced."""
+    import os
+
+    from relaxgrip.errors import InputError
+
+    folder = tmp_path / "d"
+    folder.mkdir()
+    alias = tmp_path / "alias"
+    alias.symlink_to(folder)
+    monkeypatch.chdir(folder)
+    first = McuEmulator(TwinConfig(), seed=0, clock=WallClock())
+    second = McuEmulator(TwinConfig(), seed=0, clock=WallClock())
+    try:
+        first.listen("f.sock")
+        inode = os.stat(folder / "f.sock").st_ino
+        for spelling in (folder / "f.sock", alias / "f.sock"):
+            with pytest.raises(InputError, match="another emulator is serving it") as info:
+                second.listen(str(spelling))
+            assert "\n" not in str(info.value)
+        assert os.stat(folder / "f.sock").st_ino == inode
+        monkeypatch.chdir(tmp_path)  # stopping elsewhere still removes its files
+    finally:
+        second.stop()
+        first.stop()
+    assert list(folder.iterdir()) == []
+    third = McuEmulator(TwinConfig(), seed=0, clock=WallClock())
+    try:
+        third.listen(str(alias / "f.sock"))  # free once the first stopped
+    finally:
+        third.stop()
+    assert list(folder.iterdir()) == []

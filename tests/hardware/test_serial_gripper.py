@@ -144,3 +144,68 @@ def test_mcu_fault_is_reported_and_host_limits_apply(bench: Bench) -> None:
     with pytest.raises(GripperFaultError, match="outputs stopped by fault MOTOR_DRIVER"):
         bench.gripper.act(Command(motor_velocity_mm_s=1.0))
     assert fault_names(int(FaultFlag.RESET) | (1 << 9)) == {"RESET", "BIT9"}
+
+
+def test_a_reset_that_fails_on_the_thermal_camera_releases_the_rgb_one() -> None:
+    """Cameras open once (a streaming V4L2 device refuses a second opener): a reset that
+    fails on the second camera closes the first, so that the retry can open both."""
+    import time
+    from pathlib import Path
+    from typing import Any
+
+    import numpy as np
+
+    from relaxgrip.hardware.cameras import OpenCvRgbSource, UvcThermalSource
+    from relaxgrip.hardware.gripper import SerialGripper
+    from relaxgrip.hardware.protocol import McuClient, McuEndpoint, MemoryLink
+    from relaxgrip.hardware.rig_file import load_rig
+
+    rig = load_rig(Path(__file__).resolve().parents[2] / "docs" / "rig-example.toml")
+    busy: set[int | str] = set()
+    plugged = {rig.rgb.device}
+    caps: list[Any] = []
+
+    class ExclusiveCapture:
+        def __init__(self, device: int | str) -> None:
+            self.device = device
+            self.opened = device in plugged and device not in busy
+            if self.opened:
+                busy.add(device)
+            caps.append(self)
+
+        def isOpened(self) -> bool:
+            return self.opened
+
+        def set(self, prop: int, value: float) -> bool:
+            return True
+
+        def read(self) -> tuple[bool, np.ndarray[Any, Any]]:
+            time.sleep(0.002)
+            if self.device == rig.rgb.device:
+                return True, np.zeros((480, 640, 3), np.uint8)
+            return True, np.full((192, 256), 30_000, np.uint16)
+
+        def release(self) -> None:
+            if self.opened:
+                busy.discard(self.device)
+                self.opened = False
+
+    clock = VirtualClock()
+    link = MemoryLink(clock)
+    mcu = McuEndpoint(link.device, clock)
+    link.host.set_service(mcu.poll)
+    rgb = OpenCvRgbSource(rig.rgb, clock, capture_factory=ExclusiveCapture)
+    ir = UvcThermalSource(rig.ir, clock, capture_factory=ExclusiveCapture)
+    gripper = SerialGripper(McuClient(link.host, clock), rgb, ir, limits=rig.limits)
+    try:
+        with pytest.raises(GripperFaultError, match="cannot open thermal camera"):
+            gripper.reset()
+        assert busy == set()  # the RGB camera was closed, its reader stopped
+        assert rgb._thread is None
+        plugged.add(rig.ir.device)  # the thermal camera is plugged in; the lab retries
+        gripper.reset()
+        assert busy == {rig.rgb.device, rig.ir.device}
+        assert [c.device for c in caps] == [rig.rgb.device, rig.ir.device] * 2
+    finally:
+        gripper.close()
+    assert busy == set()

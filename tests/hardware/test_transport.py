@@ -113,6 +113,36 @@ def test_serial_transport_bad_port_is_one_line() -> None:
         SerialTransport("/dev/tty\x00S0")
 
 
+def test_a_serial_port_in_use_is_refused_with_one_line(pty_pair: tuple[int, str]) -> None:
+    """A second host on the port (check-rig during a hold) would reset the session with its
+    Hello: the port is locked while open."""
+    _, path = pty_pair
+    first = SerialTransport(path)
+    try:
+        with pytest.raises(LinkError) as info:
+            SerialTransport(path)
+    finally:
+        first.close()
+    assert str(info.value) == (f"serial port {path} is in use by another process (a running "
+                               "host, check-rig or a dashboard): stop it first")
+    SerialTransport(path).close()  # free again once closed
+
+
+def test_a_full_non_blocking_descriptor_drops_and_counts_instead_of_waiting(
+        pty_pair: tuple[int, str]) -> None:
+    """As a UART overflows its TX buffer: the writer (the MCU loop) never waits."""
+    master, _ = pty_pair
+    os.set_blocking(master, False)
+    fd = FdTransport(master)
+    frame = bytes(range(1, 33)) + b"\x00"
+    for _ in range(100_000):  # the slave side is never read: its buffer fills
+        fd.write(frame)
+        if fd.tx_overflows:
+            break
+    assert fd.tx_overflows == 1
+    assert 0 < fd.tx_dropped_bytes <= len(frame)
+
+
 def test_core_imports_without_pyserial_and_says_how_to_install() -> None:
     code = (
         "import sys; sys.modules['serial'] = None\n"

@@ -14,6 +14,7 @@ emulator has sent every frame up to the time asked for.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import socket
 import threading
@@ -92,12 +93,23 @@ def _stalled(name: str, now_s: float, last_s: float, stall_s: float, had_frame: 
                                  f"(limit {stall_s * 1e3:.0f} ms)")
 
 
+#: Force chunks (one per emulator tick that has readings) an :class:`EmulatorChannel`
+#: keeps for :meth:`EmulatorChannel.take_truth`: at least 5 s of the twin's 100 Hz force
+#: ball.  A host without a truth consumer (a rig-file host) never takes them.
+_FORCE_CHUNKS = 512
+
 #: Builds a ``cv2.VideoCapture``-like object for a device (tests pass a fake).
 CaptureFactory = Callable[[int | str], Any]
 
 
 def _default_capture(device: int | str) -> Any:
     return cv2.VideoCapture(device)
+
+
+def _one_line(exc: BaseException) -> str:
+    """``exc`` as one line (OpenCV's messages span several)."""
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
 
 
 class _CaptureSource:
@@ -116,7 +128,7 @@ class _CaptureSource:
         self._last_s = 0.0
         self._seq = 0
         self._error: str | None = None
-        self._stop = threading.Event()
+        self._stop = threading.Event()  # the current reader thread's; each thread has its own
         self._thread: threading.Thread | None = None
 
     def _configure(self, cap: Any) -> None:
@@ -126,33 +138,50 @@ class _CaptureSource:
         raise NotImplementedError
 
     def start(self) -> None:
-        """Open the device, configure it and start the reader thread."""
+        """Open the device, configure it and start the reader thread.
+
+        Does nothing while the reader thread runs: the device is open already
+        (and may refuse a second opening).
+        """
+        if self._thread is not None and self._thread.is_alive():
+            return
         cap = self._factory(self.device)
         if cap is None or not cap.isOpened():
+            if cap is not None:
+                cap.release()
             raise CameraError(f"cannot open {self.name} camera {self.device!r}")
-        self._configure(cap)
+        try:
+            self._configure(cap)
+        except BaseException:
+            cap.release()
+            raise
         self._cap = cap
         self._last_s = self.clock.now()
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._run, name=f"{self.name}-camera",
-                                        daemon=True)
+        # A new Event per thread: one that close() gave up waiting for (stuck in the
+        # driver's read) must still stop when that read returns.
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(cap, self._stop),
+                                        name=f"{self.name}-camera", daemon=True)
         self._thread.start()
 
-    def _run(self) -> None:
-        cap = self._cap
+    def _run(self, cap: Any, stop: threading.Event) -> None:
         try:
-            while not self._stop.is_set():
-                ok, raw = cap.read()
-                if not ok or raw is None:
-                    time.sleep(0.005)  # no frame now; the stall check notices a dead camera
-                    continue
-                t = self.clock.now()
+            while not stop.is_set():
                 try:
+                    ok, raw = cap.read()
+                    if not ok or raw is None:
+                        time.sleep(0.005)  # no frame now; the stall check notices a dead camera
+                        continue
+                    t = self.clock.now()
                     image = self._convert(np.asarray(raw))
                 except CameraError as exc:
                     with self._lock:
                         self._error = str(exc)
                     continue
+                except Exception as exc:  # the reader must not die unreported: the host
+                    with self._lock:      # would see a stalled camera, not the cause
+                        self._error = _one_line(exc)
+                    return
                 with self._lock:
                     self._latest = Frame(t, self._seq, image)
                     self._seq += 1
@@ -214,10 +243,14 @@ class OpenCvRgbSource(_CaptureSource):
 
     def _convert(self, raw: NDArray[Any]) -> NDArray[np.generic]:
         intr = self.spec.mount.intrinsics
+        if raw.ndim not in (2, 3) or (raw.ndim == 3 and raw.shape[2] not in (1, 3)):
+            what = f"{raw.shape[2]} channels" if raw.ndim == 3 else f"shape {raw.shape}"
+            raise CameraError(f"frame has {what}, expected 3 (BGR) or 1 (grey): "
+                              "is the camera's RGB conversion off?")
         if raw.shape[:2] != intr.shape:
             raise CameraError(f"frame is {raw.shape[1]}x{raw.shape[0]}, the rig file says "
                               f"{intr.width_px}x{intr.height_px}")
-        if raw.ndim == 2:
+        if raw.ndim == 2 or raw.shape[2] == 1:
             out: NDArray[np.generic] = cv2.cvtColor(raw, cv2.COLOR_GRAY2RGB)
         else:
             out = cv2.cvtColor(raw, cv2.COLOR_BGR2RGB)
@@ -274,7 +307,8 @@ class EmulatorChannel:
 
     A reader thread takes every message: the newest RGB and infrared frames,
     the time covered by the latest tick, the truth at that tick and the force
-    readings accumulated since the host last took them.
+    readings accumulated since the host last took them (those of the last
+    512 ticks at most: a host that never takes them must not hold them all).
 
     Parameters
     ----------
@@ -303,7 +337,8 @@ class EmulatorChannel:
         self._arrival: dict[int, float] = {}
         self._tick_s = -float("inf")
         self._truth: Truth | None = None
-        self._force: list[tuple[list[float], list[float]]] = []
+        self._force: collections.deque[tuple[list[float], list[float]]] = collections.deque(
+            maxlen=_FORCE_CHUNKS)
         self._error: str | None = None
         self._closed = False
         self._thread: threading.Thread | None = None
@@ -325,6 +360,9 @@ class EmulatorChannel:
                                   f"{self.address}: {exc.strerror or exc}") from None
         self._sock = sock
         self.started_s = self.clock.now()
+        with self._cond:  # started again after close(): report this connection's faults
+            self._closed = False
+            self._error = None
         self._thread = threading.Thread(target=self._run, name="frame-channel", daemon=True)
         self._thread.start()
 
@@ -386,8 +424,8 @@ class EmulatorChannel:
     def take_truth(self) -> tuple[Truth | None, ForceSamples | None]:
         """The truth at the latest tick and the force readings since the last call."""
         with self._cond:
-            truth, chunks = self._truth, self._force
-            self._force = []
+            truth, chunks = self._truth, list(self._force)
+            self._force.clear()
         if not chunks:
             return truth, None
         t = np.concatenate([np.asarray(c[0], dtype=np.float64) for c in chunks])

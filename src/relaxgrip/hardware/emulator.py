@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import fcntl
 import os
 import socket
 import stat
@@ -302,6 +303,9 @@ class _Pty:
 def _open_pty() -> _Pty:
     master, slave = os.openpty()
     tty.setraw(master)
+    # Never wait on a host that stops reading: a full buffer drops the MCU's answers
+    # (FdTransport counts them), as a UART overflows, and the watchdog goes on.
+    os.set_blocking(master, False)
     return _Pty(master, slave, os.ttyname(slave))
 
 
@@ -343,6 +347,7 @@ class McuEmulator:
         self._thread: threading.Thread | None = None
         self._server: socket.socket | None = None
         self._socket_path: Path | None = None
+        self._socket_lock: tuple[int, Path] | None = None
         self._accept_thread: threading.Thread | None = None
         self.error: BaseException | None = None
 
@@ -385,13 +390,17 @@ class McuEmulator:
         """Serve the frame channel on a Unix socket at ``path`` (one host at a time).
 
         An old socket at ``path`` (a previous emulator's) is replaced; any
-        other file there is left alone.
+        other file there is left alone.  The emulator holds a lock on
+        ``path + ".lock"`` until :meth:`stop`, so that a second emulator is
+        refused however it spells the same path (relative, through a linked
+        folder).
 
         Raises
         ------
         InputError
-            If ``path`` is taken by something other than a socket, is too long
-            for a Unix socket, is in a missing folder, or cannot be created.
+            If ``path`` is taken by something other than a socket, is served
+            by another emulator, is too long for a Unix socket, is in a
+            missing folder, or cannot be created.
         """
         p = Path(path)
         if len(os.fsencode(p)) > _MAX_SOCKET_PATH:
@@ -400,21 +409,28 @@ class McuEmulator:
         if p.is_symlink() or (p.exists() and not stat.S_ISSOCK(p.stat().st_mode)):
             raise InputError(f"frame channel socket {p}: a file that is not a socket is "
                              "there; the emulator will not replace it")
-        if p.exists() and _answers(p):
-            raise InputError(f"frame channel socket {p}: another emulator is serving it; "
-                             "stop it or give this one another [emulator] socket")
         check_parent_dir(p, "frame channel socket")
-        server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        lock = _lock_socket(p)
         try:
-            with contextlib.suppress(FileNotFoundError):
-                p.unlink()
-            server.bind(str(p))
-        except OSError as exc:
-            server.close()
-            raise InputError(f"frame channel socket {p}: {exc.strerror or exc}") from None
+            if p.exists() and _answers(p):
+                raise InputError(f"frame channel socket {p}: another emulator is serving it; "
+                                 "stop it or give this one another [emulator] socket")
+            server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            try:
+                with contextlib.suppress(FileNotFoundError):
+                    p.unlink()
+                server.bind(str(p))
+            except OSError as exc:
+                server.close()
+                raise InputError(f"frame channel socket {p}: {exc.strerror or exc}") from None
+        except BaseException:
+            _unlock_socket(lock)
+            raise
         server.listen(1)
         server.settimeout(0.2)
-        self._server, self._socket_path = server, p
+        # Absolute, so that stop() removes the socket whatever the working folder by then.
+        self._server, self._socket_path = server, Path(os.path.abspath(p))
+        self._socket_lock = lock
 
         def accept() -> None:
             while not self._stop.is_set():
@@ -453,11 +469,58 @@ class McuEmulator:
             with contextlib.suppress(OSError):
                 self._socket_path.unlink()
             self._socket_path = None
+        if self._socket_lock is not None:
+            _unlock_socket(self._socket_lock)
+            self._socket_lock = None
         self.transport.close_fd()
         if self._pty.slave >= 0:  # once: a second stop must not close a reused descriptor
             with contextlib.suppress(OSError):
                 os.close(self._pty.slave)
             self._pty.slave = -1
+
+
+def _lock_socket(path: Path) -> tuple[int, Path]:
+    """Lock ``path + ".lock"``, the mark of the socket's owner; its descriptor and absolute path.
+
+    The lock is on the file, whatever the spelling of its path, and dies
+    with the process that holds it (a crashed emulator's socket is replaced).
+
+    Raises
+    ------
+    InputError
+        If another emulator holds it, or the lock file cannot be made.
+    """
+    lock_path = path.with_name(path.name + ".lock")
+    for _ in range(3):  # the holder may remove the file between our open and our lock
+        try:
+            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+        except OSError as exc:
+            raise InputError(f"frame channel socket {path}: cannot make its lock file "
+                             f"{lock_path}: {exc.strerror or exc}") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            raise InputError(f"frame channel socket {path}: another emulator is serving it "
+                             f"(it holds {lock_path}); stop it or give this one another "
+                             "[emulator] socket") from None
+        try:
+            current = os.stat(lock_path, follow_symlinks=False)
+        except FileNotFoundError:
+            current = None
+        if current is not None and os.path.samestat(current, os.fstat(fd)):
+            return fd, Path(os.path.abspath(lock_path))
+        os.close(fd)  # locked a file its holder had just removed: take the new one
+    raise InputError(f"frame channel socket {path}: its lock file {lock_path} keeps changing; "
+                     "is another emulator starting and stopping on it?")
+
+
+def _unlock_socket(lock: tuple[int, Path]) -> None:
+    """Remove the lock file, then release it (never the reverse: see :func:`_lock_socket`)."""
+    fd, lock_path = lock
+    with contextlib.suppress(OSError):
+        lock_path.unlink()
+    os.close(fd)
 
 
 def _answers(path: Path) -> bool:

@@ -193,9 +193,18 @@ class SerialGripper:
 
     def _start(self) -> None:
         if not self._started:  # cameras first: an emulator publishes frames from its first answer
-            for source in (self.rgb, self.ir):
-                if source is not None:
-                    source.start()
+            started: list[FrameSource] = []
+            try:
+                for source in (self.rgb, self.ir):
+                    if source is not None:
+                        source.start()
+                        started.append(source)
+            except BaseException:
+                # All or none: the next reset() starts them all again, and a camera left
+                # open here would refuse that second opening (and leak its reader).
+                for source in started:
+                    source.close()
+                raise
             self._started = True
         self.client.handshake()
         self.client.set_enabled(True)

@@ -76,6 +76,18 @@ class LinkStats:
     unsolicited: int = 0
 
 
+def _is_answer(reply: Message, request: Message, seq: int) -> bool:
+    """Whether ``reply`` answers ``request`` sent with ``seq``."""
+    if isinstance(reply, Status):
+        return reply.ack_seq == seq and not reply.unsolicited
+    if isinstance(reply, HelloAck):
+        return reply.ack_seq == seq and isinstance(request, Hello)
+    if isinstance(reply, ErrorReply):
+        return (reply.offending_type != 0 and reply.ack_seq == seq
+                and reply.offending_type == int(request.TYPE))
+    return False
+
+
 def _fault_names(flags: int) -> str:
     names = [str(f.name) for f in FaultFlag if flags & f]
     return ", ".join(names) if names else "none"
@@ -144,6 +156,7 @@ class McuClient:
             If no valid answer arrives within ``reply_timeout_s``.
         """
         self.decoder.reset()
+        self._rx_seq = None  # a rebooted MCU counts from 0 again: no frames were lost
         reply = self._exchange(Hello())
         assert isinstance(reply, HelloAck)
         self.hello_ack = reply
@@ -214,7 +227,7 @@ class McuClient:
         return self._status(GetStatus())
 
     def poll(self, timeout_s: float = 0.0) -> list[Status]:
-        """Status frames that arrived outside an exchange (unsolicited or late).
+        """Status frames that were not the answer to a request (unsolicited or late).
 
         Parameters
         ----------
@@ -289,23 +302,22 @@ class McuClient:
         deadline = self.clock.now() + self.reply_timeout_s
         while True:
             data = self.transport.read(max(0.0, deadline - self.clock.now()))
-            for packet in self._ingest(data):
-                reply = packet.message
-                if isinstance(reply, Status) and reply.ack_seq == seq and not reply.unsolicited:
-                    return reply
-                if isinstance(reply, HelloAck) and reply.ack_seq == seq:
-                    if isinstance(message, Hello):
-                        return reply
+            packets = [p.message for p in self._ingest(data)]
+            answer = next((i for i, m in enumerate(packets) if _is_answer(m, message, seq)), None)
+            for i, other in enumerate(packets):
+                # Status frames beside the answer, even those after it in the same read (a
+                # fault that tripped just after answering), are poll()'s.
+                if i == answer:
                     continue
+                if isinstance(other, ErrorReply) and other.offending_type == 0:
+                    unreadable.append(other.code_name)
+                elif isinstance(other, Status):
+                    self._telemetry.append(other)
+            if answer is not None:
+                reply = packets[answer]
                 if isinstance(reply, ErrorReply):
-                    if reply.offending_type == 0:
-                        unreadable.append(reply.code_name)
-                        continue
-                    if reply.ack_seq == seq and reply.offending_type == int(message.TYPE):
-                        self._raise_rejected(what, reply)
-                    continue
-                if isinstance(reply, Status):
-                    self._telemetry.append(reply)
+                    self._raise_rejected(what, reply)
+                return reply
             if self.clock.now() >= deadline:
                 self._raise_timeout(what, self.stats.decode_errors - errors_before, unreadable)
 

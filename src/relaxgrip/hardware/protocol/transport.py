@@ -11,6 +11,7 @@ or a pseudo-terminal path) and needs the ``hardware`` extra;
 
 from __future__ import annotations
 
+import errno
 import os
 import select
 import threading
@@ -179,26 +180,45 @@ class MemoryLink:
 class FdTransport:
     """Transport over a raw file descriptor (the master side of a pseudo-terminal).
 
+    On a non-blocking descriptor (the MCU emulator's) :meth:`write` never
+    waits: what does not fit the full buffer of a peer that stops reading is
+    dropped and counted, as a UART drops what overflows its TX FIFO, so the
+    writer (the MCU loop and its watchdog) goes on.
+
     Parameters
     ----------
     fd : int
         An open descriptor, e.g. from :func:`os.openpty` after ``tty.setraw``.
     close_fd : bool
         Close ``fd`` in :meth:`close`.
+
+    Attributes
+    ----------
+    tx_overflows : int
+        Writes cut short by a full buffer (non-blocking descriptors only).
+    tx_dropped_bytes : int
+        Bytes those writes dropped.
     """
 
     def __init__(self, fd: int, close_fd: bool = False) -> None:
         self.fd = fd
         self._close_fd = close_fd
         self._closed = False
+        self.tx_overflows = 0
+        self.tx_dropped_bytes = 0
 
     def write(self, data: bytes) -> None:
-        """Write all of ``data``."""
+        """Write all of ``data`` (on a non-blocking descriptor: what fits; see the class)."""
         if self._closed:
             raise LinkError(f"write on closed fd transport {self.fd}")
         view = memoryview(bytes(data))
         while view:
-            n = os.write(self.fd, view)
+            try:
+                n = os.write(self.fd, view)
+            except BlockingIOError:
+                self.tx_overflows += 1
+                self.tx_dropped_bytes += len(view)
+                return
             view = view[n:]
 
     def read(self, timeout_s: float) -> bytes:
@@ -210,6 +230,8 @@ class FdTransport:
             return b""
         try:
             return os.read(self.fd, 4096)
+        except BlockingIOError:  # a non-blocking descriptor that select() woke spuriously
+            return b""
         except OSError as exc:  # EIO once the slave side is closed
             raise LinkError(f"read on fd {self.fd} failed: {exc}") from exc
 
@@ -254,15 +276,25 @@ class SerialTransport:
         Device path, e.g. ``/dev/ttyACM0`` or ``os.ttyname(slave_fd)``.
     baudrate : int
         Line speed (bit/s); ignored by USB CDC devices and pseudo-terminals.
+
+    Raises
+    ------
+    LinkError
+        If the port cannot be opened, or another process has it open (the
+        port is locked for as long as it is open: a second host's Hello would
+        reset the running session).
     """
 
     def __init__(self, port: str, baudrate: int = 115_200) -> None:
         serial_mod = import_serial()
         try:
             self._serial: serial.Serial = serial_mod.Serial(
-                port, baudrate=baudrate, timeout=0.0, write_timeout=1.0
+                port, baudrate=baudrate, timeout=0.0, write_timeout=1.0, exclusive=True
             )
         except serial_mod.SerialException as exc:
+            if exc.errno in (errno.EAGAIN, errno.EWOULDBLOCK):  # the flock is taken
+                raise LinkError(f"serial port {port} is in use by another process (a running "
+                                "host, check-rig or a dashboard): stop it first") from exc
             raise LinkError(f"cannot open serial port {port}: {exc}") from exc
         except (OSError, ValueError) as exc:  # e.g. a NUL byte in the path
             raise LinkError(f"cannot open serial port {port!r}: {exc}") from exc
