@@ -211,6 +211,7 @@ def test_a_build_too_small_to_train_says_so(small: Path) -> None:
         ({"icfn_samples": 999_999_999_999}, "at most 107,000 ICFN samples (ten times the "
                                             "default), got 999,999,999,999"),
         ({"rcfn_sequences": MAX_RCFN_SEQUENCES + 1}, "at most 8,100 RCFN sequences"),
+        ({"icfn_samples": 2}, "ask for 0 or at least 3 ICFN samples, got 2"),
     ],
 )
 def test_spec_sizes_are_bounded(changes: dict[str, Any], expected: str) -> None:
@@ -218,6 +219,22 @@ def test_spec_sizes_are_bounded(changes: dict[str, Any], expected: str) -> None:
     with pytest.raises(InputError) as info:
         replace(DatasetSpec(), **changes)
     assert expected in str(info.value)
+
+
+@pytest.mark.parametrize("n", [3, 21, 22, 23, 402, 10_701])
+def test_every_sample_count_plans_episodes_that_can_close(n: int) -> None:
+    # An episode takes 2 samples before contact: a last one of 1 or 2 samples had no
+    # force level to close to (22 samples divided by zero, 21 gave 22).
+    sizes = [e.n_samples for e in plan_icfn(DatasetSpec(icfn_samples=n))]
+    assert sum(sizes) == n
+    assert min(sizes) >= 3
+
+
+def test_a_last_episode_too_short_to_close_builds_into_the_one_before(tmp_path: Path) -> None:
+    spec = DatasetSpec(icfn_samples=22, rcfn_sequences=0, seed=3)
+    build_dataset(tmp_path / "d", spec, jobs=1)
+    rows = pd.read_parquet(tmp_path / "d" / "icfn.parquet")
+    assert rows["episode"].value_counts().to_dict() == {0: 22}
 
 
 def test_the_largest_spec_plans() -> None:

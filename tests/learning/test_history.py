@@ -243,7 +243,8 @@ def test_an_ensemble_names_known_features_in_the_schemas_order(
 
 @pytest.mark.parametrize("damage", ["drop_history", "drop_file", "corrupt", "schema",
                                     "members", "member_arrays", "features_unknown",
-                                    "features_count", "features_type"])
+                                    "features_count", "features_type", "members_dropped",
+                                    "band_level"])
 def test_a_damaged_unrelaxed_section_is_refused_in_one_line(
         tmp_path: Path, fitted: tuple[ICFN, ICFN, RCFN], damage: str) -> None:
     _save(tmp_path, fitted)
@@ -265,6 +266,11 @@ def test_a_damaged_unrelaxed_section_is_refused_in_one_line(
         manifest["icfn_unrelaxed"]["features"] = list(_SUBSET)
     elif damage == "features_type":
         manifest["icfn_unrelaxed"]["features"] = "pose"
+    elif damage == "members_dropped":  # the file's second member would go unused
+        manifest["icfn_unrelaxed"]["params"]["members"] = \
+            manifest["icfn_unrelaxed"]["params"]["members"][:1]
+    elif damage == "band_level":  # the band's quantile at every frame: 2 has none
+        manifest["history"]["params"]["band_level"] = 2.0
     else:  # a third member the file has no arrays for
         members = manifest["icfn_unrelaxed"]["params"]["members"]
         members.append(members[0])

@@ -60,6 +60,7 @@ def test_a_single_knot_is_a_constant() -> None:
     ({"values_n": np.full((2, 3, 2), np.nan).tolist()}, "not finite"),
     ({"forces_n": ["a", "b"]}, "numbers"),
     ({"forces_n": None}, "non-empty"),
+    ({"values_n": np.full((2, 3, 2), 1e6).tolist()}, "1e.06 N, more than any force of the grid"),
 ])
 def test_a_grid_that_is_not_one_is_refused(change: dict[str, object], match: str) -> None:
     entry = {**grid().to_dict(), **change}

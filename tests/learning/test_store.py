@@ -212,6 +212,16 @@ CORRUPTIONS: dict[str, tuple[Callable[[Path], object], str, str]] = {
         "manifest.json",
         r"'icfn.params.hidden_layer_sizes' must be a list of positive integers, got \[0\]",
     ),
+    "rcfn temperature column": (
+        lambda d: edit_manifest(d, lambda m: m["rcfn"]["params"].update(temp_column=99)),
+        "rcfn.npz",
+        "temp_column must be a column of the",
+    ),
+    "rcfn time column text": (
+        lambda d: edit_manifest(d, lambda m: m["rcfn"]["params"].update(time_column="3")),
+        "rcfn.npz",
+        "time_column must be a column of the",
+    ),
     "hidden size float": (
         lambda d: edit_manifest(d, lambda m: m["icfn"]["params"].update(
             hidden_layer_sizes=[8.5])),

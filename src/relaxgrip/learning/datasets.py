@@ -124,6 +124,11 @@ _LOADING_FRAME_EVERY = 3
 _SPLITS = ("train", "val", "test")
 
 
+#: Samples an ICFN episode takes before contact, at zero force (the last millimetres
+#: of the approach).
+_FREE_SAMPLES = 2
+
+
 @dataclass(frozen=True)
 class DatasetSpec:
     """What to generate.
@@ -178,6 +183,10 @@ class DatasetSpec:
             raise InputError("the curve needs >= 10 Hz and the features a positive rate")
         if self.samples_per_episode < 4:
             raise InputError("need at least 4 samples per episode")
+        if 0 < self.icfn_samples <= _FREE_SAMPLES:
+            raise InputError(f"an ICFN episode takes {_FREE_SAMPLES} samples before contact: "
+                             f"ask for 0 or at least {_FREE_SAMPLES + 1} ICFN samples, "
+                             f"got {self.icfn_samples}")
         if abs(sum(self.split) - 1.0) > 1e-9 or min(self.split) <= 0:
             raise InputError(f"split shares must be > 0 and sum to 1, got {self.split}")
 
@@ -245,18 +254,21 @@ def _ranks(n: int, rng: np.random.Generator) -> list[int]:
 def plan_icfn(spec: DatasetSpec) -> list[IcfnEpisode]:
     """The ICFN episodes of a dataset (deterministic in ``spec.seed``)."""
     rng = np.random.default_rng([spec.seed, 101])
-    n_episodes = math.ceil(spec.icfn_samples / spec.samples_per_episode)
+    full, rest = divmod(spec.icfn_samples, spec.samples_per_episode)
+    sizes = [spec.samples_per_episode] * full
+    if rest > _FREE_SAMPLES or (rest and not sizes):
+        sizes.append(rest)
+    elif rest:  # too few to close on anything: the last full episode takes them
+        sizes[-1] += rest
+    n_episodes = len(sizes)
     names = [name for name, _ in ICFN_OBJECTS]
     shares = np.array([w for _, w in ICFN_OBJECTS])
     ranks = _ranks(n_episodes, rng)
     episodes = []
-    remaining = spec.icfn_samples
-    for i in range(n_episodes):
+    for i, n in enumerate(sizes):
         name = names[int(rng.choice(len(names), p=shares / shares.sum()))]
         obj = get_object(name)
         ceiling = min(ICFN_MAX_FORCE_N, 0.85 * obj.yield_force_n)
-        n = min(spec.samples_per_episode, remaining)
-        remaining -= n
         episodes.append(IcfnEpisode(
             index=i,
             seed=int(rng.integers(2**31)),
@@ -376,7 +388,7 @@ def run_icfn_episode(ep: IcfnEpisode) -> UnitResult:
     h.zero()
     out = UnitResult("icfn", ep.index)
     rows: dict[str, list[Any]] = {name: [] for name in _ICFN_COLUMNS}
-    n_free = 2  # samples before contact, at zero force
+    n_free = _FREE_SAMPLES
 
     def sample() -> None:
         percept, truth = h.perceive()

@@ -276,12 +276,7 @@ class ObserverModel:
             forces that fit no positive stiffness or no Prony series, or
             parameters that come out non-finite.
         """
-        if not (1 <= self.n_terms <= 5):
-            raise InputError(f"n_terms must be 1-5, got {self.n_terms}")
-        if not (self.loading_speed_mm_s > 0 and 0.5 <= self.band_level < 1.0
-                and self.band_scale > 0 and self.drift_scale >= 0):
-            raise InputError("need loading_speed_mm_s > 0, 0.5 <= band_level < 1, band_scale > 0,"
-                             " drift_scale >= 0")
+        self._check_params()
         holds = self._prepare(data)
         train = [h for h in holds if h.split == "train"] or holds
         held = [h for h in holds if h.split != "train"] or holds
@@ -502,6 +497,15 @@ class ObserverModel:
         out["share_spread_"] = np.asarray(self.share_spread_, dtype=np.float64)
         return out
 
+    def _check_params(self) -> None:
+        """Refuse parameters no fit or band can use (:class:`InputError`)."""
+        if isinstance(self.n_terms, bool) or self.n_terms not in range(1, 6):
+            raise InputError(f"n_terms must be 1-5, got {self.n_terms!r}")
+        if not (self.loading_speed_mm_s > 0 and 0.5 <= self.band_level < 1.0
+                and self.band_scale > 0 and self.drift_scale >= 0):
+            raise InputError("need loading_speed_mm_s > 0, 0.5 <= band_level < 1, band_scale > 0,"
+                             " drift_scale >= 0")
+
     @classmethod
     def from_arrays(cls, arrays: Mapping[str, Any], params: Mapping[str, Any]) -> ObserverModel:
         """Rebuild a fitted model from :meth:`to_arrays` and :meth:`get_params`.
@@ -522,6 +526,10 @@ class ObserverModel:
                 and _finite_at_least(model.drift_scale, 0.0, strict=False)):
             raise ValueError(f"band_scale must be > 0 and drift_scale >= 0, got "
                              f"{model.band_scale!r} and {model.drift_scale!r}")
+        try:
+            model._check_params()
+        except TypeError:  # a parameter of another type than a number
+            raise ValueError(f"bad observer parameters: {dict(params)}") from None
         onset = np.asarray(arrays.get("onset_rel_", [np.nan]), dtype=np.float64).ravel()
         if onset.size != 1 or not np.isfinite(onset).all():
             raise ValueError("array 'onset_rel_' missing or bad")

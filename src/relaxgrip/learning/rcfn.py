@@ -620,6 +620,13 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
             raise ValueError("array 'temp_knots' must be increasing")
         design = _Design(got["x_mean"], got["x_scale"], got["phi_mean"], got["phi_scale"])
         n_features = (d - knots.size + 1 if knots.size else d) - (est.time_column is not None)
+        for name, column in (("temp_column", est.temp_column), ("time_column", est.time_column)):
+            if column is None and name == "time_column":
+                continue
+            if (isinstance(column, bool) or not isinstance(column, int | np.integer)
+                    or not 0 <= column < n_features):
+                raise ValueError(f"{name} must be a column of the {n_features} inputs, "
+                                 f"got {column!r}")
         for name, shape in (("x_min", (n_features,)), ("x_max", (n_features,)),
                             ("log_tau_range", (2,))):
             if got[name].shape != shape:
