@@ -14,10 +14,12 @@ complete file (summary, footer), which every MCAP tool then opens.
 from __future__ import annotations
 
 import base64
+import io
 import json
 import os
 import struct
 import typing
+import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, fields, is_dataclass
@@ -330,14 +332,15 @@ def _periods(path: Path, tolerant: bool) -> Iterator[Period]:
             if current is not None and _complete(current):
                 yield current
             t = float(message["t_s"])
-            if pending_rgb is not None:
-                rgb = Frame(_num(message.get("rgb_t_s"), t), int(message["rgb_seq"]),
-                            decode_rgb(pending_rgb))
-                pending_rgb = None
-            if pending_ir is not None:
-                ir = Frame(_num(message.get("ir_t_s"), t), int(message["ir_seq"]),
-                           decode_ir(pending_ir))
-                pending_ir = None
+            # A frame written before this observation is its frame if it bears the time the
+            # observation names: after a chunk lost to damage it can be an older one.
+            rgb_t = _num(message.get("rgb_t_s"), t)
+            if pending_rgb is not None and _stamped(pending_rgb, rgb_t):
+                rgb = Frame(rgb_t, int(message["rgb_seq"]), decode_rgb(pending_rgb))
+            ir_t = _num(message.get("ir_t_s"), t)
+            if pending_ir is not None and _stamped(pending_ir, ir_t):
+                ir = Frame(ir_t, int(message["ir_seq"]), decode_ir(pending_ir))
+            pending_rgb = pending_ir = None
             current = Period(t, rgb if message.get("rgb_seq") is not None else None,
                              ir if message.get("ir_seq") is not None else None,
                              {topic: message})
@@ -358,6 +361,13 @@ def _complete(period: Period) -> bool:
 
 def _num(value: Any, default: float) -> float:
     return default if value is None else float(value)
+
+
+def _stamped(image: dict[str, Any], t_s: float) -> bool:
+    """Whether an image message's ``timestamp`` is ``t_s`` (s; to a microsecond)."""
+    stamp = image["timestamp"]
+    ns = int(stamp["sec"]) * 1_000_000_000 + int(stamp["nsec"])
+    return abs(ns - max(0.0, t_s) * 1e9) < 1e3  # the recorder writes no time before 0
 
 
 @dataclass(frozen=True)
@@ -406,7 +416,10 @@ def recover(src: Path, dst: Path) -> RecoverReport:
     the file.  Where the record structure itself breaks (the end of a
     killed file) reading stops.  The summary of a complete file is not
     copied (the writer makes a new one) but its message count is reported
-    beside what was recovered.  The output appears whole or not at all.
+    beside what was recovered, and the schemas and channels it lists stand
+    in for any the data section lost (a damaged first chunk of a recording
+    written before the recorder put a copy of them ahead of it).  The output
+    appears whole or not at all.
 
     Raises
     ------
@@ -428,6 +441,9 @@ def recover(src: Path, dst: Path) -> RecoverReport:
     if dst.is_dir():
         raise InputError(f"{dst}: is a directory; name the MCAP file to write")
     check_writable(dst, InputError)  # a FIFO or a device is not replaced by a file
+    # A complete file's summary lists its schemas and channels again: what the data
+    # section lost of them (in a damaged first chunk) is taken from there.
+    listed_schemas, listed_channels = _summary_definitions(src) if complete else ({}, {})
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
     count = damaged = 0
@@ -444,11 +460,17 @@ def recover(src: Path, dst: Path) -> RecoverReport:
             channels[record.id] = writer.register_channel(
                 record.topic, record.message_encoding, schemas.get(record.schema_id, 0),
                 dict(record.metadata))
-        elif isinstance(record, Message) and record.channel_id in channels:
-            writer.add_message(channels[record.channel_id], record.log_time, record.data,
-                               record.publish_time, record.sequence)
-            count += 1
-            end_ns = max(end_ns, record.log_time)
+        elif isinstance(record, Message):
+            listed = listed_channels.get(record.channel_id)
+            if record.channel_id not in channels and listed is not None:
+                if listed.schema_id in listed_schemas:
+                    copy(listed_schemas[listed.schema_id], writer)
+                copy(listed, writer)
+            if record.channel_id in channels:
+                writer.add_message(channels[record.channel_id], record.log_time, record.data,
+                                   record.publish_time, record.sequence)
+                count += 1
+                end_ns = max(end_ns, record.log_time)
 
     try:
         with atomic_file(dst) as out, open(src, "rb") as f:
@@ -491,3 +513,37 @@ def recover(src: Path, dst: Path) -> RecoverReport:
                          end_ns * 1e-9 if end_ns >= 0 else float("nan"),
                          damaged_chunks=damaged, expected_messages=expected,
                          stopped_early=stopped_early)
+
+
+def _summary_definitions(path: Path) -> tuple[dict[int, Any], dict[int, Any]]:
+    """The schemas and channels (by id) the summary of a complete MCAP file lists.
+
+    Both are empty if the file has no summary, or one that does not check
+    (its CRC, its records).
+    """
+    from mcap.records import Channel, Footer, Schema
+    from mcap.stream_reader import StreamReader
+
+    schemas: dict[int, Any] = {}
+    channels: dict[int, Any] = {}
+    try:
+        with open(path, "rb") as f:
+            end = f.seek(-len(_MAGIC), os.SEEK_END)  # the footer's end
+            f.seek(end - _FOOTER_RECORD)
+            summary_start, _, crc = struct.unpack("<QQI", f.read(_FOOTER_RECORD)[9:])
+            if summary_start == 0:
+                return {}, {}
+            f.seek(summary_start)
+            summary = f.read(end - summary_start)
+        if crc and zlib.crc32(summary[:-4]) != crc:  # it covers all but itself
+            return {}, {}
+        for record in StreamReader(io.BytesIO(summary), skip_magic=True).records:
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Footer):
+                break
+    except Exception:  # a summary damaged beyond its CRC's notice: none to use
+        return {}, {}
+    return schemas, channels

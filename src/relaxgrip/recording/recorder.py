@@ -11,7 +11,9 @@ full and, whatever its size, every ``flush_every_s`` of loop time
 (:meth:`mcap.writer.Writer.flush`), and the file object is flushed to the
 operating system after every period.  A process killed with SIGKILL therefore
 leaves a file whose complete chunks are all readable: at most the last
-``flush_every_s`` of loop time (or one chunk) is lost.  Such a file has no
+``flush_every_s`` of loop time (or one chunk) is lost.  (The schemas and
+channels are written ahead of the first chunk as well as in it, so a damaged
+chunk, the first included, costs only its own messages.)  Such a file has no
 summary or footer; :func:`relaxgrip.recording.reader.read_recording` reads it
 with ``tolerant=True`` and :func:`relaxgrip.recording.reader.recover` (``relaxgrip
 recover``) rewrites it as a complete file.  Losing power needs an ``fsync`` as
@@ -175,6 +177,8 @@ class McapRecorder:
                  chunk_size_bytes: int = 512 * 1024, flush_every_s: float = 1.0,
                  compression: str = "zstd") -> None:
         require_mcap()
+        from mcap.data_stream import RecordBuilder
+        from mcap.records import Channel, Schema
         from mcap.writer import CompressionType, Writer
 
         if rgb_format not in RGB_FORMATS:
@@ -200,14 +204,20 @@ class McapRecorder:
         self._writer: Writer = Writer(self._file, chunk_size=chunk_size_bytes,
                                       compression=kinds[compression])
         self._channels: dict[str, int] = {}
+        definitions = RecordBuilder()
         try:
             with named_errors(self.path):
                 self._writer.start(profile="", library=f"relaxgrip {__version__}")
                 for topic, schema in CHANNELS.items():
+                    data = schema_bytes(schema)
                     schema_id = self._writer.register_schema(schema["title"], "jsonschema",
-                                                             schema_bytes(schema))
-                    self._channels[topic] = self._writer.register_channel(topic, "json",
-                                                                          schema_id)
+                                                             data)
+                    channel_id = self._writer.register_channel(topic, "json", schema_id)
+                    self._channels[topic] = channel_id
+                    Schema(id=schema_id, name=schema["title"], encoding="jsonschema",
+                           data=data).write(definitions)
+                    Channel(id=channel_id, topic=topic, message_encoding="json",
+                            schema_id=schema_id, metadata={}).write(definitions)
                 self._writer.flush()  # type: ignore[no-untyped-call]
                 self._file.flush()
         except OSError:  # nothing recorded yet: no file is left
@@ -216,6 +226,7 @@ class McapRecorder:
             with suppress(OSError):
                 self.path.unlink()
             raise
+        self._definitions: bytes = definitions.end()  # type: ignore[no-untyped-call]
         self._closed = False
         self._last_flush_s = -math.inf
         self._rgb_seq: int | None = None
@@ -234,13 +245,15 @@ class McapRecorder:
         A recording started during a grasp (the dashboard's Record button)
         says so (``grasp_in_progress``): the marker's zero and the
         estimator's state from before it are not in it, so it cannot be
-        replayed or made a dataset of.  The controller's log entries from
-        before ``t_s`` are not written.
+        replayed or made a dataset of.  So is one started in Open once the
+        marker's zero has taken a frame: that frame is not in it either.  The
+        controller's log entries from before ``t_s`` are not written.
         """
         phase = controller.phase
-        zeroed = controller.perception.tracker.zero_pose is not None
+        tracker = controller.perception.tracker
+        zeroed = tracker.zero_pose is not None
         in_progress = phase not in (GraspPhase.DONE, GraspPhase.STOPPED) and not (
-            phase is GraspPhase.OPEN and not zeroed)
+            phase is GraspPhase.OPEN and tracker.zero_samples == 0)
         self._write("/relaxgrip/session", t_s, {
             "format": RECORDING_FORMAT, "format_version": RECORDING_VERSION,
             "relaxgrip_version": __version__,
@@ -366,16 +379,16 @@ class McapRecorder:
 
     def _write_events(self, t: float, c: GraspController) -> None:
         log = c.log
-        if log is not self._log:  # a new grasp started: its log is new
+        if log is not self._log:
+            # A new grasp started (GraspController.start) since the last period.  What the
+            # old log gained before it (a Stop, a Release) comes first.  The start reset
+            # perception, which the replay repeats on the new log's ``open``: the zero pose
+            # it dropped is no rezero of the controller's.
+            if self._log is not None:
+                self._write_log(t, self._log)
             self._log, self._n_transitions, self._n_events = log, 0, 0
-        for t_s, phase in log.transitions[self._n_transitions:]:
-            self._write("/relaxgrip/events", t, {"t_s": t_s, "kind": "phase",
-                                                 "detail": phase.value})
-        self._n_transitions = len(log.transitions)
-        for event in log.events[self._n_events:]:
-            self._write("/relaxgrip/events", t, {"t_s": event.t_s, "kind": event.kind.value,
-                                                 "detail": event.detail})
-        self._n_events = len(log.events)
+            self._zeroed = False
+        self._write_log(t, log)
         # The controller may zero the marker again after this period's frame (it does so
         # once the fingers are at temperature); the zero pose only ever comes back by
         # averaging, so a zero that is gone now was dropped during this period.
@@ -387,12 +400,30 @@ class McapRecorder:
                                                  "detail": "zero pose dropped by the controller"})
         self._zeroed = zeroed
 
+    def _write_log(self, t: float, log: PhaseLog) -> None:
+        """Write the transitions and events ``log`` gained since they were last written."""
+        for t_s, phase in log.transitions[self._n_transitions:]:
+            self._write("/relaxgrip/events", t, {"t_s": t_s, "kind": "phase",
+                                                 "detail": phase.value})
+        self._n_transitions = len(log.transitions)
+        for event in log.events[self._n_events:]:
+            self._write("/relaxgrip/events", t, {"t_s": event.t_s, "kind": event.kind.value,
+                                                 "detail": event.detail})
+        self._n_events = len(log.events)
+
     def _write(self, topic: str, t_s: float, message: dict[str, Any]) -> None:
         if self._closed:
             raise InputError(f"{self.path}: the recording is closed")
         data = json.dumps(json_safe(message), allow_nan=False, separators=(",", ":")).encode()
         ns = _ns(t_s)
         with self._writing():  # a full chunk is written out here
+            if self._definitions:
+                # The writer puts the schemas and channels in the first chunk only (it
+                # writes no chunk without a message): a copy of them ahead of it keeps the
+                # other chunks readable if that one is damaged.  MCAP allows them outside
+                # chunks, and repeated if the same.
+                self._file.write(self._definitions)
+                self._definitions = b""
             self._writer.add_message(self._channels[topic], log_time=ns, data=data,
                                      publish_time=ns, sequence=self.messages)
         self.messages += 1

@@ -1,0 +1,106 @@
+"""A damaged recording: recover keeps what the damage spared, and the reader never shows a
+frame under another frame's number and time."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+from mcap.reader import NonSeekingReader, make_reader
+from mcap.writer import Writer
+
+from relaxgrip.experiments.controlled_hold import HoldResult
+from relaxgrip.recording import iter_messages, iter_periods, recover
+
+
+def _copy(src: Path, dst: Path, keep: Callable[[str, int], bool]) -> None:
+    """Copy a recording as mcap's own writer lays it out (the schemas and channels in the
+    first chunk only, as the recorder did), with the messages ``keep(topic, log_time_ns)``
+    keeps."""
+    with open(src, "rb") as f, open(dst, "wb") as out:
+        writer = Writer(out)
+        writer.start()
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            if not keep(channel.topic, message.log_time):
+                continue
+            if channel.id not in channels:
+                assert schema is not None
+                schemas.setdefault(schema.id, writer.register_schema(
+                    schema.name, schema.encoding, schema.data))
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id])
+            writer.add_message(channels[channel.id], message.log_time, message.data,
+                               message.publish_time)
+        writer.finish()  # type: ignore[no-untyped-call]
+
+
+def _damage_first_chunk(src: Path, dst: Path) -> None:
+    """``src`` with a byte of its first chunk's records flipped."""
+    with open(src, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    first = min(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    data = bytearray(src.read_bytes())
+    data[first.chunk_start_offset + first.chunk_length - 100] ^= 0xFF
+    dst.write_bytes(bytes(data))
+
+
+def test_recover_keeps_the_rest_of_a_file_whose_first_chunk_is_damaged(
+        relax_hold: tuple[Path, HoldResult], tmp_path: Path) -> None:
+    """The schemas and channels were only in the first chunk: a complete file's summary
+    lists them again, and the recorder now writes them ahead of the first chunk as well, so
+    a killed file (no summary) keeps them too."""
+    good = relax_hold[0]
+    total = sum(1 for _ in iter_messages(good))
+    old_style = tmp_path / "old-style.mcap"
+    _copy(good, old_style, lambda topic, t: True)
+    for src, cut in ((old_style, False), (good, False), (good, True)):
+        damaged = tmp_path / "damaged.mcap"
+        _damage_first_chunk(src, damaged)
+        if cut:  # killed: no summary, no footer
+            damaged.write_bytes(damaged.read_bytes()[: damaged.stat().st_size * 2 // 3])
+        out = tmp_path / "recovered.mcap"
+        report = recover(damaged, out)
+        assert report.damaged_chunks == 1, src
+        assert report.complete is not cut
+        if not cut:
+            assert report.lost_messages is not None
+            assert 0 < report.lost_messages < total // 4
+        topics = {topic for topic, _, _ in iter_messages(out)}
+        assert "/relaxgrip/observation" in topics
+        assert report.messages > total // 2
+    # The recorder's layout reads with mcap's linear reader as with its indexed one.
+    with open(good, "rb") as f:
+        linear = sum(1 for _ in NonSeekingReader(f).iter_messages())
+    assert linear == total
+
+
+def test_a_frame_lost_with_its_period_is_not_shown_under_a_later_frame_s_stamp(
+        relax_hold: tuple[Path, HoldResult], tmp_path: Path) -> None:
+    """Periods lost with a damaged chunk: the RGB frame written last before them is not the
+    frame of the first observation after them, which names another."""
+    good = relax_hold[0]
+    original = {p.rgb.seq: p.rgb for p in iter_periods(good) if p.rgb is not None}
+    times = [t for topic, t, _ in iter_messages(good) if topic == "/relaxgrip/observation"]
+    lost_from, lost_to = times[60], times[64]  # periods 60-63 lost, then 64's frame
+
+    def keep(topic: str, t: int) -> bool:
+        if topic == "/rgb":  # the first lost period's frame survives, the next one's not
+            return not lost_from < t <= lost_to
+        return not lost_from <= t < lost_to
+
+    gap = tmp_path / "gap.mcap"
+    _copy(good, gap, keep)
+    stamps = {m["timestamp"]["sec"] * 10**9 + m["timestamp"]["nsec"]
+              for topic, _, m in iter_messages(gap) if topic == "/rgb"}
+    periods = list(iter_periods(gap))
+    assert len(periods) == len(times) - 4
+    for p in periods:
+        if p.rgb is None:
+            continue
+        assert round(p.rgb.t_s * 1e9) in stamps, p.t_s  # a frame the file holds
+        assert p.rgb.t_s == original[p.rgb.seq].t_s
+        np.testing.assert_array_equal(p.rgb.image, original[p.rgb.seq].image)
