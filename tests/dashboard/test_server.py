@@ -331,6 +331,33 @@ def test_a_session_runs_the_models_and_observer_it_is_given(make_session, tmp_pa
         make_session(observer_dir=tmp_path / "none")
 
 
+def test_a_disk_too_full_to_start_a_recording_refuses_it_in_one_line(make_session,
+                                                                     monkeypatch) -> None:
+    """Room for the MCAP header and not for the channels and first records: the Record
+    control is refused with one line (the page shows it), and the grasp goes on."""
+    pytest.importorskip("mcap")
+    from relaxgrip.errors import InputError
+    from tests.recording.test_bad_input import filling_disk
+
+    filling_disk(monkeypatch, 3_000)
+    session = make_session()
+    session.start()
+    try:
+        with pytest.raises(InputError) as info:
+            session.set_recording(True)
+        message = str(info.value)
+        assert message.startswith("cannot record to ")
+        assert "No space left on device" in message
+        assert "\n" not in message
+        assert session.state()["recording"] is None
+        periods = session.periods
+        time.sleep(0.3)
+        assert session.alive
+        assert session.periods > periods
+    finally:
+        session.close()
+
+
 def test_a_full_disk_stops_the_recording_not_the_loop(make_session, monkeypatch) -> None:
     """The recording ends sealed and says why on the page; the grasp goes on, and the next
     recording (another file) starts clean."""

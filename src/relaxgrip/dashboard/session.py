@@ -432,13 +432,16 @@ class LiveSession:
             self._check_running()
             stamp = dt.datetime.now().strftime("%Y%m%d-%H%M%S-%f")
             path = self.record_dir / f"relaxgrip-{stamp}.mcap"
-            if self._recorder_factory is not None:
-                recorder = self._recorder_factory(path)
-            else:
-                from relaxgrip.recording import McapRecorder
+            try:
+                if self._recorder_factory is not None:
+                    recorder = self._recorder_factory(path)
+                else:
+                    from relaxgrip.recording import McapRecorder
 
-                recorder = McapRecorder(path)
-            recorder.start(self.backend.info, self.controller, self._now())
+                    recorder = McapRecorder(path)
+                recorder.start(self.backend.info, self.controller, self._now())
+            except OSError as exc:  # a disk too full for its first records: the grasp goes on
+                raise InputError(f"cannot record to {path}: {exc.strerror or exc}") from None
             self._recorder, self.record_path, self.record_error = recorder, path, None
             return path
 
