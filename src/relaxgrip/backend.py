@@ -80,8 +80,9 @@ class Command:
         check_finite(self.approach_velocity_mm_s, "approach_velocity_mm_s")
         if len(self.heater_duty) != 2:
             raise InputError(f"heater_duty needs 2 values, got {len(self.heater_duty)}")
-        for duty in self.heater_duty:
-            check_duty(duty)
+        duties = (check_duty(self.heater_duty[0]), check_duty(self.heater_duty[1]))
+        # A copy: a list given here and changed after the check would reach the heaters.
+        object.__setattr__(self, "heater_duty", duties)
 
 
 @dataclass(frozen=True)

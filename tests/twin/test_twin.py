@@ -153,6 +153,85 @@ def test_lift_holds_by_friction_or_slips(name, lifted):
     assert t.object_slipping is (not lifted)
 
 
+def _hammer_lifted(grip_n: float, lift_mm: float) -> tuple[GripperTwin, VirtualClock]:
+    """The hammer gripped with ``grip_n`` and the arm raised by ``lift_mm`` at 30 mm/s."""
+    clock = VirtualClock()
+    twin = GripperTwin(TwinConfig(object_name="hammer").without_sensors(), seed=0, clock=clock)
+    twin.act(Command(5.0))
+    while truth(twin.observe()).contact_force_n < grip_n:
+        clock.advance(1 / 30)
+    twin.act(Command(0.0, arm_velocity_mm_s=30.0))
+    clock.advance(lift_mm / 30.0)
+    twin.act(Command())
+    return twin, clock
+
+
+def test_a_lifted_object_let_go_of_falls_and_stays_behind():
+    twin, clock = _hammer_lifted(5.0, 40.0)
+    assert truth(twin.observe()).object_lifted
+    twin.act(Command(-20.0))  # open with the arm still: it fell nowhere and went along
+    clock.advance(5.0)
+    t = truth(twin.observe())
+    assert t.contact_force_n == 0.0
+    assert not t.object_lifted
+    twin.act(Command(0.0, approach_velocity_mm_s=-20.0))  # back off: it stays on the table
+    clock.advance(2.0)
+    assert truth(twin.observe()).object_ahead_m == pytest.approx(0.040)
+
+
+def test_an_object_that_slipped_is_gripped_again_where_it_lies():
+    # 1 N cannot carry the hammer: it slips back to the table as the arm rises 30 mm.
+    # Squeezed harder, it is held where the fingers are on it, not lifted to the arm
+    # (it jumped 30 mm in one period), and rises with the arm from there.
+    twin, clock = _hammer_lifted(1.0, 30.0)
+    t = truth(twin.observe())
+    assert t.object_slipping
+    assert not t.object_lifted
+    twin.act(Command(5.0))
+    while truth(twin.observe()).contact_force_n < 8.0:
+        clock.advance(1 / 30)
+        assert not truth(twin.observe()).object_lifted
+    twin.act(Command(0.0, arm_velocity_mm_s=30.0))
+    clock.advance(0.5)
+    t = truth(twin.observe())
+    assert t.object_lifted
+    assert not t.object_slipping
+
+
+def test_an_object_is_put_between_open_fingers_only():
+    twin, clock = _hammer_lifted(5.0, 0.0)
+    with pytest.raises(InputError, match="open them first"):
+        twin.set_object("orange")
+    twin.set_object("orange", ahead_m=0.1)  # ahead of them: any aperture
+    twin.act(Command(-20.0))
+    clock.advance(8.0)
+    twin.observe()
+    twin.set_object("orange")
+    assert truth(twin.observe()).contact_force_n == 0.0
+
+
+def test_frames_keep_time_with_a_clock_stepped_by_sums():
+    # advance(1/30) far from t = 0 adds round-off of 1e-10 s a step: past a nanosecond,
+    # every observation carried the previous period's frame (after half an hour from 0).
+    clock = VirtualClock(1e6)
+    twin = GripperTwin(TwinConfig(ir=None), seed=0, clock=clock)
+    seqs = []
+    for _ in range(300):
+        clock.advance(1 / 30)
+        obs = twin.observe()
+        assert obs.rgb is not None
+        assert abs(obs.rgb.t_s - obs.t_s) < 1e-6
+        seqs.append(obs.rgb.seq)
+    assert np.all(np.diff(seqs) == 1)
+
+
+def test_a_command_keeps_the_duties_it_was_checked_with():
+    duty = [1.0, 1.0]
+    command = Command(0.0, duty)  # type: ignore[arg-type]
+    duty[0] = 50.0
+    assert command.heater_duty == (1.0, 1.0)
+
+
 def test_adhesion_pads_hold_a_flat_object_only_when_heated():
     def lift(temp_c: float) -> bool:
         clock = VirtualClock()
@@ -179,6 +258,8 @@ def test_catalogue_and_bad_input():
         Command(math.nan)
     with pytest.raises(InputError, match="absolute zero"):
         TwinConfig(ambient_c=-300.0)
+    with pytest.raises(InputError, match=r"heat model's finger is 0\.15 m long"):
+        TwinConfig(heat=replace(TwinConfig().heat, length_m=0.15))
     with pytest.raises(InputError, match="non-negative"):
         GripperTwin(seed=-1)
 

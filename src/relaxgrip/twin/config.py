@@ -182,11 +182,13 @@ class TwinConfig:
             )
         if not self.object_distance_m >= 0.0:
             raise InputError(f"object distance must be >= 0 m, got {self.object_distance_m}")
-        if abs(self.rig.finger.length_m - self.finger.length_m) > 1e-9:
-            raise InputError(
-                f"the rig's finger is {self.rig.finger.length_m} m long but the beam model's "
-                f"is {self.finger.length_m} m"
-            )
+        for what, length in (("rig's", self.rig.finger.length_m),
+                             ("heat model's", self.heat.length_m)):
+            if abs(length - self.finger.length_m) > 1e-9:  # temperatures read at other places
+                raise InputError(
+                    f"the {what} finger is {length} m long but the beam model's "
+                    f"is {self.finger.length_m} m"
+                )
 
     def without_cameras(self) -> TwinConfig:
         """The same twin with no RGB or infrared camera (no frames rendered)."""

@@ -32,8 +32,10 @@ FloatArray = NDArray[np.float64]
 
 __all__ = ["SceneState", "SensorSuite"]
 
-#: Captures closer than this to a requested time count as due (s): clock arithmetic slack.
-_TIME_SLACK_S = 1e-9
+#: Captures closer than this to a requested time count as due (s): clock arithmetic slack,
+#: for a clock stepped by sums of a period (``VirtualClock.advance(1 / 30)``) too, whose
+#: round-off passes a nanosecond after half an hour (a frame then came a period late).
+_TIME_SLACK_S = 1e-6
 
 
 @dataclass(frozen=True)
@@ -193,7 +195,7 @@ class SensorSuite:
 
     def skip_force(self, t_s: float) -> None:
         """No sensor in the grasp up to ``t_s``: drop the trace, no samples until then."""
-        n = math.floor((t_s - self._force_t0_s) / self._force_period_s + _TIME_SLACK_S) + 1
+        n = math.floor((t_s - self._force_t0_s + _TIME_SLACK_S) / self._force_period_s) + 1
         self._force_next = max(self._force_next, n)
         self._trace_t, self._trace_n = [], []
 
@@ -204,8 +206,8 @@ class SensorSuite:
             return None
         period, origin = self._force_period_s, self._force_t0_s
         first = max(self._force_next,
-                    math.ceil((trace_t[0] - origin) / period - _TIME_SLACK_S))
-        last = math.floor((trace_t[-1] - origin) / period + _TIME_SLACK_S)
+                    math.ceil((trace_t[0] - origin - _TIME_SLACK_S) / period))
+        last = math.floor((trace_t[-1] - origin + _TIME_SLACK_S) / period)
         self._trace_t, self._trace_n = trace_t[-1:], trace_n[-1:]
         if last < first:
             return None

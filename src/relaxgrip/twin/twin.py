@@ -49,8 +49,9 @@ __all__ = ["GripperTwin", "TwinMaterial"]
 _REFRESH_K = 0.02
 #: Plastic set (m) from which an object counts as visibly crushed.
 _CRUSHED_M = 0.001
-#: Times closer than this are the same instant (s): clock arithmetic round-off.
-_TIME_SLACK_S = 1e-9
+#: Times closer than this are the same instant (s): clock arithmetic round-off, that of
+#: a clock stepped by sums of a period included (see the sensor suite's).
+_TIME_SLACK_S = 1e-6
 #: Steps whose lengths differ by less than this share their discretisation (relative).
 _SAME_STEP_REL = 1e-9
 
@@ -213,6 +214,7 @@ class GripperTwin:
         self._object_x_mm = cfg.object_distance_m * 1e3
         self._object: ObjectSpec | None = cfg.object
         self._object_height_mm = 0.0
+        self._grip_mm = 0.0  # arm height less the held object's: where the fingers hold it
         self._engaged = self._object is not None and cfg.object_distance_m == 0.0
         self._plastic_m = 0.0
         self._slipping = False
@@ -301,9 +303,14 @@ class GripperTwin:
         """
         if not (math.isfinite(ahead_m) and ahead_m >= 0.0):
             raise InputError(f"object distance must be >= 0 m, got {ahead_m}")
-        self._object = None if name is None else get_object(name)
+        obj = None if name is None else get_object(name)
+        if obj is not None and ahead_m == 0.0 and self.aperture_m < obj.width_m:
+            raise InputError(f"{name} is {obj.width_m * 1e3:g} mm wide and the fingers "
+                             f"{self.aperture_m * 1e3:.1f} mm apart: open them first")
+        self._object = obj
         self._engaged = self._object is not None and ahead_m == 0.0
         self._object_height_mm = self._arm_mm
+        self._grip_mm = 0.0
         self._object_x_mm = self._forward_mm + ahead_m * 1e3
         self._plastic_m = 0.0
         self._external_n = 0.0
@@ -541,13 +548,22 @@ class GripperTwin:
         level = abs(self._arm_mm - self._object_height_mm) * 1e-3 < obj.grip_length_m
         if at_grasp and level and self.aperture_m >= obj.width_m - self._plastic_m:
             self._engaged = True
+            self._grip_mm = self._arm_mm - self._object_height_mm
 
     def _lift(self, obj: ObjectSpec, force_n: float) -> None:
-        """Carry the object with the arm if friction and adhesion hold its weight."""
-        if self._arm_mm <= self._object_height_mm:
+        """Carry the object with the arm if friction and adhesion hold its weight.
+
+        The fingers hold it where they took it (``_grip_mm`` below the arm):
+        an object that slipped down the fingers to the table and is gripped
+        again rises with the arm from there.  Let go of in the air (no
+        squeeze, no hand holding it), it falls to the table.
+        """
+        base = self._arm_mm - self._grip_mm  # the held object's height
+        let_go = force_n <= 0.0 and self._external_n == 0.0 and self._object_height_mm > 0.0
+        if base <= self._object_height_mm and not let_go:
             if force_n > 0.0 and self._object_height_mm > 0.0:
                 # Lowered while held: it goes down with the fingers, to the table at most.
-                self._object_height_mm = self._arm_mm
+                self._object_height_mm = max(base, 0.0)
             self._slipping = False
             return
         s0, s1 = self._stiff
@@ -556,11 +572,12 @@ class GripperTwin:
         capacity = float(friction_capacity_n(force_n, obj.friction_coeff, tilt))
         capacity += float(adhesion_pulloff_n(pad_c, obj.surface == "flat", self.config.adhesion))
         if force_n > 0.0 and capacity >= obj.weight_n:
-            self._object_height_mm = self._arm_mm
+            self._object_height_mm = max(base, self._object_height_mm)
             self._slipping = False
             return
         self._slipping = True
         if self._object_height_mm > 0.0:
             self._object_height_mm = 0.0  # it falls back to the table
+        self._grip_mm = self._arm_mm - self._object_height_mm  # the fingers slide along it
         if (self._arm_mm - self._object_height_mm) * 1e-3 > obj.grip_length_m:
             self._engaged = False  # the fingers have slid off it
