@@ -9,6 +9,7 @@ its speed benchmark.  Experiments may read ground truth; estimators never do.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -116,6 +117,8 @@ class HoldTrace:
         Mean finger temperature (°C).
     twin_version : str
         Version of the twin that produced it.
+    onset_s : float
+        Twin time at which the hold started, after the closing (s).
     """
 
     temp_c: float
@@ -125,6 +128,7 @@ class HoldTrace:
     force_n: FloatArray
     temp_mean_c: FloatArray
     twin_version: str = TWIN_VERSION
+    onset_s: float = math.nan
 
     def window(self, start_s: float, end_s: float) -> FloatArray:
         """Forces with ``start_s <= t <= end_s`` (N)."""
@@ -203,4 +207,4 @@ def run_fixed_aperture_hold(
         temp[k] = sum(map(sum, truth.finger_temps_c)) / (2 * len(truth.finger_temps_c[0]))
         twin.act(Command(0.0, thermostat.duty(obs, dt)))
         clock.advance(dt)
-    return HoldTrace(temp_c, target_n, seed, t, force, temp)
+    return HoldTrace(temp_c, target_n, seed, t, force, temp, onset_s=t0)
