@@ -64,3 +64,17 @@ def test_the_onset_error_is_where_the_closing_stopped(budgeted) -> None:
     # A fixed aperture keeps what the onset left, less the finger's relaxation.
     fixed = run_hold("fixed", target_n=3.0, duration_s=20.0, seed=2).metrics()
     assert fixed["onset_error_n"] > fixed["mean_signed_error_n"] + 0.02
+
+
+def test_a_push_on_the_object_pushes_the_copy_too() -> None:
+    """The copy held at the onset's aperture feels the loop's push: what the loop's
+    closure adds stays the closure (the push had counted as 0.44 N of it)."""
+    from relaxgrip.experiments.profiles import parse_disturbance
+
+    pushed = run_hold("relax", duration_s=20.0, seed=2, budget=True,
+                      disturbance=parse_disturbance("push:2:10"))
+    fixed = pushed.fixed_aperture_n
+    assert fixed is not None
+    before, after = np.searchsorted(pushed.t_s, [9.9, 11.0])
+    assert fixed[after] < fixed[before] - 0.2  # the push unloads finger 0 in the copy
+    assert abs(pushed.error_budget()["closure_n"]) < 0.05
