@@ -12,7 +12,7 @@ from tests.clitools import run_main
 
 KEYS = {"twin_version", "estimator", "target_n", "temp_c", "seed", "mae_n", "rmse_n",
         "mean_signed_error_n", "median_signed_error_n", "iqr_n", "est_error_mean_n",
-        "est_rmse_n", "onset_error_n"}
+        "est_rmse_n", "onset_error_n", "abs_error_iqr_n"}
 
 
 def test_hold_json_has_the_paper_statistics(monkeypatch, capsys, tmp_path: Path):
@@ -29,6 +29,8 @@ def test_hold_json_has_the_paper_statistics(monkeypatch, capsys, tmp_path: Path)
     assert d["window_s"] == pytest.approx([5.0, 14.0])
     q25, q75 = d["iqr_n"]
     assert q25 <= d["median_signed_error_n"] <= q75
+    a25, a75 = d["abs_error_iqr_n"]  # the paper's: the quartiles of |error|, about the MAE
+    assert 0.0 <= a25 <= a75 <= max(abs(q25), abs(q75))
     assert 0.0 <= d["mae_n"] <= d["rmse_n"] + 1e-12
     assert plot.stat().st_size > 10_000
 
@@ -45,6 +47,9 @@ def test_compare_prints_the_table_and_draws_the_figure(monkeypatch, capsys, tmp_
     assert "3.57143" not in out
     assert "MAE reduction of relax vs fixed" in out
     assert "vs icfn" in out
+    assert "IQR of" in out  # the paper's IQR, of |error|, beside relax's (wrapped)
+    assert "[0.055," in out
+    assert "0.076]" in out
     assert (tmp_path / "relaxgrip-hold.png").stat().st_size > 10_000
 
 

@@ -18,11 +18,11 @@ if TYPE_CHECKING:
     from relaxgrip.experiments.hold_survey import HoldSurvey
 
 #: The paper's figures (§V-C): MAE, mean signed error, RMSE of the true force from 5 N.
-PAPER = {
+PAPER: dict[str, dict[str, float | tuple[float, float]]] = {
     "fixed": {"mae_n": 0.333, "mean_signed_error_n": 0.606, "rmse_n": 0.643},
     "icfn": {"mae_n": 1.327, "mean_signed_error_n": 1.019, "rmse_n": 1.035},
     "relax": {"mae_n": 0.066, "mean_signed_error_n": -0.036, "rmse_n": 0.102,
-              "median_signed_error_n": -0.041},
+              "median_signed_error_n": -0.041, "abs_error_iqr_n": (0.055, 0.076)},
 }
 PAPER_REDUCTION = {"vs_fixed": 0.802, "vs_icfn": 0.950}
 DEFAULT_COMPARE_PLOT = Path("relaxgrip-hold.png")
@@ -30,7 +30,11 @@ DEFAULT_COMPARE_PLOT = Path("relaxgrip-hold.png")
 
 def _paper(name: str, key: str) -> str:
     value = PAPER.get(name, {}).get(key)
-    return "" if value is None else f" [{value:+.3f}]" if "signed" in key else f" [{value:.3f}]"
+    if value is None:
+        return ""
+    if isinstance(value, tuple):
+        return f" [{value[0]:.3f}, {value[1]:.3f}]"
+    return f" [{value:+.3f}]" if "signed" in key else f" [{value:.3f}]"
 
 
 @app.command("hold")
@@ -296,14 +300,15 @@ def _print_table(rows: dict[str, dict[str, Any]], reductions: dict[str, float],
                         f"{first['temp_c']:g} °C, seed {first['seed']}: true force − target over "
                         f"{lo:.4g}–{hi:.4g} s (paper in brackets)")
     _add_columns(table, ("estimator", "MAE (N)", "mean (N)", "median (N)", "RMSE (N)",
-                         "IQR (N)", "estimate − true: mean / RMSE (N)"))
+                         "IQR of |error| (N)", "estimate − true: mean / RMSE (N)"))
     for name, d in rows.items():
-        q25, q75 = d["iqr_n"]
+        q25, q75 = d["abs_error_iqr_n"]
         table.add_row(
             name, f"{d['mae_n']:.3f}{_paper(name, 'mae_n')}",
             f"{d['mean_signed_error_n']:+.3f}{_paper(name, 'mean_signed_error_n')}",
             f"{d['median_signed_error_n']:+.3f}{_paper(name, 'median_signed_error_n')}",
-            f"{d['rmse_n']:.3f}{_paper(name, 'rmse_n')}", f"[{q25:+.3f}, {q75:+.3f}]",
+            f"{d['rmse_n']:.3f}{_paper(name, 'rmse_n')}",
+            f"[{q25:.3f}, {q75:.3f}]{_paper(name, 'abs_error_iqr_n')}",
             f"{d['est_error_mean_n']:+.3f} / {d['est_rmse_n']:.3f}")
     console.print(table)
     for key, value in reductions.items():
@@ -375,7 +380,7 @@ def budget_survey(
     for col in ("part", "mean (N)", "SD (N)", *(short[g] for g in SCATTER_GROUPS)):
         table.add_column(col, justify="left" if col == "part" else "right")
     for name, p in parts.items():
-        table.add_row(name.removesuffix("_n"), f"{p['mean']:+.3f}", f"{p['sd']:.3f}",
+        table.add_row(name.removesuffix("_n"), f"{p['mean']:+.3f}", _fmt(p['sd'], ".3f"),
                       *(_fmt(r2[name][g], ".2f") for g in SCATTER_GROUPS))
     console.print(table)
     console.print(f"MAE from the target {survey.column('mae_n').mean():.3f} N; with the bias "

@@ -154,11 +154,13 @@ class BudgetSurvey:
         return (*BUDGET_PARTS[:-1], *extra, BUDGET_PARTS[-1])
 
     def parts(self) -> dict[str, dict[str, float]]:
-        """Per part: mean, SD and range over the seeds (N)."""
+        """Per part: mean, SD (the sample's, as ``hold --seeds`` gives) and range over the
+        seeds (N)."""
         out = {}
         for name in self.part_names:
             v = self.column(name)
-            out[name] = {"mean": float(v.mean()), "sd": float(v.std()),
+            sd = float(v.std(ddof=1)) if v.size > 1 else math.nan
+            out[name] = {"mean": float(v.mean()), "sd": sd,
                          "min": float(v.min()), "max": float(v.max())}
         return out
 
