@@ -128,6 +128,25 @@ def test_a_serial_port_in_use_is_refused_with_one_line(pty_pair: tuple[int, str]
     SerialTransport(path).close()  # free again once closed
 
 
+def test_a_write_does_not_wait_for_the_line_to_drain(pty_pair: tuple[int, str],
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """tcdrain has no timeout: a device that stopped reading would hold the host for ever."""
+    import termios
+
+    master, path = pty_pair
+
+    def stuck(fd: int) -> None:
+        raise AssertionError("the write waited for the line to drain")
+
+    monkeypatch.setattr(termios, "tcdrain", stuck)
+    port = SerialTransport(path)
+    try:
+        port.write(b"\x01\x02\x00")
+        assert os.read(master, 16) == b"\x01\x02\x00"
+    finally:
+        port.close()
+
+
 def test_a_full_non_blocking_descriptor_drops_and_counts_instead_of_waiting(
         pty_pair: tuple[int, str]) -> None:
     """As a UART overflows its TX buffer: the writer (the MCU loop) never waits."""

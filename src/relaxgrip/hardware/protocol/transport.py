@@ -302,9 +302,13 @@ class SerialTransport:
         self.port = port
 
     def write(self, data: bytes) -> None:
-        """Write all of ``data``."""
+        """Write all of ``data`` to the port's driver (within the 1 s write timeout).
+
+        It does not wait for the bytes to leave the wire (``tcdrain``, which has
+        no timeout: a USB device that stopped reading would hold the host there
+        for ever, its loop stuck between two periods).
+        """
         self._serial.write(bytes(data))
-        self._serial.flush()
 
     def read(self, timeout_s: float) -> bytes:
         """Bytes available, waiting up to ``timeout_s`` (wall clock) for the first."""
