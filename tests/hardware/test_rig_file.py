@@ -28,6 +28,7 @@ def test_examples_load_and_match_the_twin_geometry() -> None:
     assert (emu.rgb.source, emu.ir.source) == ("emulator", "emulator")
     assert real.ir.temp_c(30000) == pytest.approx(26.85)  # centi-kelvin
     assert real.serial.reply_timeout_s == pytest.approx(0.1)
+    assert real.serial.boot_wait_s == pytest.approx(2.5)
     assert emu.emulator is not None
     assert emu.emulator.socket.endswith(".sock")
     assert real.rgb.exposure == -6
@@ -37,6 +38,7 @@ def test_examples_load_and_match_the_twin_geometry() -> None:
 @pytest.mark.parametrize(("table", "key", "value", "message"), [
     ("serial", "baud", "fast", r"\[serial\] baud must be an integer"),
     ("serial", "port", "", r"\[serial\] port must be a non-empty string"),
+    ("serial", "boot_wait_ms", -1, r"\[serial\] boot_wait_ms must be >= 0"),
     ("rgb", "fps", -30, r"\[rgb\] fps must be > 0"),
     ("rgb", "source", "webcam", r"\[rgb\] source must be one of opencv, emulator"),
     ("rgb", "fx_px", 0, r"\[rgb\] fx_px must be > 0"),

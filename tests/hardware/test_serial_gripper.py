@@ -209,3 +209,39 @@ def test_a_reset_that_fails_on_the_thermal_camera_releases_the_rgb_one() -> None
     finally:
         gripper.close()
     assert busy == set()
+
+
+@pytest.mark.parametrize("boot_wait_s", [0.0, 2.5])
+def test_reset_says_hello_again_while_the_mcu_boots(boot_wait_s: float) -> None:
+    """Opening a USB-serial port resets an Arduino-class MCU (DTR): its bootloader is
+    silent for a second or two, and one Hello within 100 ms went unanswered."""
+    clock = VirtualClock()
+    gripper, emu = open_emulated_gripper(seed=0, clock=clock, grace_s=0.02)
+    gripper.boot_wait_s = boot_wait_s
+    emu.tamper_tx = lambda data: data if clock.now() >= 1.0 else b""  # booting until 1 s
+    try:
+        if boot_wait_s == 0.0:
+            with pytest.raises(GripperFaultError, match="no reply from the MCU to Hello"):
+                gripper.reset()
+        else:
+            gripper.reset()
+            assert 1.0 <= clock.now() < 1.3
+            assert gripper.client.hello_ack is not None
+    finally:
+        gripper.close()
+        emu.stop()
+
+
+def test_an_mcu_that_never_boots_is_named_after_the_wait() -> None:
+    clock = VirtualClock()
+    gripper, emu = open_emulated_gripper(seed=0, clock=clock, grace_s=0.02)
+    gripper.boot_wait_s = 0.5
+    emu.tamper_tx = lambda data: b""
+    try:
+        with pytest.raises(GripperFaultError) as info:
+            gripper.reset()
+        _one_line(str(info.value))
+        assert "(Hello said for 0.5 s: the MCU did not boot)" in str(info.value)
+    finally:
+        gripper.close()
+        emu.stop()

@@ -147,13 +147,19 @@ class SerialGripper:
         Version of the twin behind an emulator (recorded in :attr:`info`).
     on_close : callable, optional
         Called last by :meth:`close` (e.g. to stop an in-process emulator).
+    boot_wait_s : float
+        How long :meth:`reset` says Hello again while the MCU gives no valid
+        answer (s): opening a USB-serial port raises DTR, which resets an
+        Arduino-class MCU, and its bootloader answers nothing for a second or
+        two.  0: one Hello.
     """
 
     def __init__(self, client: McuClient, rgb: FrameSource | None, ir: FrameSource | None, *,
                  limits: LimitsSpec | None = None, name: str = "serial",
                  truth_feed: TruthFeed | None = None, twin_version: str | None = None,
-                 on_close: Callable[[], None] | None = None) -> None:
+                 on_close: Callable[[], None] | None = None, boot_wait_s: float = 0.0) -> None:
         self.client = client
+        self.boot_wait_s = boot_wait_s
         self.clock: Clock = client.clock
         self.rgb = rgb
         self.ir = ir
@@ -206,7 +212,17 @@ class SerialGripper:
                     source.close()
                 raise
             self._started = True
-        self.client.handshake()
+        deadline = self.clock.now() + self.boot_wait_s
+        while True:
+            try:
+                self.client.handshake()
+                break
+            except LinkError as exc:  # silence or a bootloader's bytes: booting, maybe
+                if self.clock.now() >= deadline:
+                    if self.boot_wait_s > 0:
+                        raise type(exc)(f"{exc} (Hello said for {self.boot_wait_s:g} s: "
+                                        "the MCU did not boot)") from None
+                    raise
         self.client.set_enabled(True)
 
     def observe(self) -> Observation:
@@ -369,4 +385,5 @@ def open_rig_gripper(rig: RigFile, clock: Clock, *,
     client = McuClient(transport, clock, reply_timeout_s=rig.serial.reply_timeout_s)
     rgb, ir = sources if sources is not None else open_frame_sources(rig, clock)
     return SerialGripper(client, rgb, ir, limits=rig.limits,
-                         name="emulator" if rig.rgb.source == "emulator" else "serial")
+                         name="emulator" if rig.rgb.source == "emulator" else "serial",
+                         boot_wait_s=rig.serial.boot_wait_s)

@@ -171,11 +171,16 @@ class SerialSpec:
         Line speed (bit/s).
     reply_timeout_s : float
         Longest wait for an MCU answer (s).
+    boot_wait_s : float
+        How long the host says Hello again before the MCU answers (s): opening
+        the port resets an Arduino-class MCU (DTR), whose bootloader is silent
+        for a second or two.
     """
 
     port: str
     baud: int = 115_200
     reply_timeout_s: float = 0.1
+    boot_wait_s: float = 2.5
 
 
 @dataclass(frozen=True)
@@ -461,6 +466,7 @@ def parse_rig(data: dict[str, Any], where: str = "rig file") -> RigFile:
         ser.string("port"),
         ser.integer("baud", 115_200, min_value=300, max_value=10_000_000),
         ser.number("reply_timeout_ms", 100.0, min_value=5.0, max_value=1000.0) * 1e-3,
+        ser.number("boot_wait_ms", 2500.0, min_value=0.0, max_value=30_000.0) * 1e-3,
     )
     ser.done()
     tables = {key: _Table(where, key, data[key]) for key in ("rgb", "ir", "marker", "finger")}
