@@ -115,6 +115,28 @@ def test_state_messages_carry_the_live_view(served) -> None:
     assert green.sum() > 20
 
 
+def test_a_state_message_that_fails_is_logged_and_the_next_ones_go_out(
+        make_session, monkeypatch, caplog) -> None:
+    """The broadcast task had ended on the first exception, silently: the page froze."""
+    from relaxgrip.dashboard import app as app_module
+
+    calls = {"n": 0}
+    original = app_module._Frames.message
+
+    def flaky(self: Any) -> Any:
+        calls["n"] += 1
+        if calls["n"] <= 3:
+            raise RuntimeError("a frame the encoder could not take")
+        return original(self)
+
+    monkeypatch.setattr(app_module._Frames, "message", flaky)
+    session = make_session()
+    with TestClient(create_app(session)) as client, client.websocket_connect("/ws") as ws:
+        assert _state(ws, lambda s: True)["type"] == "state"
+    failed = [r for r in caplog.records if "state message failed" in r.getMessage()]
+    assert len(failed) == 1  # once per streak of failures, not per message
+
+
 def test_controls_change_the_loop_and_bad_values_change_nothing(served) -> None:
     client, session, _ = served
     with client.websocket_connect("/ws") as ws:

@@ -141,9 +141,18 @@ def create_app(session: LiveSession, *, token: str | None = None,
         period = 1.0 / broadcast_hz
         loop = asyncio.get_running_loop()
         t_next = loop.time()
+        failing = False
         while True:
             if hub.viewers:
-                hub.publish(await asyncio.to_thread(frames.message))
+                try:
+                    message = await asyncio.to_thread(frames.message)
+                except Exception:  # a fault of ours: logged once, the viewers still served
+                    if not failing:
+                        _log.exception("the dashboard's state message failed")
+                    failing = True
+                else:
+                    failing = False
+                    hub.publish(message)
             t_next += period
             t_next = max(t_next, loop.time())
             await asyncio.sleep(t_next - loop.time())
