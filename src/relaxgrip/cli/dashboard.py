@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
 import re
 import secrets
+import signal
 import socket
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -112,11 +116,38 @@ def dashboard(
     if token:
         console.print(f"access token: {token}", markup=False, highlight=False)
     try:
-        server = uvicorn.Server(uvicorn.Config(application, log_level="warning"))
+        server = _hangup_server(uvicorn.Config(application, log_level="warning"))
         server.run(sockets=[listener])
     finally:
         session.close()
         listener.close()
+
+
+def _hangup_server(config: Any) -> Any:
+    """A uvicorn server that a hang-up (a closed terminal) shuts down as SIGTERM does.
+
+    uvicorn shuts down gracefully on SIGINT and SIGTERM, then raises them
+    again for the command's own handlers (a stop with exit code 130).  A
+    SIGHUP raised our ``KeyboardInterrupt`` inside its event loop instead,
+    which printed the loop's tasks' tracebacks.  Ignored (``nohup``), it stays
+    ignored.
+    """
+    import uvicorn
+
+    class HangupServer(uvicorn.Server):
+        @contextlib.contextmanager
+        def capture_signals(self) -> Iterator[None]:
+            with super().capture_signals():  # raises what it caught once restored
+                hooked = (threading.current_thread() is threading.main_thread()
+                          and signal.getsignal(signal.SIGHUP) is not signal.SIG_IGN)
+                previous = signal.signal(signal.SIGHUP, self.handle_exit) if hooked else None
+                try:
+                    yield
+                finally:
+                    if hooked:
+                        signal.signal(signal.SIGHUP, previous)
+
+    return HangupServer(config)
 
 
 def _resolve(host: str, port: int) -> tuple[int, int, int, Any]:
