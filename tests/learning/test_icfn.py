@@ -202,3 +202,24 @@ def test_select_icfn_picks_lowest_validation_mae():
     np.testing.assert_array_equal(again.predict(X_val), best.predict(X_val))
     with pytest.raises(ValueError, match="features"):
         select_icfn(X, y, X_val[:, :3], y_val, candidates=candidates)
+
+
+def test_ctrl_c_during_training_stops_the_fit(data, monkeypatch):
+    """scikit-learn's MLP catches KeyboardInterrupt and returns half trained: `relaxgrip
+    train` then saved that network and exited 0.  The interrupt now reaches the caller."""
+    from sklearn.neural_network import MLPRegressor
+
+    calls = {"n": 0}
+    original = MLPRegressor._backprop
+
+    def interrupted(self, *args, **kwargs):
+        calls["n"] += 1
+        if calls["n"] == 5:
+            raise KeyboardInterrupt
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(MLPRegressor, "_backprop", interrupted)
+    X, y = data
+    with pytest.raises(KeyboardInterrupt):
+        ICFN(**SMALL).fit(X, y)
+    assert calls["n"] == 5

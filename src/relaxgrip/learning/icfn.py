@@ -16,7 +16,9 @@ is a preplanned, allocation-free pass for the control loop's every frame.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+import warnings
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -141,6 +143,25 @@ class _ForwardPlan:
         return float(g.dot(self.out_weights)) + self.constant
 
 
+#: What scikit-learn's MLP warns when Ctrl-C (or SIGTERM, which the command turns into
+#: it) stops its training: it then returns the network half trained, as if done.
+_INTERRUPTED = "Training interrupted by user"
+
+
+@contextmanager
+def _interrupt_kept() -> Iterator[None]:
+    """Let Ctrl-C stop a fit: the MLP catches ``KeyboardInterrupt`` and returns half trained
+    (``relaxgrip train`` went on to save such a network and exit 0)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("error", message=_INTERRUPTED, category=UserWarning)
+        try:
+            yield
+        except UserWarning as exc:
+            if _INTERRUPTED not in str(exc):
+                raise
+            raise KeyboardInterrupt from None
+
+
 class ICFN(RegressorMixin, BaseEstimator):  # type: ignore[misc]
     """Instantaneous contact force network: a ReLU MLP from features to force (N).
 
@@ -240,7 +261,8 @@ class ICFN(RegressorMixin, BaseEstimator):  # type: ignore[misc]
         x_mean, x_scale = _location_scale(X_arr)
         y_mean, y_scale = _location_scale(y_arr[:, None])
         mlp = self._make_mlp()
-        mlp.fit((X_arr - x_mean) / x_scale, (y_arr - y_mean[0]) / y_scale[0])
+        with _interrupt_kept():
+            mlp.fit((X_arr - x_mean) / x_scale, (y_arr - y_mean[0]) / y_scale[0])
         self.x_mean_ = x_mean
         self.x_scale_ = x_scale
         self.y_mean_ = float(y_mean[0])
