@@ -207,7 +207,7 @@ def test_select_icfn_picks_lowest_validation_mae():
 def test_ctrl_c_during_training_stops_the_fit(data, monkeypatch):
     """scikit-learn's MLP catches KeyboardInterrupt and returns half trained: `relaxgrip
     train` then saved that network and exited 0.  The interrupt now reaches the caller."""
-    from sklearn.neural_network import MLPRegressor
+    from sklearn.neural_network import MLPRegressor  # type: ignore[import-untyped]
 
     calls = {"n": 0}
     original = MLPRegressor._backprop
