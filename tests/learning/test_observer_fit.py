@@ -71,3 +71,19 @@ def test_fitting_without_train_holds_says_so(holds: Path, tmp_path: Path,
                             monkeypatch, capsys)
     assert code == 0, err
     assert "has no RCFN train sequences: the observer was identified on all 30" in err
+
+
+@pytest.mark.parametrize(("asked", "failed", "suggested"), [(5, 4, 3), (4, 4, 3), (3, 2, 1)])
+def test_a_series_the_holds_cannot_tell_apart_names_the_terms_that_would_fit(
+        holds: Path, monkeypatch: pytest.MonkeyPatch, asked: int, failed: int,
+        suggested: int) -> None:
+    # A fit of 5 terms that failed at 4 had suggested --terms 4, which failed the same way.
+    import relaxgrip.learning.observer as observer_module
+    from relaxgrip.physics.fitting import UnidentifiableError
+
+    def failing(t: object, y: object, n_terms: int) -> None:
+        raise UnidentifiableError(f"a {failed}-term Prony series is not identifiable", failed)
+
+    monkeypatch.setattr(observer_module, "fit_prony", failing)
+    with pytest.raises(InputError, match=rf"\(relaxgrip fit-observer --terms {suggested}\)$"):
+        ObserverModel(n_terms=asked).fit(load_dataset(holds))

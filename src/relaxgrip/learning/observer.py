@@ -73,7 +73,7 @@ from relaxgrip.fileio import (
 from relaxgrip.learning.datastore import Dataset
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.perception.features import ICFN_SCHEMA
-from relaxgrip.physics.fitting import fit_prony
+from relaxgrip.physics.fitting import UnidentifiableError, fit_prony
 from relaxgrip.physics.viscoelastic import branch_update
 from relaxgrip.validate import check_finite, check_positive
 
@@ -379,10 +379,10 @@ class ObserverModel:
         try:
             fit = fit_prony(t, y, n_terms=self.n_terms)
         except InputError as exc:  # the holds are too short for this many times
-            if self.n_terms == 1:
+            failed = exc.n_terms if isinstance(exc, UnidentifiableError) else self.n_terms
+            if failed == 1:
                 raise
-            raise InputError(f"{exc} (relaxgrip fit-observer --terms {self.n_terms - 1})"
-                             ) from None
+            raise InputError(f"{exc} (relaxgrip fit-observer --terms {failed - 1})") from None
         return np.clip(np.asarray(fit.tau_s, dtype=np.float64), 0.05, 1e5)
 
     def _group_error(self, group: list[_Hold], log_shift: float

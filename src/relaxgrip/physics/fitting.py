@@ -58,6 +58,7 @@ __all__ = [
     "WEIGHTINGS",
     "PronyFit",
     "ReducedFit",
+    "UnidentifiableError",
     "Weighting",
     "find_hold",
     "find_hold_start",
@@ -101,6 +102,21 @@ _COARSE_BINS = 2_000
 _NEAR_PLATEAU = 0.01
 _LSQ_TOL = 1e-12
 _MAX_NFEV = 400
+
+
+class UnidentifiableError(InputError):
+    """A Prony series with more terms than the hold shows.
+
+    Attributes
+    ----------
+    n_terms : int
+        The number of terms that could not be told apart (a fit of more
+        terms fails on its way through this many).
+    """
+
+    def __init__(self, message: str, n_terms: int) -> None:
+        super().__init__(message)
+        self.n_terms = n_terms
 
 
 @dataclass(frozen=True)
@@ -801,10 +817,10 @@ class _Problem:
                 order = np.argsort(worst.log_tau)
                 taus = ", ".join(f"{math.exp(v):.4g}" for v in worst.log_tau[order])
                 amps = ", ".join(f"{k:+.4g}" for k in worst.coef[-level:][order])
-                raise InputError(
+                raise UnidentifiableError(
                     f"a {level}-term Prony series is not identifiable on this hold: its best "
                     f"fits put relaxation times together (tau {taus} s) with amplitudes that "
-                    f"cancel ({amps} N); fit fewer terms")
+                    f"cancel ({amps} N); fit fewer terms", level)
             beam = _distinct_best(admissible, _BEAM_WIDTH)
         return beam[0]
 
