@@ -83,7 +83,8 @@ def hold(
     budget: Annotated[bool, typer.Option(
         "--budget", help="Split relax's estimate error into the onset force, Eq. 10's "
                          "relaxation and the added closure, against a copy of the twin held "
-                         "at the onset's aperture (relax, twin backend).")] = False,
+                         "at the onset's aperture, and the calibration and closed chain of "
+                         "models that have them (relax, twin backend).")] = False,
 ) -> None:
     """Close on the force ball to the target and hold it, scoring the steady state (100-280 s)."""
     from relaxgrip.control import EstimatorKind, check_target_n
