@@ -452,6 +452,21 @@ def test_a_hold_that_creeps_a_little_holds_from_the_step(creep_rel: float) -> No
     assert find_hold(t, x) == clean
 
 
+@pytest.mark.parametrize("unload_dt_s", [0.002, 0.01])
+def test_an_unloading_sampled_finely_does_not_widen_the_band(unload_dt_s: float) -> None:
+    # A plateau whose displacement never changes, then an unloading sampled finer than
+    # it: its first step (0.4 or 2 % of the step) had been taken for the recording's
+    # resolution, and the band of five of them reached into the ramp.
+    t, x = _step_and_hold()
+    clean = find_hold(t, x)
+    t_off = t[-1] + unload_dt_s * np.arange(1, 101)
+    t2 = np.concatenate([t, t_off])
+    x2 = np.concatenate([x, np.maximum(2.0 - 2.0 * (t_off - t[-1]), 0.0)])
+    start, stop = find_hold(t2, x2)
+    assert start == clean[0]
+    assert stop <= t.size + 5  # the first thousandths of a millimetre of the unloading
+
+
 def test_a_prony_series_with_more_terms_than_the_hold_shows_is_refused() -> None:
     """The first second of a VHB-like hold (modes of 5.5, 55 and 540 s) with 1 mN of
     noise: the best three-term fits merge two relaxation times into a pair of amplitudes

@@ -100,6 +100,8 @@ _COARSE_ABOVE = 20_000
 _COARSE_BINS = 2_000
 #: Samples within this share of the step of the plateau show its recording resolution.
 _NEAR_PLATEAU = 0.01
+#: Changes of the smallest size on a plateau that make it a recording's resolution.
+_MIN_COUNTS = 3
 _LSQ_TOL = 1e-12
 _MAX_NFEV = 400
 
@@ -327,11 +329,15 @@ def find_hold(
     # A displacement logged in counts mostly does not change from one sample to the
     # next on the plateau, and when it does, by a count: the resolution, below which
     # the noise estimate cannot go (a ramp changes at every sample, and is no plateau).
+    # A count recurs: a change seen once is no resolution (the first step of an
+    # unloading sampled finely, which would widen the band to the ramp).
     near = np.abs(tail - level[-m:]) <= _NEAR_PLATEAU * abs(step)
     changes = np.abs(d_tail[near[1:] & near[:-1]])
     counts = changes[changes > 0.0]
     if counts.size and counts.size <= 0.5 * changes.size:
-        sigma = max(sigma, float(np.min(counts)))
+        count = float(np.min(counts))
+        if np.count_nonzero(counts <= 1.5 * count) >= _MIN_COUNTS:
+            sigma = max(sigma, count)
     noise_band = noise_factor * sigma
     # Below this the step is lost in rounding of the recorded values.
     resolution = 64.0 * np.finfo(np.float64).eps * max(float(np.max(np.abs(x))), 1e-300)
