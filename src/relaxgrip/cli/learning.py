@@ -310,8 +310,8 @@ def calibrate_band_command(
     table = Table(title=f"band coverage at {result.level:.0%}: scale {result.previous_scale:.3g}"
                         f" -> {result.band_scale:.3g}, drift scale "
                         f"{result.previous_drift_scale:.3g} -> {result.drift_scale:.3g}")
-    for column in ("scenario", "seed" if recordings is None else "recording", "MAE (N)",
-                   "coverage before", "coverage after"):
+    for column in ("scenario", "seed" if recordings is None else "recording",
+                   "true − target: MAE (N)", "coverage before", "coverage after"):
         table.add_column(column)
     for name, entry in result.scenarios.items():
         for seed, row in entry["seeds"].items():
@@ -319,7 +319,8 @@ def calibrate_band_command(
                           f"{row['coverage_before']:.1%}", f"{row['coverage_after']:.1%}")
     console.print(table)
     summary = Table(title="per scenario, mean over its holds")
-    for column in ("scenario", "holds", "MAE (N)", "coverage before", "coverage after"):
+    for column in ("scenario", "holds", "true − target: MAE (N)", "coverage before",
+                   "coverage after"):
         summary.add_column(column)
     for name, row in result.summary().items():
         summary.add_row(name, str(len(result.scenarios[name]["seeds"])), f"{row['mae_n']:.3f}",
@@ -455,8 +456,10 @@ def calibrate_hold_command(
         emit_json({"models": str(models), "written": not dry_run, "bias": result.bias.to_dict(),
                    **record})
         return
-    table = Table(title="relax, estimate − true force over the steady state, uncalibrated")
-    for column in ("target (N)", "temperature (°C)", "holds", "mean (N)", "SE (N)", "MAE (N)"):
+    table = Table(title="relax, estimate − true force over the steady state, uncalibrated "
+                        "(the last column: the held force's MAE from the target)")
+    for column in ("target (N)", "temperature (°C)", "holds", "mean (N)", "SE (N)",
+                   "true − target: MAE (N)"):
         table.add_column(column, justify="right")
     summary = result.summary()
     for target in result.targets_n:
