@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from relaxgrip.experiments.band_calibration import calibrate_band
-from relaxgrip.experiments.controlled_hold import HoldResult
+from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
 from relaxgrip.experiments.hold_calibration import RECORDINGS_SOURCE, hold_row
 from relaxgrip.experiments.recorded_calibration import (
     calibrate_band_on_recordings,
@@ -190,3 +190,29 @@ def test_cli_calibrates_the_band_on_recordings(png_observer_hold: tuple[Path, Ho
         assert code == 2
         assert expected in err
     assert (directory / MANIFEST_NAME).read_bytes() == before
+
+
+def test_holds_that_change_target_or_temperature_are_not_calibrated_on(
+        tmp_path: Path, models: ModelBundle) -> None:
+    """A profiled hold was binned as one at its plan's target and temperature: a ramp to
+    55 °C moved the 5 N, 40 °C row's mean error from -0.133 to -0.227 N."""
+    from relaxgrip.errors import InputError
+    from relaxgrip.experiments.profiles import parse_target_profile
+    from relaxgrip.experiments.recorded_calibration import recorded_plan
+    from relaxgrip.recording import McapRecorder
+
+    # As `hold --record --target-profile` writes it: the scenario in the session.
+    stepped = tmp_path / "stepped.mcap"
+    with McapRecorder(stepped, scenario={"target_profile": "step:3:3"}) as rec:
+        run_hold("relax", 5.0, HOLD_S, 40.0, 0, models, recorder=rec,
+                 target_profile=parse_target_profile("step:3:3"))
+    with pytest.raises(InputError, match="a hold with --target-profile step:3:3; the "
+                                         "calibrations take holds at their plan's constant"):
+        recorded_plan(stepped)
+    # Changed by hand (the dashboard): seen in the periods themselves.
+    with McapRecorder(tmp_path / "by-hand.mcap") as rec:
+        run_hold("relax", 5.0, HOLD_S, 40.0, 0, models, recorder=rec,
+                 target_profile=parse_target_profile("step:3:3"))
+    with pytest.raises(InputError, match=r"the hold's target went from 5 to 3\.00 N 3\.0 s "
+                                         "into it"):
+        recorded_hold(tmp_path / "by-hand.mcap", models)

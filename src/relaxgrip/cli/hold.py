@@ -203,7 +203,10 @@ def hold(
         else:
             from relaxgrip.recording import McapRecorder
 
-            with McapRecorder(record) as recorder:
+            given = {"temp_profile": temp_profile, "target_profile": target_profile,
+                     "disturbance": disturbance}
+            scenario = {k: v for k, v in given.items() if v is not None}
+            with McapRecorder(record, scenario=scenario) as recorder:
                 result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
                                   backend=backend, recorder=recorder,
                                   temp_profile=temps, target_profile=targets, disturbance=push,

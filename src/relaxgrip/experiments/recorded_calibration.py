@@ -152,6 +152,11 @@ def recorded_plan(path: Path) -> tuple[float, float, float]:
         raise InputError(f"{path}: a {estimator} hold; the calibrations take holds regulated "
                          f"by {' or '.join(REGULATED)}")
     plan = session.get("plan")
+    scenario = session.get("scenario") or {}
+    if isinstance(scenario, dict) and scenario:
+        given = ", ".join(f"--{k.replace('_', '-')} {v}" for k, v in scenario.items())
+        raise InputError(f"{path}: a hold with {given}; the calibrations take holds at their "
+                         "plan's constant target and temperature")
     with malformed_fields(path):
         if not isinstance(plan, dict):
             raise TypeError(f"the session's plan is {type(plan).__name__}, not an object")
@@ -196,6 +201,7 @@ def recorded_hold(path: Path, models: ModelBundle, estimator: str = "relax",
                     end_s = float(event["t_s"])
             if onsets == 0:
                 continue
+            _check_constant(path, period.messages, target_n, temp_c, period.t_s - onset_s)
             rows.append((period.t_s - onset_s, estimate.force_n,
                          estimate.chain_n if math.isfinite(estimate.chain_n) else 0.0,
                          truth_force_n(period.messages), estimate.f_onset_n,
@@ -222,6 +228,22 @@ def recorded_hold(path: Path, models: ModelBundle, estimator: str = "relax",
     t, force, chain, truth, f_onset, lo, hi, drift = cols.T
     return RecordedHold(path, target_n, temp_c, float(length), t, force, chain, truth,
                         f_onset, temps, lo, hi, drift)
+
+
+def _check_constant(path: Path, messages: dict[str, Any], target_n: float, temp_c: float,
+                    hold_s: float) -> None:
+    """Refuse a hold whose target or setpoint left the plan's (an operator's change on the
+    dashboard): the calibrations bin holds by their plan's target and temperature."""
+    target = messages.get("/relaxgrip/phase", {}).get("target_n")  # not in older recordings
+    if target is not None and abs(float(target) - target_n) > 1e-3:
+        raise InputError(f"{path}: the hold's target went from {target_n:g} to "
+                         f"{float(target):.2f} N {hold_s:.1f} s into it; the calibrations take "
+                         "holds at their plan's constant target and temperature")
+    setpoint = messages.get("/relaxgrip/temperature", {}).get("setpoint_c")
+    if setpoint is not None and math.isfinite(temp_c) and abs(float(setpoint) - temp_c) > 0.01:
+        raise InputError(f"{path}: the hold's setpoint went from {temp_c:g} to "
+                         f"{float(setpoint):.2f} °C {hold_s:.1f} s into it; the calibrations "
+                         "take holds at their plan's constant target and temperature")
 
 
 def _replayed(args: tuple[Path, ModelBundle, str, ObserverModel | None]) -> RecordedHold:

@@ -33,7 +33,7 @@ import json
 import math
 import os
 import struct
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager, suppress
 from dataclasses import asdict
 from pathlib import Path
@@ -171,11 +171,16 @@ class McapRecorder:
         Loop time between forced chunk writes: the most a kill can lose.
     compression : {"zstd", "lz4", "none"}
         Chunk compression.
+    scenario : mapping of str to str, optional
+        What the run changes besides the plan, as given (``hold --temp-profile``,
+        ``--target-profile``, ``--disturbance``): written in the session, so
+        that nothing takes the hold for one at its plan's target and
+        temperature.
     """
 
     def __init__(self, path: Path, rgb_format: str = "jpeg", jpeg_quality: int = 95,
                  chunk_size_bytes: int = 512 * 1024, flush_every_s: float = 1.0,
-                 compression: str = "zstd") -> None:
+                 compression: str = "zstd", scenario: Mapping[str, str] | None = None) -> None:
         require_mcap()
         from mcap.data_stream import RecordBuilder
         from mcap.records import Channel, Schema
@@ -194,6 +199,7 @@ class McapRecorder:
         if compression not in kinds:
             raise InputError(f"compression must be zstd, lz4 or none, got {compression!r}")
         self.path = Path(path)
+        self.scenario = dict(scenario or {})
         self.rgb_format = rgb_format
         self.jpeg_quality = jpeg_quality
         self.flush_every_s = flush_every_s
@@ -263,7 +269,7 @@ class McapRecorder:
                      for k, v in asdict(controller.plan).items()},
             "rig": asdict(controller.rig), "t0_s": t_s, "rgb_format": self.rgb_format,
             "ir_encoding": IR_ENCODING, "started_in_phase": phase.value,
-            "grasp_in_progress": in_progress,
+            "grasp_in_progress": in_progress, "scenario": self.scenario,
         })
         self._last_flush_s = t_s
         log = controller.log
@@ -356,7 +362,8 @@ class McapRecorder:
             "t_s": t, "ir_temp_c": temps, "setpoint_c": math.nan if setpoint is None else setpoint,
             "truth_temp_c": None,
         })
-        self._write("/relaxgrip/phase", t, {"t_s": t, "phase": c.phase.value})
+        self._write("/relaxgrip/phase", t, {"t_s": t, "phase": c.phase.value,
+                                            "target_n": c.plan.target_n})
 
     def _write_truth(self, t: float, obs: Observation) -> None:
         truth = obs.truth

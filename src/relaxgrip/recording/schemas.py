@@ -87,6 +87,9 @@ SESSION = _obj("relaxgrip.Session", "Who recorded what: written once, first.", {
     "t0_s": {"type": "number", "description": "loop start on the backend's clock"},
     "rgb_format": {"type": "string"},
     "ir_encoding": {"type": "string"},
+    "scenario": {"type": "object", "additionalProperties": {"type": "string"},
+                 "description": "profiles the run applied besides the plan, as given "
+                                "(temp_profile, target_profile, disturbance)"},
 }, ("format", "format_version", "backend", "estimator", "rig", "t0_s"))
 
 OBSERVATION = _obj("relaxgrip.Observation",
@@ -143,9 +146,10 @@ TEMPERATURE = _obj("relaxgrip.Temperature", "Finger temperatures (°C) and the s
                      "description": "true mean temperature per finger (twin only)"},
 }, ("t_s", "ir_temp_c"))
 
-PHASE = _obj("relaxgrip.Phase", "The grasp phase this period.", {
+PHASE = _obj("relaxgrip.Phase", "The grasp phase this period, and the force it holds.", {
     "t_s": {"type": "number"},
     "phase": {"type": "string"},
+    "target_n": {"type": "number", "description": "the plan's target force now (N)"},
 }, ("t_s", "phase"))
 
 EVENT = _obj("relaxgrip.Event",
