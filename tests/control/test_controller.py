@@ -219,13 +219,17 @@ def test_lost_marker_stops_the_motor_until_it_is_back(models):
     assert np.ptp(res["motor_mm"][gone]) < 0.02
 
 
-def frozen_ir(start_s: float, end_s: float = math.inf) -> Callable[[Observation], Observation]:
-    """The infrared frame of ``start_s`` delivered again until ``end_s`` (a stalled camera)."""
-    frozen: dict[str, Frame] = {}
+def frozen(stream: str, start_s: float, end_s: float = math.inf
+           ) -> Callable[[Observation], Observation]:
+    """The frame of ``stream`` (``rgb`` or ``ir``) at ``start_s`` delivered again until
+    ``end_s`` (a stalled camera)."""
+    held: dict[str, Frame] = {}
 
     def stall(obs: Observation) -> Observation:
-        if obs.ir is not None and start_s <= obs.t_s < end_s:
-            return replace(obs, ir=frozen.setdefault("ir", obs.ir))
+        frame = getattr(obs, stream)
+        if frame is not None and start_s <= obs.t_s < end_s:
+            again: dict[str, Any] = {stream: held.setdefault(stream, frame)}
+            return replace(obs, **again)
         return obs
 
     return stall
@@ -243,7 +247,7 @@ def held_while_lost(res: LoopResult, lost_kind: EventKind, back_kind: EventKind
 
 
 def test_stale_infrared_turns_the_heaters_off(models):
-    res, _ = grasp(models, "relax", change=frozen_ir(20.0), seed=6, temp_c=45.0,
+    res, _ = grasp(models, "relax", change=frozen("ir", 20.0), seed=6, temp_c=45.0,
                    plan=GraspPlan(target_n=3.0, temp_c=45.0, hold_s=15.0))
     event = res.log.first(EventKind.IR_STALE)
     assert event is not None
@@ -261,7 +265,7 @@ def test_stale_infrared_turns_the_heaters_off(models):
 
 
 def test_the_force_loop_waits_for_the_infrared_and_resumes(models):
-    res, _ = grasp(models, "icfn", change=frozen_ir(20.0, 26.0), seed=6,
+    res, _ = grasp(models, "icfn", change=frozen("ir", 20.0, 26.0), seed=6,
                    plan=GraspPlan(target_n=3.0, temp_c=40.0, hold_s=20.0))
     lost, back, _ = held_while_lost(res, EventKind.ESTIMATE_LOST, EventKind.ESTIMATE_BACK)
     assert 23.0 <= lost.t_s <= 24.1
@@ -271,22 +275,10 @@ def test_the_force_loop_waits_for_the_infrared_and_resumes(models):
     assert np.abs(res["estimate_n"][after] - 3.0).max() < 0.3  # regulating again
 
 
-def frozen_rgb(start_s: float, end_s: float) -> Callable[[Observation], Observation]:
-    """The RGB frame of ``start_s`` delivered again until ``end_s`` (a stalled camera)."""
-    frozen: dict[str, Frame] = {}
-
-    def stall(obs: Observation) -> Observation:
-        if obs.rgb is not None and start_s <= obs.t_s < end_s:
-            return replace(obs, rgb=frozen.setdefault("rgb", obs.rgb))
-        return obs
-
-    return stall
-
-
 def test_a_stalled_rgb_camera_holds_the_motor_until_frames_come_again(models):
     # Frozen while closing on the object: on the frozen estimate the PID would close on
     # to the stroke's end (about 20 N on this seed), for the estimate never rises.
-    res, _ = grasp(models, "icfn", change=frozen_rgb(15.0, 22.0), seed=5,
+    res, _ = grasp(models, "icfn", change=frozen("rgb", 15.0, 22.0), seed=5,
                    plan=GraspPlan(target_n=3.0, temp_c=40.0, hold_s=10.0))
     lost, back, gone = held_while_lost(res, EventKind.MARKER_LOST, EventKind.MARKER_BACK)
     assert 15.2 <= lost.t_s <= 15.3

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import pytest
+from mcap.reader import make_reader
+from mcap.writer import Writer
 
 from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
 from relaxgrip.learning.store import ModelBundle
@@ -14,6 +17,31 @@ from relaxgrip.learning.training import load_default_models
 from relaxgrip.recording import McapRecorder
 
 HOLD_S = 6.0
+
+
+def copy_recording(src: Path, dst: Path,
+                   change: Callable[[str, bytes, int], bytes | None]) -> None:
+    """Copy a recording as mcap's own writer lays it out (the schemas and channels in the
+    first chunk only), each message's data through ``change(topic, data, log_time_ns)``
+    (None: left out)."""
+    with open(src, "rb") as f, open(dst, "wb") as out:
+        writer = Writer(out)
+        writer.start()
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            data = change(channel.topic, message.data, message.log_time)
+            if data is None:
+                continue
+            if channel.id not in channels:
+                assert schema is not None
+                schemas.setdefault(schema.id, writer.register_schema(
+                    schema.name, schema.encoding, schema.data))
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id])
+            writer.add_message(channels[channel.id], message.log_time, data,
+                               message.publish_time)
+        writer.finish()  # type: ignore[no-untyped-call]
 
 
 def record_hold(path: Path, estimator: str, target_n: float, duration_s: float,

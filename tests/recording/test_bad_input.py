@@ -9,14 +9,12 @@ import json
 import os
 import shutil
 import struct
-from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import pytest
 from mcap.reader import make_reader
-from mcap.writer import Writer
 
 from relaxgrip.clock import VirtualClock
 from relaxgrip.control import GraspController, GraspPlan, make_estimator, run_loop
@@ -25,34 +23,12 @@ from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import default_models_dir
 from relaxgrip.recording import McapRecorder
 from tests.clitools import assert_one_error_line, run_main
-
-
-def _copy(src: Path, dst: Path, change: Callable[[str, bytes], bytes | None]) -> None:
-    """Copy a recording, each message's data through ``change`` (None: left out)."""
-    with open(src, "rb") as f, open(dst, "wb") as out:
-        reader = make_reader(f)
-        writer = Writer(out)
-        writer.start()
-        schemas: dict[int, int] = {}
-        channels: dict[int, int] = {}
-        for schema, channel, message in reader.iter_messages(log_time_order=False):
-            data = change(channel.topic, message.data)
-            if data is None:
-                continue
-            if channel.id not in channels:
-                assert schema is not None
-                schemas.setdefault(schema.id, writer.register_schema(
-                    schema.name, schema.encoding, schema.data))
-                channels[channel.id] = writer.register_channel(
-                    channel.topic, channel.message_encoding, schemas[schema.id])
-            writer.add_message(channels[channel.id], message.log_time, data,
-                               message.publish_time)
-        writer.finish()  # type: ignore[no-untyped-call]
+from tests.recording.conftest import copy_recording
 
 
 def _without(src: Path, dst: Path, topics: set[str]) -> None:
     """Copy a recording leaving out some topics."""
-    _copy(src, dst, lambda topic, data: None if topic in topics else data)
+    copy_recording(src, dst, lambda topic, data, _: None if topic in topics else data)
 
 
 @pytest.mark.parametrize("command", ["replay", "from-recordings"])
@@ -345,7 +321,7 @@ def _rewritten(src: Path, dst: Path, change) -> None:
     """Copy a recording with ``change(topic, message)`` applied to its first message per topic."""
     changed: set[str] = set()
 
-    def first(topic: str, data: bytes) -> bytes:
+    def first(topic: str, data: bytes, _: int) -> bytes:
         if topic in changed:
             return data
         new = change(topic, json.loads(data))
@@ -354,7 +330,7 @@ def _rewritten(src: Path, dst: Path, change) -> None:
         changed.add(topic)
         return json.dumps(new).encode()
 
-    _copy(src, dst, first)
+    copy_recording(src, dst, first)
 
 
 def _drop(key: str):

@@ -3,38 +3,14 @@ frame under another frame's number and time."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 from mcap.reader import NonSeekingReader, make_reader
-from mcap.writer import Writer
 
 from relaxgrip.experiments.controlled_hold import HoldResult
 from relaxgrip.recording import iter_messages, iter_periods, recover
-
-
-def _copy(src: Path, dst: Path, keep: Callable[[str, int], bool]) -> None:
-    """Copy a recording as mcap's own writer lays it out (the schemas and channels in the
-    first chunk only, as the recorder did), with the messages ``keep(topic, log_time_ns)``
-    keeps."""
-    with open(src, "rb") as f, open(dst, "wb") as out:
-        writer = Writer(out)
-        writer.start()
-        schemas: dict[int, int] = {}
-        channels: dict[int, int] = {}
-        for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
-            if not keep(channel.topic, message.log_time):
-                continue
-            if channel.id not in channels:
-                assert schema is not None
-                schemas.setdefault(schema.id, writer.register_schema(
-                    schema.name, schema.encoding, schema.data))
-                channels[channel.id] = writer.register_channel(
-                    channel.topic, channel.message_encoding, schemas[schema.id])
-            writer.add_message(channels[channel.id], message.log_time, message.data,
-                               message.publish_time)
-        writer.finish()  # type: ignore[no-untyped-call]
+from tests.recording.conftest import copy_recording
 
 
 def _damage_first_chunk(src: Path, dst: Path) -> None:
@@ -56,7 +32,7 @@ def test_recover_keeps_the_rest_of_a_file_whose_first_chunk_is_damaged(
     good = relax_hold[0]
     total = sum(1 for _ in iter_messages(good))
     old_style = tmp_path / "old-style.mcap"
-    _copy(good, old_style, lambda topic, t: True)
+    copy_recording(good, old_style, lambda topic, data, t: data)
     for src, cut in ((old_style, False), (good, False), (good, True)):
         damaged = tmp_path / "damaged.mcap"
         _damage_first_chunk(src, damaged)
@@ -93,7 +69,7 @@ def test_a_frame_lost_with_its_period_is_not_shown_under_a_later_frame_s_stamp(
         return not lost_from <= t < lost_to
 
     gap = tmp_path / "gap.mcap"
-    _copy(good, gap, keep)
+    copy_recording(good, gap, lambda topic, data, t: data if keep(topic, t) else None)
     stamps = {m["timestamp"]["sec"] * 10**9 + m["timestamp"]["nsec"]
               for topic, _, m in iter_messages(gap) if topic == "/rgb"}
     periods = list(iter_periods(gap))
