@@ -58,6 +58,14 @@ class FakeCapture:
         self.released = True
 
 
+def _wait_error(source: Any) -> None:
+    """Until the source's reader has met its error (2 s at most)."""
+    for _ in range(2000):
+        if source._error is not None:
+            return
+        time.sleep(0.001)
+
+
 def _wait_frame(source: Any, clock: VirtualClock) -> Frame:
     for _ in range(2000):
         frame = source.read(clock.now())
@@ -125,10 +133,7 @@ def test_thermal_source_rejects_8_bit_frames() -> None:
     source = UvcThermalSource(rig.ir, VirtualClock(), capture_factory=lambda dev: cap)
     source.start()
     try:
-        for _ in range(2000):
-            if source._error is not None:
-                break
-            time.sleep(0.001)
+        _wait_error(source)
         with pytest.raises(CameraError, match="is the camera in Y16 mode"):
             source.read(0.0)
     finally:
@@ -355,10 +360,7 @@ def test_an_rgb_frame_with_another_channel_count_is_named(channels: int) -> None
     source = OpenCvRgbSource(rig.rgb, clock, capture_factory=lambda dev: cap)
     source.start()
     try:
-        for _ in range(2000):
-            if source._error is not None:
-                break
-            time.sleep(0.001)
+        _wait_error(source)
         with pytest.raises(CameraError, match=f"RGB camera: frame has {channels} channels, "
                                               r"expected 3 \(BGR\) or 1 \(grey\)"):
             source.read(0.0)
