@@ -173,3 +173,48 @@ def test_sealing_refuses_a_file_without_a_complete_header(
     with pytest.raises(OSError, match="MCAP header"):
         seal_recording(path)
     assert path.stat().st_size == cut  # left as it was
+
+
+def test_a_signal_while_a_chunk_is_written_stops_the_run_after_it(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """SIGTERM as the writer compresses a chunk: the interrupt had cut it between taking
+    the chunk's messages and writing them, so the file lost them while its summary counted
+    them (a hold recorded 246 messages and held 174)."""
+    import zstandard
+
+    from relaxgrip.clock import VirtualClock
+    from relaxgrip.control import GraspController, GraspPlan, make_estimator, run_loop
+    from relaxgrip.interrupts import interrupt
+    from relaxgrip.learning.training import load_default_models
+    from relaxgrip.recording import McapRecorder
+    from relaxgrip.twin import GripperTwin, TwinConfig
+
+    compress = zstandard.compress  # what mcap's writer calls, looked up at each chunk
+    chunks = {"n": 0}
+
+    def signalled(data: bytes) -> bytes:
+        chunks["n"] += 1
+        out: bytes = compress(data)
+        if chunks["n"] == 3:
+            os.kill(os.getpid(), signal.SIGTERM)  # handled as this call returns
+        return out
+
+    monkeypatch.setattr(zstandard, "compress", signalled)
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    path = tmp_path / "signalled.mcap"
+    models = load_default_models()
+    cfg = TwinConfig()
+    clock = VirtualClock()
+    twin = GripperTwin(cfg, seed=0, clock=clock)
+    ctl = GraspController(cfg.rig, make_estimator("fixed", models.icfn, models.rcfn))
+    try:
+        with pytest.raises(KeyboardInterrupt), McapRecorder(path, flush_every_s=0.2) as rec:
+            run_loop(twin, ctl, clock, GraspPlan(target_n=5.0), 30.0, recorder=rec)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert chunks["n"] >= 3
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    assert summary.statistics is not None
+    assert summary.statistics.message_count == sum(1 for _ in iter_messages(path)) > 10

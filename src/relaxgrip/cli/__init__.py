@@ -38,21 +38,24 @@ from relaxgrip.cli import (  # noqa: F401  (registers commands)
     perceive,
     recording,
 )
-from relaxgrip.cli._app import app, err_console, interrupt
+from relaxgrip.cli._app import app, err_console
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import one_line
+from relaxgrip.interrupts import interrupt
 
 __all__ = ["app", "main"]
 
 
-#: Signals that stop a command as Ctrl-C does (SIGINT is Python's own already).
-_STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+#: Signals that stop a command as Ctrl-C does.  SIGINT too: Python's own handler
+#: raises at once, inside a record half written (:mod:`relaxgrip.interrupts`).
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 @contextmanager
 def _signals_interrupt() -> Iterator[None]:
-    """SIGTERM and SIGHUP raise ``KeyboardInterrupt`` in the block, where they are not
-    ignored (``nohup`` ignores SIGHUP: that stays); only the main thread can set them."""
+    """SIGINT, SIGTERM and SIGHUP raise ``KeyboardInterrupt`` in the block, between writes,
+    where they are not ignored (``nohup`` ignores SIGHUP: that stays); only the main
+    thread can set them."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Callable
-from types import FrameType
 from typing import Any
 
 import typer
@@ -24,11 +23,6 @@ app = typer.Typer(
 # No emoji codes: paths and values the user typed (``push:abc:1``) are printed as typed.
 console = Console(emoji=False)
 err_console = Console(stderr=True, emoji=False)
-
-
-def interrupt(signum: int, frame: FrameType | None) -> None:
-    """A signal handler that stops the command as Ctrl-C does: its clean-up runs."""
-    raise KeyboardInterrupt
 
 
 def emit_json(obj: dict[str, Any]) -> None:

@@ -13,8 +13,9 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 from rich.table import Table
 
-from relaxgrip.cli._app import app, console, emit_json, float_option, int_option, interrupt
+from relaxgrip.cli._app import app, console, emit_json, float_option, int_option
 from relaxgrip.errors import InputError
+from relaxgrip.interrupts import interrupt
 
 if TYPE_CHECKING:
     from relaxgrip.perception.rig_check import RigCheck

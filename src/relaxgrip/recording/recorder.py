@@ -48,6 +48,7 @@ from relaxgrip.backend import BackendInfo, Command, Frame, Observation
 from relaxgrip.control.phases import GraspPhase, PhaseLog
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import named_errors
+from relaxgrip.interrupts import deferred
 from relaxgrip.perception.features import marker_pose
 from relaxgrip.perception.marker import TrackStatus
 from relaxgrip.recording.schemas import CHANNELS, RECORDING_FORMAT, RECORDING_VERSION, schema_bytes
@@ -451,9 +452,14 @@ class McapRecorder:
     @contextmanager
     def _writing(self) -> Iterator[None]:
         """A block that writes to the file: if the system refuses (a full disk), the
-        recording ends there, sealed as far as it was written (:func:`seal_recording`)."""
+        recording ends there, sealed as far as it was written (:func:`seal_recording`).
+
+        Ctrl-C or ``kill`` stops the command after the block, not inside it
+        (:func:`relaxgrip.interrupts.deferred`): cut in a chunk's write, the
+        chunk was lost while the summary counted its messages.
+        """
         try:
-            with named_errors(self.path):
+            with deferred(), named_errors(self.path):
                 yield
         except OSError as exc:
             self._abandon(exc)
