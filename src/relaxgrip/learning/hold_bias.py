@@ -114,10 +114,10 @@ class HoldBias:
             raise InputError(f"hold bias: values_n must have shape {shape}, got {values.shape}")
         if not np.all(np.isfinite(values)):
             raise InputError("hold bias: values_n has a value that is not finite")
-        largest = float(np.abs(values).max())
-        if largest > float(np.abs(forces).max()):  # a correction is a share of the force
+        largest, strongest = float(np.abs(values).max()), float(np.abs(forces).max())
+        if largest > strongest:  # a correction is a share of the force
             raise InputError(f"hold bias: values_n has {largest:g} N, more than any force of "
-                             f"the grid ({float(np.abs(forces).max()):g} N)")
+                             f"the grid ({strongest:g} N)")
         object.__setattr__(self, "forces_n", forces)
         object.__setattr__(self, "temps_c", temps)
         object.__setattr__(self, "times_s", times)

@@ -505,8 +505,8 @@ def _load_unrelaxed(directory: Path, manifest: Mapping[str, Any]) -> UnrelaxedIc
     if not (isinstance(params, list) and params and all(isinstance(p, dict) for p in params)):
         raise ModelFileError(f"{path}: manifest 'icfn_unrelaxed.params.members' is not a "
                              "list of parameter objects")
-    claimed = {f"member{i}/" for i in range(len(params))}
-    unclaimed = sorted({k.split("/", 1)[0] for k in arrays if k[: k.find("/") + 1] not in claimed})
+    unclaimed = sorted({k.split("/", 1)[0] for k in arrays}
+                       - {f"member{i}" for i in range(len(params))})
     if unclaimed:  # a member the manifest lost would be dropped from the ensemble unseen
         raise ModelFileError(f"{path}: {len(params)} member(s) in the manifest, but the file "
                              f"also holds {', '.join(unclaimed)}")

@@ -35,7 +35,7 @@ __all__ = ["SceneState", "SensorSuite"]
 #: Captures closer than this to a requested time count as due (s): clock arithmetic slack,
 #: for a clock stepped by sums of a period (``VirtualClock.advance(1 / 30)``) too, whose
 #: round-off passes a nanosecond after half an hour (a frame then came a period late).
-_TIME_SLACK_S = 1e-6
+TIME_SLACK_S = 1e-6
 
 
 @dataclass(frozen=True)
@@ -140,8 +140,8 @@ class SensorSuite:
         """
         seen: SceneState | None = None
         for stream in self.streams:
-            while stream.next_t_s <= t_s + _TIME_SLACK_S:
-                if stream.next_t_s + stream.period_s > until_s + _TIME_SLACK_S:  # kept
+            while stream.next_t_s <= t_s + TIME_SLACK_S:
+                if stream.next_t_s + stream.period_s > until_s + TIME_SLACK_S:  # kept
                     if seen is None:
                         seen = scene()
                     stream.latest = (stream.next_seq, stream.next_t_s, seen)
@@ -195,7 +195,7 @@ class SensorSuite:
 
     def skip_force(self, t_s: float) -> None:
         """No sensor in the grasp up to ``t_s``: drop the trace, no samples until then."""
-        n = math.floor((t_s - self._force_t0_s + _TIME_SLACK_S) / self._force_period_s) + 1
+        n = math.floor((t_s - self._force_t0_s + TIME_SLACK_S) / self._force_period_s) + 1
         self._force_next = max(self._force_next, n)
         self._trace_t, self._trace_n = [], []
 
@@ -206,8 +206,8 @@ class SensorSuite:
             return None
         period, origin = self._force_period_s, self._force_t0_s
         first = max(self._force_next,
-                    math.ceil((trace_t[0] - origin - _TIME_SLACK_S) / period))
-        last = math.floor((trace_t[-1] - origin + _TIME_SLACK_S) / period)
+                    math.ceil((trace_t[0] - origin - TIME_SLACK_S) / period))
+        last = math.floor((trace_t[-1] - origin + TIME_SLACK_S) / period)
         self._trace_t, self._trace_n = trace_t[-1:], trace_n[-1:]
         if last < first:
             return None

@@ -38,7 +38,7 @@ from relaxgrip.physics.thermal import (
 from relaxgrip.physics.viscoelastic import phi1
 from relaxgrip.twin.config import TWIN_VERSION, TwinConfig
 from relaxgrip.twin.objects import ObjectSpec, get_object
-from relaxgrip.twin.sensor_suite import SceneState, SensorSuite
+from relaxgrip.twin.sensor_suite import TIME_SLACK_S, SceneState, SensorSuite
 from relaxgrip.twin.sensors import SceneObject
 
 FloatArray = NDArray[np.float64]
@@ -49,9 +49,6 @@ __all__ = ["GripperTwin", "TwinMaterial"]
 _REFRESH_K = 0.02
 #: Plastic set (m) from which an object counts as visibly crushed.
 _CRUSHED_M = 0.001
-#: Times closer than this are the same instant (s): clock arithmetic round-off, that of
-#: a clock stepped by sums of a period included (see the sensor suite's).
-_TIME_SLACK_S = 1e-6
 #: Steps whose lengths differ by less than this share their discretisation (relative).
 _SAME_STEP_REL = 1e-9
 
@@ -375,11 +372,11 @@ class GripperTwin:
         """Integrate to ``t_s``, stopping at every camera capture on the way."""
         while True:
             t_capture = self._sensors.next_capture_s()
-            if t_capture > t_s + _TIME_SLACK_S:
+            if t_capture > t_s + TIME_SLACK_S:
                 break
             # A capture that falls on the requested time up to round-off is taken there:
             # no sliver of a step between them.
-            self._integrate_to(t_s if t_capture > t_s - _TIME_SLACK_S else t_capture)
+            self._integrate_to(t_s if t_capture > t_s - TIME_SLACK_S else t_capture)
             # A capture that a later one of this advance replaces is never seen: its
             # scene is not assembled.
             self._sensors.capture(t_capture, self._scene, until_s=t_s)
