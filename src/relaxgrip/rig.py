@@ -280,6 +280,12 @@ class MarkerMount:
         Where the tab is fixed along the finger (m from the root).
     tilt_deg : float
         Tab tilt about the finger's bending axis (degrees; 0 faces the camera).
+    max_travel_m : float
+        Farthest the bent finger carries the marker from its zero pose (m):
+        perception rejects a marker of this id further away, however long it
+        stays (another marker printed with the same id).  The twin's finger
+        moves it 11 mm under the 12 N force limit and 15 mm under 20 N, hot
+        and loaded at the tip; a softer finger needs more.
     """
 
     dictionary: str = "4X4_50"
@@ -287,6 +293,7 @@ class MarkerMount:
     size_m: float = 0.012
     position_m: float = 0.060
     tilt_deg: float = 30.0
+    max_travel_m: float = 0.020
 
     def __post_init__(self) -> None:
         if self.dictionary not in ARUCO_DICTIONARIES:
@@ -298,6 +305,8 @@ class MarkerMount:
             raise InputError(f"marker size must be > 0 m, got {self.size_m}")
         if not abs(self.tilt_deg) < 75.0:
             raise InputError(f"marker tilt must be within ±75°, got {self.tilt_deg}")
+        if not self.max_travel_m > 0.0:  # inf turns the bound off; nan is none
+            raise InputError(f"marker travel must be > 0 m, got {self.max_travel_m}")
 
     @property
     def aruco_dictionary(self) -> cv2.aruco.Dictionary:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -13,6 +14,9 @@ from relaxgrip.rig import RigGeometry
 from relaxgrip.twin.render_rgb import RgbRenderer
 from relaxgrip.twin.sensors import RgbSensorConfig
 from tests.clitools import assert_one_error_line, run_cli, run_main
+
+if TYPE_CHECKING:
+    from PIL import Image
 
 RIG = RigGeometry()
 
@@ -146,18 +150,20 @@ def test_images_as_labs_save_them_read_as_the_plain_one(
     assert np.allclose(got["tvec_m"], want["tvec_m"], atol=2e-5)
 
 
-def test_a_phone_jpeg_is_read_turned_as_its_exif_orientation_says(
+@pytest.mark.parametrize("ext", ["jpg", "png", "webp"])
+def test_a_phone_picture_is_read_turned_as_its_exif_orientation_says(
     marker_png: tuple[Path, np.ndarray], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-    capsys: pytest.CaptureFixture[str],
+    capsys: pytest.CaptureFixture[str], ext: str,
 ) -> None:
+    """A PNG or WebP was read as stored: cv2.imdecode(IMREAD_UNCHANGED) ignores EXIF."""
     from PIL import Image  # matplotlib's dependency
 
     path, _ = marker_png
     image = Image.open(path)
     exif = image.getexif()
     exif[0x0112] = 6  # turn 90° clockwise to display
-    turned = tmp_path / "portrait.jpg"
-    image.save(turned, exif=exif, quality=95)
+    turned = tmp_path / f"portrait.{ext}"
+    image.save(turned, exif=exif, quality=95, lossless=True)
     code, out, err = run_main(["perceive", turned, "--json"], monkeypatch, capsys)
     assert code == 0, err
     found = json.loads(out)
@@ -173,3 +179,79 @@ def test_a_phone_jpeg_is_read_turned_as_its_exif_orientation_says(
                              make_detector(MarkerMount().aruco_dictionary))
     # The same corners as in the picture as shown (within the edge fit's refinement).
     assert np.abs(np.asarray(marker["corners_px"]) - seen.corners_px).max() < 1.0
+
+
+#: PIL's transposes that undo each EXIF orientation (what ``ImageOps.exif_transpose`` does).
+_UNDO = {2: "FLIP_LEFT_RIGHT", 3: "ROTATE_180", 4: "FLIP_TOP_BOTTOM", 5: "TRANSPOSE",
+         6: "ROTATE_270", 7: "TRANSVERSE", 8: "ROTATE_90"}
+
+
+def _stored_as(upright: Image.Image, orientation: int, path: Path) -> None:
+    """Save ``upright`` as a camera that writes ``orientation`` would: turned, tagged."""
+    from PIL import Image
+
+    stored = upright
+    if orientation != 1:  # the inverse of the transpose that shows it (6 and 8 swap)
+        inverse = {6: 8, 8: 6}.get(orientation, orientation)
+        stored = upright.transpose(getattr(Image.Transpose, _UNDO[inverse]))
+    exif = stored.getexif()
+    exif[0x0112] = orientation
+    stored.save(path, exif=exif, quality=95, lossless=True)
+
+
+@pytest.mark.parametrize("orientation", range(1, 9))
+@pytest.mark.parametrize("ext", ["png", "webp", "jpg"])
+def test_every_exif_orientation_is_read_as_shown(
+    marker_png: tuple[Path, np.ndarray], tmp_path: Path, ext: str, orientation: int
+) -> None:
+    from PIL import Image, ImageOps
+
+    from relaxgrip.cli.perceive import _read_gray
+
+    upright = Image.open(marker_png[0]).convert("RGB")
+    path = tmp_path / f"o{orientation}.{ext}"
+    _stored_as(upright, orientation, path)
+    got = _read_gray(path)
+    if ext == "jpg":  # lossy: as OpenCV shows it (it turns JPEG itself)
+        shown = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        assert shown is not None
+        assert np.array_equal(got, cv2.cvtColor(shown, cv2.COLOR_BGR2GRAY))
+        return
+    # Lossless: exactly the upright picture, as PIL's viewer-side transpose also shows it.
+    assert np.array_equal(np.asarray(ImageOps.exif_transpose(Image.open(path))),
+                          np.asarray(upright))
+    assert np.array_equal(got, cv2.cvtColor(np.asarray(upright), cv2.COLOR_RGB2GRAY))
+
+
+def test_a_transparent_png_is_turned_with_its_alpha(
+    marker_png: tuple[Path, np.ndarray], tmp_path: Path
+) -> None:
+    from PIL import Image
+
+    from relaxgrip.cli.perceive import _read_gray
+
+    grey = np.asarray(Image.open(marker_png[0]).convert("L"))
+    alpha = np.where(grey < 200, 255, 0).astype(np.uint8)
+    rgba = Image.fromarray(np.dstack([np.where(alpha > 0, grey, 0)] * 3 + [alpha]), "RGBA")
+    upright, turned = tmp_path / "upright.png", tmp_path / "turned.png"
+    _stored_as(rgba, 1, upright)
+    _stored_as(rgba, 8, turned)
+    assert np.array_equal(_read_gray(turned), _read_gray(upright))
+
+
+def test_an_orientation_that_is_none_leaves_the_image_as_stored(
+    marker_png: tuple[Path, np.ndarray], tmp_path: Path
+) -> None:
+    """A value outside 1-8, a TIFF (OpenCV's decoder turns it itself) and bytes that are
+    no image read as stored."""
+    from PIL import Image
+
+    from relaxgrip.cli.perceive import _exif_orientation
+
+    upright = Image.open(marker_png[0]).convert("RGB")
+    for name, value in (("bad.png", 9), ("turned.tif", 6)):
+        exif = upright.getexif()
+        exif[0x0112] = value
+        upright.save(tmp_path / name, exif=exif)
+        assert _exif_orientation((tmp_path / name).read_bytes()) == 1
+    assert _exif_orientation(b"not an image at all") == 1

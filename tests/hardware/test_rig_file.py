@@ -33,6 +33,9 @@ def test_examples_load_and_match_the_twin_geometry() -> None:
     assert emu.emulator.socket.endswith(".sock")
     assert real.rgb.exposure == -6
     assert emu.rgb.exposure is None
+    softer = _example()
+    softer["marker"]["max_travel_mm"] = 35.0
+    assert parse_rig(softer, "x.toml").geometry.marker.max_travel_m == pytest.approx(0.035)
 
 
 @pytest.mark.parametrize(("table", "key", "value", "message"), [
@@ -58,6 +61,7 @@ def test_examples_load_and_match_the_twin_geometry() -> None:
     ("rig", "open_aperture_mm", 1e308, r"\[rig\] open_aperture_mm must be <= 1000, got 1e\+308"),
     ("rig", "open_aperture_mm", 1001, r"\[rig\] open_aperture_mm must be <= 1000"),
     ("marker", "size_mm", -1, r"\[marker\] size_mm must be > 0"),
+    ("marker", "max_travel_mm", 0, r"\[marker\] max_travel_mm must be > 0"),
     ("finger", "beam_positions_mm", [200.0], r"\[finger\] beam_positions_mm must lie on"),
     ("limits", "heater_duty_limit", 1.5, r"\[limits\] heater_duty_limit must be <= 1"),
     ("limits", "max_temp_c", "hot", r"\[limits\] max_temp_c must be a number"),

@@ -21,7 +21,7 @@ from relaxgrip.perception.marker import (
     rotation_angle,
     to_gray,
 )
-from relaxgrip.rig import CameraIntrinsics, RigGeometry, rotation_x, rotation_z
+from relaxgrip.rig import CameraIntrinsics, MarkerMount, RigGeometry, rotation_x, rotation_z
 from relaxgrip.twin.render_rgb import RgbRenderer
 from relaxgrip.twin.sensors import RgbSensorConfig
 
@@ -270,7 +270,11 @@ def test_a_pose_ippe_cannot_give_falls_back_or_is_non_finite() -> None:
 
 def test_a_marker_back_far_from_where_it_was_lost_is_tracked_without_a_crash() -> None:
     """Lost for two seconds, back 40 mm to the right: the corners' old velocity must not
-    carry the edge follower's prediction out of the frame (it had raised on every frame)."""
+    carry the edge follower's prediction out of the frame (it had raised on every frame).
+
+    40 mm is beyond the default ``max_travel_m`` (no bent finger moves its marker that far,
+    see test_a_second_marker_of_its_id_cannot_take_the_tracker_over): a tracker allowed
+    50 mm follows it there."""
     from relaxgrip.backend import Frame
     from relaxgrip.perception.marker import MarkerTracker, TrackStatus
     from relaxgrip.rig import RigGeometry
@@ -279,7 +283,7 @@ def test_a_marker_back_far_from_where_it_was_lost_is_tracked_without_a_crash() -
 
     rig = RigGeometry()
     renderer = RgbRenderer(rig, RgbSensorConfig(), 0)
-    tracker = MarkerTracker(rig.rgb.intrinsics, rig.marker)
+    tracker = MarkerTracker(rig.rgb.intrinsics, replace(rig.marker, max_travel_m=0.05))
     base = rig.marker2cam(0.0, 0.04)
     left, right = base.copy(), base.copy()
     left[0, 3] -= 0.02
@@ -313,9 +317,12 @@ def test_frames_from_before_the_last_one_are_not_tracked() -> None:
         state = tracker.update(Frame(t, 99, renderer.render(99, pose)))
         assert state.status is TrackStatus.INVALID
     jumped = pose.copy()
-    jumped[0, 3] += 0.02  # 20 mm within one frame: implausible, rejected (the clock was kept)
-    assert tracker.update(Frame(1.4, 13, renderer.render(13, jumped))).status \
-        is TrackStatus.REJECTED
+    # 15 mm within one frame: implausible, rejected (the clock was kept); within a bent
+    # finger's reach, so the speed bound alone decides.
+    jumped[0, 3] += 0.015
+    state = tracker.update(Frame(1.4, 13, renderer.render(13, jumped)))
+    assert state.status is TrackStatus.REJECTED
+    assert state.message == "implausible jump since last frame"
 
 
 def test_corners_that_give_no_pose_give_a_non_finite_one() -> None:
@@ -329,3 +336,153 @@ def test_corners_that_give_no_pose_give_a_non_finite_one() -> None:
         pose = solver.solve(corners)
         assert not pose.valid
         assert np.isnan(pose.rvec).all()
+
+
+def with_decoy(image: np.ndarray, decoy2cam: np.ndarray, seq: int) -> np.ndarray:
+    """``image`` with a second marker of the tracked id pasted in at ``decoy2cam``."""
+    renderer = RgbRenderer(RIG, RgbSensorConfig(), 0)
+    other = renderer.render(seq, decoy2cam)
+    corners = renderer.marker_corners_px(decoy2cam)
+    centre = corners.mean(axis=0)
+    box = centre + 1.6 * (corners - centre)  # the black square and its white quiet zone
+    x0, y0 = np.maximum(np.floor(box.min(axis=0)).astype(int), 0)
+    x1, y1 = np.ceil(box.max(axis=0)).astype(int)
+    out = image.copy()
+    out[y0:y1, x0:x1] = other[y0:y1, x0:x1]
+    return out
+
+
+def shifted(pose: np.ndarray, axis: int, by_m: float) -> np.ndarray:
+    out = pose.copy()
+    out[axis, 3] += by_m
+    return out
+
+
+def test_a_second_marker_of_its_id_cannot_take_the_tracker_over() -> None:
+    # Tracked, then hidden while another id-0 marker 25 mm away is in view, then both in
+    # view: the tracker had rejected it four frames, taken it as the finger's on the fifth
+    # (the speed bound grows with the time since the last pose) and stayed on it, reporting
+    # a 25 mm deflection for good.
+    clear = RgbRenderer(RIG, RgbSensorConfig(), 0)
+    hidden = RgbRenderer(RIG, RgbSensorConfig(occlusion=0.4), 0)
+    rest = RIG.marker2cam()
+    decoy = shifted(rest, 1, 0.025)
+    tracker = MarkerTracker(RIG.rgb.intrinsics, RIG.marker, zero_frames=3)
+    states = []
+    for k in range(40):
+        if k < 10:
+            image = clear.render(k, rest)
+        else:
+            image = with_decoy((hidden if k < 20 else clear).render(k, rest), decoy, k)
+        states.append(tracker.update(Frame(k / 30, k, image)))
+    deflections_mm = [1e3 * float(np.abs(s.delta_t_m).max()) for s in states
+                      if s.ok and s.delta_t_m is not None]
+    assert max(deflections_mm) < 0.1  # never the other marker's 25 mm
+    assert states[9].status is TrackStatus.TRACKING
+    assert [s.status for s in states[20:]] == [TrackStatus.TRACKING] * 20
+    for state in states[10:20]:
+        assert state.status is TrackStatus.REJECTED
+        assert state.message.startswith("marker 25.0 mm from its zero pose, beyond the 20 mm")
+
+
+def test_rezero_lets_the_tracker_follow_a_marker_moved_beyond_reach() -> None:
+    # The tab re-glued 25 mm away: rejected as another marker until the zero pose is retaken.
+    renderer = RgbRenderer(RIG, RgbSensorConfig(), 0)
+    rest = RIG.marker2cam()
+    moved = shifted(rest, 1, 0.025)
+    tracker = MarkerTracker(RIG.rgb.intrinsics, RIG.marker, zero_frames=3)
+    states = [tracker.update(Frame(k / 30, k, renderer.render(k, rest if k < 5 else moved)))
+              for k in range(15)]
+    assert [s.status for s in states[5:]] == [TrackStatus.REJECTED] * 10
+    tracker.rezero()
+    states = [tracker.update(Frame(k / 30, k, renderer.render(k, moved))) for k in range(15, 20)]
+    assert [s.status for s in states] == [TrackStatus.ZEROING] * 2 + [TrackStatus.TRACKING] * 3
+    assert states[-1].pose is not None
+    assert np.abs(states[-1].pose.tvec_m - moved[:3, 3]).max() < 1e-4
+
+
+def test_of_two_markers_of_its_id_the_one_nearest_the_last_pose_is_kept() -> None:
+    # Lost for a second, the finger comes back bent 10 mm, out of its last region: the
+    # full-frame detector lists the other marker (25 mm left of the rest pose) first.
+    renderer = RgbRenderer(RIG, RgbSensorConfig(), 0)
+    rest, bent = RIG.marker2cam(), RIG.marker2cam(0.010, 0.1)
+    decoy = shifted(rest, 0, -0.025)
+    tracker = MarkerTracker(RIG.rgb.intrinsics, RIG.marker, zero_frames=3)
+    for k in range(4):
+        tracker.update(Frame(k / 30, k, renderer.render(k, rest)))
+    blank = np.full((*RIG.rgb.intrinsics.shape, 3), 128, np.uint8)
+    assert tracker.update(Frame(0.5, 15, blank)).status is TrackStatus.LOST
+    image = with_decoy(renderer.render(34, bent), decoy, 34)
+    found = detect_markers(to_gray(image), make_detector(RIG.marker.aruco_dictionary))
+    assert [d.marker_id for d in found] == [0, 0]
+    state = tracker.update(Frame(34 / 30, 34, image))
+    assert state.status is TrackStatus.TRACKING
+    assert state.search == "full"
+    assert state.delta_t_m is not None
+    assert np.abs(state.delta_t_m - (bent[:3, 3] - rest[:3, 3])).max() < 1e-4
+
+
+def test_two_markers_of_its_id_from_the_start_need_the_expected_place() -> None:
+    renderer = RgbRenderer(RIG, RgbSensorConfig(), 0)
+    rest = RIG.marker2cam()
+    image = with_decoy(renderer.render(0, rest), shifted(rest, 0, -0.025), 0)
+    blind = MarkerTracker(RIG.rgb.intrinsics, RIG.marker)
+    state = blind.update(Frame(0.0, 0, image))
+    assert state.status is TrackStatus.REJECTED
+    assert state.message == ("2 markers with id 0 in view and none tracked yet: give home_px "
+                             "to tell the finger's apart")
+    home = renderer.marker_corners_px(rest).mean(axis=0)
+    told = MarkerTracker(RIG.rgb.intrinsics, RIG.marker, home_px=(home[0], home[1]))
+    state = told.update(Frame(0.0, 0, image))
+    assert state.status is TrackStatus.ZEROING
+    assert state.pose is not None
+    assert np.abs(state.pose.tvec_m - rest[:3, 3]).max() < 1e-4
+
+
+def test_a_jump_while_zeroing_starts_the_zero_pose_again() -> None:
+    # Two frames at rest, then the marker 15 mm away for good: re-acquired after two
+    # rejections, it had averaged both places into the zero pose (6 mm off the finger).
+    renderer = RgbRenderer(RIG, RgbSensorConfig(), 0)
+    rest = RIG.marker2cam()
+    moved = shifted(rest, 0, 0.015)
+    tracker = MarkerTracker(RIG.rgb.intrinsics, RIG.marker, zero_frames=5, reacquire_after=2)
+    states = [tracker.update(Frame(k / 30, k, renderer.render(k, rest if k < 2 else moved)))
+              for k in range(12)]
+    assert [s.status for s in states[:4]] == [TrackStatus.ZEROING, TrackStatus.ZEROING,
+                                              TrackStatus.REJECTED, TrackStatus.REJECTED]
+    assert states[4].status is TrackStatus.ZEROING
+    assert states[4].message.startswith("re-acquired 15.0 mm from the last pose")
+    assert [s.status for s in states[5:8]] == [TrackStatus.ZEROING] * 3  # five new samples
+    assert [s.status for s in states[8:]] == [TrackStatus.TRACKING] * 4
+    assert states[-1].delta_t_m is not None
+    assert np.abs(states[-1].delta_t_m).max() < 1e-4
+
+
+def test_perception_tracks_the_finger_s_marker_of_two_with_its_id_from_the_start() -> None:
+    """The pipeline's tracker knows where the unbent finger's marker is (the rig): of two
+    markers of its id in view before any was tracked, it takes that one."""
+    from relaxgrip.perception.pipeline import Perception
+
+    renderer = RgbRenderer(RIG, RgbSensorConfig(), 0)
+    rest = RIG.marker2cam()
+    for decoy_by_m in (-0.025, 0.025):
+        image = with_decoy(renderer.render(0, rest), shifted(rest, 0, decoy_by_m), 0)
+        state = Perception(RIG).update(Frame(0.0, 0, image), None, 0.0).marker
+        assert state.status is TrackStatus.ZEROING, state.message
+        assert state.pose is not None
+        assert np.abs(state.pose.tvec_m - rest[:3, 3]).max() < 1e-4
+
+
+@pytest.mark.parametrize("travel_m", [0.0, -0.01, math.nan])
+def test_a_marker_travel_that_is_no_bound_is_refused(travel_m: float) -> None:
+    from relaxgrip.errors import InputError
+
+    with pytest.raises(InputError, match="marker travel must be > 0 m"):
+        MarkerMount(max_travel_m=travel_m)
+
+
+def test_a_home_that_is_no_place_is_refused() -> None:
+    from relaxgrip.errors import InputError
+
+    with pytest.raises(InputError, match="home_px must be two finite pixel coordinates"):
+        MarkerTracker(RIG.rgb.intrinsics, RIG.marker, home_px=(math.nan, 1.0))

@@ -7,7 +7,12 @@ import pytest
 
 from relaxgrip.backend import Frame
 from relaxgrip.perception.features import finger_temperature_c
-from relaxgrip.perception.frames import FrameError
+from relaxgrip.perception.frames import (
+    DEAD_FILL_PASSES,
+    MAX_DEAD_FRACTION,
+    FrameError,
+    check_ir_frame,
+)
 from relaxgrip.perception.thermal import (
     FingerThermal,
     ThermalFeatures,
@@ -242,3 +247,82 @@ def test_finger_temperature_falls_back_to_the_face_without_beams_or_contrast():
     assert uncovered_mean_c(cold, 25.0) == pytest.approx(25.56)
     gone = FingerThermal((math.nan,) * 5, math.nan, math.nan, math.nan, math.nan, math.nan)
     assert math.isnan(finger_temperature_c(ThermalFeatures(0.0, (gone, gone), 25.0, ())))
+
+
+def _clean_frame(aperture_m: float = 0.075) -> np.ndarray:
+    return IrRenderer(RIG, IrSensorConfig(), seed=1).render(0, EXAMPLE_C, NODES, aperture_m, [],
+                                                            AMBIENT_C)
+
+
+def _beam_pixel(j: int, i: int, aperture_m: float = 0.075) -> tuple[int, int]:
+    """(row, column) of the pixel under beam ``i`` of finger ``j``."""
+    u, v = ThermalPerception(RIG)._beam_pixels(j, aperture_m)[i]
+    return math.floor(v), math.floor(u)
+
+
+def test_dead_pixels_are_read_from_their_neighbours() -> None:
+    # A microbolometer reports its dead pixels as NaN: one on each finger's middle beam,
+    # a +inf on the face, a 2x2 cluster in the background, a -inf in a corner.
+    clean = _clean_frame()
+    image = clean.copy()
+    dead = [_beam_pixel(0, 2), _beam_pixel(1, 2), (_beam_pixel(1, 1)[0], _beam_pixel(1, 1)[1] + 1),
+            (20, 30), (20, 31), (21, 30), (21, 31), (0, 0)]
+    for k, (row, col) in enumerate(dead):
+        image[row, col] = (np.nan, np.inf, -np.inf)[k % 3]
+    assert np.count_nonzero(~np.isfinite(image)) == len(dead)
+    perception = ThermalPerception(RIG)
+    got = perception.extract(Frame(0.0, 0, image), motor_mm(0.075))
+    want = perception.extract(Frame(0.0, 0, clean), motor_mm(0.075))
+    assert np.count_nonzero(~np.isfinite(image)) == len(dead)  # the caller's frame is kept
+    for j in (0, 1):
+        g, w = got.fingers[j], want.fingers[j]
+        assert np.all(np.isfinite(g.beam_temps_c))
+        assert np.allclose(g.beam_temps_c, w.beam_temps_c, atol=0.05)
+        for name in ("mean_c", "max_c", "min_c", "std_k", "gradient_k_per_m"):
+            assert math.isfinite(getattr(g, name)), name
+        assert g.mean_c == pytest.approx(w.mean_c, abs=0.01)
+    assert got.background_c == pytest.approx(want.background_c, abs=0.01)
+    assert got.objects == want.objects
+
+
+def test_a_dead_pixel_is_the_mean_of_its_live_neighbours() -> None:
+    image = np.arange(192 * 256, dtype=np.float32).reshape(192, 256) / 100.0
+    image[50, 60] = np.nan  # its eight neighbours are live
+    image[100:102, 100] = np.nan  # each has seven live neighbours
+    out = check_ir_frame(image, RIG.ir.intrinsics)
+    ring = np.r_[image[49, 59:62], image[50, [59, 61]], image[51, 59:62]]
+    assert out[50, 60] == pytest.approx(float(ring.mean()), rel=1e-6)
+    upper = np.r_[image[99, 99:102], image[100, [99, 101]], image[101, [99, 101]]]
+    assert out[100, 100] == pytest.approx(float(upper.mean()), rel=1e-6)
+    live = np.isfinite(image)
+    assert np.array_equal(out[live], image[live])
+
+
+def test_a_finite_frame_is_returned_as_it_is() -> None:
+    # The fast path: no copy, no fill, so frames without dead pixels read exactly as before.
+    clean = _clean_frame()
+    assert check_ir_frame(clean, RIG.ir.intrinsics) is clean
+
+
+def test_a_dead_block_of_four_pixels_is_filled_and_of_five_refused() -> None:
+    side = 2 * DEAD_FILL_PASSES
+    image = _clean_frame()
+    image[60 : 60 + side, 30 : 30 + side] = np.nan
+    assert np.all(np.isfinite(check_ir_frame(image, RIG.ir.intrinsics)))
+    image[60 : 61 + side, 30 : 31 + side] = np.nan
+    with pytest.raises(FrameError, match=f"non-finite temperatures more than {DEAD_FILL_PASSES} "
+                                         f"pixels from any finite one"):
+        ThermalPerception(RIG).extract(Frame(0.0, 0, image), motor_mm(0.075))
+
+
+def test_more_dead_pixels_than_a_working_sensor_has_are_refused() -> None:
+    image = _clean_frame()
+    limit = int(MAX_DEAD_FRACTION * image.size)
+    flat = image.reshape(-1)
+    spread = np.linspace(0, image.size - 1, limit + 1).astype(int)  # scattered, no clusters
+    flat[spread[:-1]] = np.nan
+    assert np.all(np.isfinite(check_ir_frame(image, RIG.ir.intrinsics)))
+    flat[spread[-1]] = np.nan
+    with pytest.raises(FrameError, match=f"{limit + 1} non-finite temperatures, more than the "
+                                         f"{limit} dead pixels"):
+        ThermalPerception(RIG).extract(Frame(0.0, 0, image), motor_mm(0.075))

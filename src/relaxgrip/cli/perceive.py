@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import math
 import re
 from pathlib import Path
@@ -26,6 +27,61 @@ from relaxgrip.rig import ARUCO_DICTIONARIES, MAX_DIST_COEFF, CameraIntrinsics, 
 
 __all__ = ["perceive"]
 
+#: EXIF's Orientation tag (TIFF tag 274).
+_ORIENTATION_TAG = 0x0112
+
+
+def _exif_orientation(data: bytes) -> int:
+    """The orientation (1-8) an image file's EXIF gives it (Pillow reads a JPEG's APP1, a
+    PNG's ``eXIf`` and a WebP's ``EXIF`` chunk); 1 (as stored) for none, a value outside
+    1-8, a file Pillow cannot read, and a TIFF, whose decoder in OpenCV turns it itself."""
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(io.BytesIO(data)) as image:
+            if image.format == "TIFF":
+                return 1
+            value = image.getexif().get(_ORIENTATION_TAG, 1)
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError):
+        return 1
+    return value if isinstance(value, int) and 1 <= value <= 8 else 1
+
+
+def _as_shown(image: np.ndarray[Any, Any], orientation: int) -> np.ndarray[Any, Any]:
+    """``image`` turned and mirrored as EXIF ``orientation`` (1-8) says it is shown.
+
+    The transforms of OpenCV's ``ExifTransform`` (what ``cv2.imread`` applies):
+    5-8 transpose first; then 2, 3, 6, 7 flip left-right and 3, 4, 7, 8 flip
+    upside down (6 is a quarter turn clockwise, 8 anticlockwise).
+    """
+    if orientation >= 5:
+        image = image.swapaxes(0, 1)
+    if orientation in (2, 3, 6, 7):
+        image = image[:, ::-1]
+    if orientation in (3, 4, 7, 8):
+        image = image[::-1]
+    return np.ascontiguousarray(image)
+
+
+def _decode(data: np.ndarray[Any, np.dtype[np.uint8]]) -> np.ndarray[Any, Any] | None:
+    """Decode an image file's bytes, turned as its EXIF orientation says it is shown.
+
+    A JPEG has no alpha: decoded grey or colour, depth kept.  Other formats
+    are decoded unchanged, alpha kept, and ``cv2.imdecode`` then ignores their
+    orientation (it turns an image only for flags other than
+    ``IMREAD_UNCHANGED``).  So every format is decoded as stored and turned
+    here, as its EXIF says.
+    """
+    if not data.size:
+        return None
+    jpeg = data[:2].tobytes() == b"\xff\xd8"
+    flags = (cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR | cv2.IMREAD_IGNORE_ORIENTATION if jpeg
+             else cv2.IMREAD_UNCHANGED)
+    image = cv2.imdecode(data, flags)
+    if image is None or image.size == 0:
+        return None
+    return _as_shown(image, _exif_orientation(data.tobytes()))
+
 
 def _read_gray(path: Path) -> np.ndarray[Any, np.dtype[np.uint8]]:
     """Read any image OpenCV can decode as 8-bit grey.
@@ -33,9 +89,8 @@ def _read_gray(path: Path) -> np.ndarray[Any, np.dtype[np.uint8]]:
     Transparent pixels are taken as white (a marker printed on nothing); a
     16-bit or float image is stretched between its 0.1st and 99.9th
     percentiles, so that one hot or dead pixel does not flatten the rest.
-    A JPEG is turned as its EXIF orientation says, as ``cv2.imread`` and
-    image viewers show it (a phone's portrait photo); other formats are read
-    as stored.
+    Every format is turned as its EXIF orientation says, as image viewers and
+    ``cv2.imread`` show it (a phone's portrait photo), see :func:`_decode`.
     """
     if path.is_dir():
         raise InputError(f"{path}: is a directory, not an image file")
@@ -45,10 +100,7 @@ def _read_gray(path: Path) -> np.ndarray[Any, np.dtype[np.uint8]]:
     previous = log.getLogLevel()
     log.setLogLevel(log.LOG_LEVEL_SILENT)  # a truncated file: our error line, not also OpenCV's
     try:
-        # A JPEG has no alpha: decoded with its EXIF orientation applied, depth kept.
-        jpeg = data[:2].tobytes() == b"\xff\xd8"
-        flags = cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR if jpeg else cv2.IMREAD_UNCHANGED
-        image = cv2.imdecode(data, flags) if data.size else None
+        image = _decode(data)
     finally:
         log.setLogLevel(previous)
     if image is None:

@@ -401,7 +401,9 @@ def _marker(t: _Table) -> MarkerMount:
     size = t.number("size_mm", positive=True)
     position = t.number("position_mm", positive=True)
     tilt = t.number("tilt_deg", 30.0, min_value=-74.9, max_value=74.9)
-    return MarkerMount(dictionary, marker_id, size * 1e-3, position * 1e-3, tilt)
+    travel = t.number("max_travel_mm", 20.0, positive=True)
+    return MarkerMount(dictionary, marker_id, size * 1e-3, position * 1e-3, tilt,
+                       travel * 1e-3)
 
 
 def _finger(t: _Table) -> FingerGeometry:

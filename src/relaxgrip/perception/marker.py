@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from relaxgrip.backend import Frame
+from relaxgrip.errors import InputError
 from relaxgrip.perception.frames import FrameError, check_rgb_frame
 from relaxgrip.rig import CameraIntrinsics, MarkerMount
 
@@ -499,7 +500,8 @@ class TrackStatus(enum.StrEnum):
     TRACKING = "tracking"
     """Marker seen; relative pose available."""
     REJECTED = "rejected"
-    """Marker seen, but it jumped implausibly far since the last frame: ignored."""
+    """Marker seen, but it jumped implausibly far since the last frame, lies beyond the
+    finger's reach, or cannot be told from another marker of its id: ignored."""
     LOST = "lost"
     """No marker in the frame."""
     INVALID = "invalid"
@@ -529,7 +531,8 @@ class MarkerState:
         How the marker was found: followed by its edges from the last frames,
         detected in the region of interest, in the full frame, or not at all.
     message : str
-        Why a frame was invalid or rejected; empty otherwise.
+        Why a frame was invalid or rejected; on the frame a marker is
+        re-acquired after an implausible jump, how far it jumped; empty otherwise.
     """
 
     t_s: float
@@ -569,7 +572,18 @@ class MarkerTracker:
         rejected as a false detection.
     reacquire_after : int
         After this many consecutive rejections the new pose is accepted (the
-        marker really moved, e.g. while it was hidden).
+        marker really moved, e.g. while it was hidden).  A pose accepted after
+        rejected jumps says how far it jumped, and a zero pose still being
+        averaged starts again from it.  A pose further than the mount's
+        ``max_travel_m`` from the zero pose is rejected however long it stays:
+        it is another marker of the same id, not the finger.
+    home_px : tuple of float, optional
+        Where the marker's centre is expected in the image (pixels), e.g. the
+        projection of :meth:`relaxgrip.rig.RigGeometry.marker2cam`.  Of several
+        detections of the tracked id, the tracker keeps the one nearest the
+        last accepted corners; before any is accepted, the one nearest
+        ``home_px``.  Without it, a frame showing several is rejected until one
+        can be told apart.
     verify_every : int
         Between detections the corners are followed by the edge fit alone,
         started from where the last frames put them (a marker moves a pixel
@@ -588,10 +602,14 @@ class MarkerTracker:
     max_rate_rad_s: float = 3.0
     reacquire_after: int = 5
     verify_every: int = 5
+    home_px: tuple[float, float] | None = None
     _full: cv2.aruco.ArucoDetector = field(init=False, repr=False)
     _roi: cv2.aruco.ArucoDetector = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        if self.home_px is not None and not (
+                len(self.home_px) == 2 and all(math.isfinite(v) for v in self.home_px)):
+            raise InputError(f"home_px must be two finite pixel coordinates, got {self.home_px}")
         dictionary = self.marker.aruco_dictionary
         self._full = make_detector(dictionary)
         self._roi = make_detector(dictionary, roi=True)
@@ -642,18 +660,35 @@ class MarkerTracker:
         except FrameError as exc:
             return MarkerState(frame.t_s, TrackStatus.INVALID, lost_for_s=lost_for,
                                message=str(exc))
-        found, search = self._find(image)
+        found, search, reason = self._find(image)
         if found is None:
+            if reason:
+                return MarkerState(frame.t_s, TrackStatus.REJECTED, lost_for_s=lost_for,
+                                   search=search, message=reason)
             return MarkerState(frame.t_s, TrackStatus.LOST, lost_for_s=lost_for)
         pose = self._solver.solve(found, self._last)
         if not pose.valid:
             return MarkerState(frame.t_s, TrackStatus.REJECTED, lost_for_s=lost_for,
                                search=search, message="no finite pose from the corners")
-        if self._implausible(pose, frame.t_s):
+        reason = self._beyond_reach(pose)
+        if reason:  # not counted towards re-acquisition: no wait makes it the finger's
+            return MarkerState(frame.t_s, TrackStatus.REJECTED, lost_for_s=lost_for,
+                               search=search, message=reason)
+        implausible = self._implausible(pose, frame.t_s)
+        if implausible:
             self._rejections += 1
             if self._rejections <= self.reacquire_after:
                 return MarkerState(frame.t_s, TrackStatus.REJECTED, lost_for_s=lost_for,
                                    search=search, message="implausible jump since last frame")
+        if self._rejections and self._last is not None:
+            # Accepted after frames rejected as jumps (now plausible, the speed bound having
+            # grown with the time since the last pose, or after reacquire_after of them).
+            step = pose.tvec_m - self._last.tvec_m
+            rejected = self._rejections - 1 if implausible else self._rejections
+            reason = (f"re-acquired {1e3 * math.sqrt(float(step @ step)):.1f} mm from the "
+                      f"last pose after {rejected} rejected frames")
+            if self._zero is None:  # the samples so far are of the marker where it was
+                self._zero_samples = []
         # The corners' velocity is known only from frames tracked one after the other: after
         # a full-frame search or a re-acquisition the last corners are from elsewhere.
         continuous = search != "full" and self._rejections == 0
@@ -664,32 +699,59 @@ class MarkerTracker:
         if self._zero is None:
             self._zero_samples.append(pose)
             if len(self._zero_samples) < self.zero_frames:
-                return MarkerState(frame.t_s, TrackStatus.ZEROING, pose, search=search)
+                return MarkerState(frame.t_s, TrackStatus.ZEROING, pose, search=search,
+                                   message=reason)
             rot0 = mean_rotation([p.rotation for p in self._zero_samples])
             t0 = np.mean([p.tvec_m for p in self._zero_samples], axis=0)
             self._zero = (rot0, t0)
         rot0, t0 = self._zero
         delta_r = np.asarray(cv2.Rodrigues(pose.rotation @ rot0.T)[0], dtype=np.float64).ravel()
         return MarkerState(frame.t_s, TrackStatus.TRACKING, pose, pose.tvec_m - t0, delta_r,
-                           search=search)
+                           search=search, message=reason)
 
-    def _find(self, image: NDArray[np.uint8]) -> tuple[FloatArray | None, Search]:
+    def _find(self, image: NDArray[np.uint8]) -> tuple[FloatArray | None, Search, str]:
+        """The marker's corners, how they were found, and why none were if one was seen."""
         if self._last is not None:
             if self.edge_refine and self._followed + 1 < self.verify_every:
                 followed = self._follow_edges(image, self._last.corners_px)
                 if followed is not None:
                     self._followed += 1
-                    return followed, "edges"
+                    return followed, "edges", ""
             found = self._search_roi(image, self._last.corners_px)
             if found is not None:
                 self._followed = 0
-                return found, "roi"
+                return found, "roi", ""
         gray = to_gray(image)
-        for det in detect_markers(gray, self._full):
-            if det.marker_id == self.marker.marker_id:
-                self._followed = 0
-                return self._refined(gray, det.corners_px, (0, 0)), "full"
-        return None, "none"
+        det, reason = self._pick(detect_markers(gray, self._full))
+        if det is None:
+            return None, ("full" if reason else "none"), reason
+        self._followed = 0
+        return self._refined(gray, det.corners_px, (0, 0)), "full", ""
+
+    def _pick(self, found: list[MarkerDetection], origin: tuple[int, int] = (0, 0)
+              ) -> tuple[MarkerDetection | None, str]:
+        """The tracked marker among detections whose corners are relative to ``origin``.
+
+        Of several with the tracked id (a second marker printed with it, 25 mm
+        away on the next finger or the bench), the one whose centre is nearest
+        the last accepted corners' centre, or ``home_px`` before any was
+        accepted; with neither, none, and the reason.
+        """
+        mine = [d for d in found if d.marker_id == self.marker.marker_id]
+        if len(mine) < 2:
+            return (mine[0] if mine else None), ""
+        if self._last is not None:
+            ref = self._last.corners_px.mean(axis=0) - np.asarray(origin, dtype=np.float64)
+        elif self.home_px is not None:
+            ref = np.asarray(self.home_px, dtype=np.float64) - np.asarray(origin)
+        else:
+            return None, (f"{len(mine)} markers with id {self.marker.marker_id} in view and "
+                          f"none tracked yet: give home_px to tell the finger's apart")
+
+        def distance_px(det: MarkerDetection) -> float:
+            return float(np.linalg.norm(det.corners_px.mean(axis=0) - ref))
+
+        return min(mine, key=distance_px), ""
 
     def _follow_edges(self, image: NDArray[np.uint8], corners: FloatArray) -> FloatArray | None:
         """Re-fit the edges around where the marker is expected, without the detector."""
@@ -740,10 +802,8 @@ class MarkerTracker:
         if x1 - x0 < 16 or y1 - y0 < 16:
             return None
         gray = to_gray(image[y0:y1, x0:x1])
-        for det in detect_markers(gray, self._roi):
-            if det.marker_id == self.marker.marker_id:
-                return self._refined(gray, det.corners_px, (x0, y0))
-        return None
+        det, _ = self._pick(detect_markers(gray, self._roi), (x0, y0))
+        return None if det is None else self._refined(gray, det.corners_px, (x0, y0))
 
     def _refined(self, gray: GrayImage, corners: FloatArray, origin: tuple[int, int]) -> FloatArray:
         if self.edge_refine:
@@ -753,6 +813,7 @@ class MarkerTracker:
         return corners + np.asarray(origin, dtype=np.float64)
 
     def _implausible(self, pose: MarkerPose, t_s: float) -> bool:
+        """Whether ``pose`` is further from the last accepted one than the marker moves."""
         if self._last is None or self._last_t is None:
             return False
         dt = max(t_s - self._last_t, 0.0)
@@ -761,3 +822,21 @@ class MarkerTracker:
         cos_step = 0.5 * (float((pose.rotation * self._last.rotation).sum()) - 1.0)
         step_rad = math.acos(min(1.0, max(-1.0, cos_step)))
         return step_m > 1e-3 + self.max_speed_m_s * dt or step_rad > 0.05 + self.max_rate_rad_s * dt
+
+    def _beyond_reach(self, pose: MarkerPose) -> str:
+        """Why ``pose`` cannot be the finger's marker (further than the mount's
+        ``max_travel_m`` from the zero pose, or from the first frame taken towards it, while
+        that is averaged); empty if it can be."""
+        if self._zero is not None:
+            home = self._zero[1]
+        elif self._zero_samples:
+            home = self._zero_samples[0].tvec_m
+        else:
+            return ""
+        step = pose.tvec_m - home
+        travel_m = math.sqrt(float(step @ step))
+        if travel_m <= self.marker.max_travel_m:
+            return ""
+        return (f"marker {1e3 * travel_m:.1f} mm from its zero pose, beyond the "
+                f"{1e3 * self.marker.max_travel_m:g} mm a bent finger reaches (the rig's "
+                f"marker max_travel_mm): another marker of id {self.marker.marker_id}?")

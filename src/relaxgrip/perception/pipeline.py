@@ -118,8 +118,12 @@ class Perception:
         max_ir_age_s: float = 3.0,
     ) -> None:
         self.rig = rig
-        self.tracker = tracker if tracker is not None else MarkerTracker(rig.rgb.intrinsics,
-                                                                        rig.marker)
+        if tracker is None:
+            # Where the unbent finger's marker is: of two markers of its id, the finger's.
+            home = rig.rgb.intrinsics.project(rig.marker2cam()[:3, 3])
+            tracker = MarkerTracker(rig.rgb.intrinsics, rig.marker,
+                                    home_px=(float(home[0]), float(home[1])))
+        self.tracker = tracker
         self.thermal = thermal if thermal is not None else ThermalPerception(rig)
         self.ir = StreamSync(max_ir_age_s)
         self._proximity: ProximityEstimator | None = None

@@ -268,7 +268,11 @@ class ThermalPerception:
         Parameters
         ----------
         frame : Frame
-            Infrared frame: ``(H, W)`` float apparent temperatures (°C).
+            Infrared frame: ``(H, W)`` float apparent temperatures (°C).  Dead
+            pixels (non-finite) are read from their neighbours
+            (:func:`relaxgrip.perception.frames.check_ir_frame`): a NaN would
+            otherwise spread through the window, face and background statistics
+            that contain it.
         motor_position_mm : float
             Encoder position of the closing motor when the frame was taken (mm).
 
@@ -280,7 +284,8 @@ class ThermalPerception:
         Raises
         ------
         FrameError
-            If the frame is empty, the wrong size or type, or not finite.
+            If the frame is empty, the wrong size or type, or has more dead
+            pixels, or a wider dead block, than a working sensor.
         InputError
             If ``motor_position_mm`` is not finite.
         """
