@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +23,8 @@ def _example() -> dict[str, Any]:
 def test_examples_load_and_match_the_twin_geometry() -> None:
     real = load_rig(DOCS / "rig-example.toml")
     emu = load_rig(DOCS / "rig-emulator.toml")
-    assert real.geometry == RigGeometry()
+    # A rig reads its fingers bent as they are; the emulator's frames are the twin's, unbent.
+    assert real.geometry == replace(RigGeometry(), ir_follow_bend=True)
     assert emu.geometry == RigGeometry()
     assert (real.rgb.source, real.ir.source) == ("opencv", "uvc")
     assert (emu.rgb.source, emu.ir.source) == ("emulator", "emulator")
@@ -55,6 +57,7 @@ def test_examples_load_and_match_the_twin_geometry() -> None:
     ("rgb", "stall_ms", 10, r"\[rgb\] stall_ms must exceed one frame period"),
     ("ir", "scale", 0, r"\[ir\] scale must not be 0"),
     ("ir", "width_px", 0, r"\[ir\] width_px must be in 1..16384"),
+    ("ir", "follow_bend", "yes", r"\[ir\] follow_bend must be true or false, got 'yes'"),
     ("marker", "dictionary", "4X4_9", r"\[marker\] dictionary is not an OpenCV ArUco"),
     ("marker", "id", 60, r"\[marker\] id must be below 50"),
     ("marker", "id", -1, r"\[marker\] id must be >= 0, got -1$"),

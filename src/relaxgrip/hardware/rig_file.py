@@ -232,6 +232,10 @@ class IrCameraSpec:
         A camera without a new frame for longer than this is stalled (s).
     mount : IrCameraMount
         Intrinsics and pose.
+    follow_bend : bool
+        Read the fingers where their load bends them
+        (:attr:`RigGeometry.ir_follow_bend`): on by default, off for the
+        emulator, whose frames are the twin's, drawn unbent.
     """
 
     source: str
@@ -241,6 +245,7 @@ class IrCameraSpec:
     offset_c: float
     stall_s: float
     mount: IrCameraMount
+    follow_bend: bool = True
 
     def temp_c(self, raw: Any) -> Any:
         """Convert raw counts (array or number) to °C."""
@@ -324,7 +329,8 @@ class RigFile:
         """The rig as perception and the twin describe it."""
         return RigGeometry(finger=self.finger, marker=self.marker, rgb=self.rgb.mount,
                            ir=self.ir.mount, open_aperture_m=self.open_aperture_m,
-                           marker_finger=self.marker_finger)
+                           marker_finger=self.marker_finger,
+                           ir_follow_bend=self.ir.follow_bend)
 
 
 def _intrinsics(t: _Table) -> CameraIntrinsics:
@@ -385,8 +391,11 @@ def _ir(t: _Table) -> IrCameraSpec:
     pos = t.numbers("position_mm", (-70.0, 0.0, 60.0), length=3)
     pitch = t.number("pitch_down_deg", 25.0, min_value=-90.0, max_value=90.0)
     stall = _stall_s(t, fps, 2500.0)
+    follow = t.raw("follow_bend", source != "emulator", required=False)
+    if not isinstance(follow, bool):
+        raise t.fail("follow_bend", f"must be true or false, got {follow!r}")
     mount = IrCameraMount(intr, fps, (pos[0] * 1e-3, pos[1] * 1e-3, pos[2] * 1e-3), pitch)
-    return IrCameraSpec(source, device, fps, scale, offset, stall, mount)
+    return IrCameraSpec(source, device, fps, scale, offset, stall, mount, follow)
 
 
 def _marker(t: _Table) -> MarkerMount:

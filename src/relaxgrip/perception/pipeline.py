@@ -28,7 +28,7 @@ from relaxgrip.rig import RigGeometry
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["Percept", "Perception", "StreamSync"]
+__all__ = ["Percept", "Perception", "StreamSync", "finger_bend"]
 
 #: The marker tab's outline relative to the black square (its white quiet
 #: zone and a margin), masked out when looking for a target object.
@@ -132,6 +132,8 @@ class Perception:
         self._last_rgb_t: float | None = None
         self._last_ir_t: float | None = None
         self._last: Percept | None = None
+        #: The marker finger's bend at the tab, (deflection m, slope rad), as last tracked.
+        self._bend: tuple[float, float] | None = None
 
     def set_target(self, target: ProximityTarget | None) -> None:
         """Look for ``target`` in the RGB frames (``None`` to stop)."""
@@ -144,6 +146,7 @@ class Perception:
         self._last_rgb_seq = self._last_ir_seq = None
         self._last_rgb_t = self._last_ir_t = None
         self._last = None
+        self._bend = None
 
     def update(self, rgb: Frame | None, ir: Frame | None, motor_position_mm: float) -> Percept:
         """Process whatever frames are new.
@@ -166,7 +169,7 @@ class Perception:
         if ir is not None and new_ir:
             self._last_ir_seq, self._last_ir_t = ir.seq, ir.t_s
             try:
-                self.ir.hold(self.thermal.extract(ir, motor_position_mm))
+                self.ir.hold(self.thermal.extract(ir, motor_position_mm, self._bend))
             except FrameError as exc:
                 self.ir.error = str(exc)
         if rgb is None:
@@ -181,6 +184,8 @@ class Perception:
             return self._last
         self._last_rgb_seq, self._last_rgb_t = rgb.seq, rgb.t_s
         marker = self.tracker.update(rgb)
+        if marker.delta_t_m is not None and marker.delta_r_rad is not None:
+            self._bend = finger_bend(self.rig, marker.delta_t_m, marker.delta_r_rad)
         proximity = None
         if self._proximity is not None and marker.status is not TrackStatus.INVALID:
             tab = None
@@ -198,6 +203,15 @@ class Perception:
         thermal = self.ir.latest
         features = None if thermal is None else build_icfn_features(marker, thermal)
         return Percept(t, marker, thermal, self.ir.age_s(t), self.ir.error, features, proximity)
+
+
+def finger_bend(rig: RigGeometry, delta_t_m: FloatArray, delta_r_rad: FloatArray
+                ) -> tuple[float, float]:
+    """The marker finger's deflection (m, outwards) and slope (rad) at the tab, from the
+    marker's pose relative to its zero (camera frame): the camera is fixed to the finger's
+    root, so the tab's move is the bend (:meth:`~relaxgrip.rig.MarkerMount.marker2finger`)."""
+    cam2finger = rig.rgb.cam2finger[:3, :3]
+    return float(cam2finger[2] @ delta_t_m), -float(cam2finger[1] @ delta_r_rad)
 
 
 def _newer(frame: Frame, last_t_s: float | None) -> bool:

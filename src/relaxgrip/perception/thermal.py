@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from relaxgrip.backend import Frame
 from relaxgrip.errors import InputError
 from relaxgrip.perception.frames import check_ir_frame
-from relaxgrip.rig import RigGeometry, transform_points
+from relaxgrip.rig import RigGeometry, bend_profile_m, transform_points
 from relaxgrip.validate import ABSOLUTE_ZERO_C, check_finite
 
 FloatArray = NDArray[np.float64]
@@ -55,7 +55,9 @@ __all__ = [
 
 #: Aperture resolution of the cached image regions (m).
 _APERTURE_STEP_M = 1.0e-4
-#: Apertures whose regions are kept.
+#: Slope resolution of the cached regions of a bent finger (rad).
+_SLOPE_STEP_RAD = 1.0e-3
+#: Apertures (and bends) whose regions are kept.
 _CACHE_SIZE = 64
 #: Fraction of the face height used for the face statistics.
 _FACE_WIDTH_FRACTION = 0.8
@@ -260,9 +262,13 @@ class ThermalPerception:
         self.min_object_px = int(min_object_px)
         self.edge_clearance_px = float(edge_clearance_px)
         self._beams_m = np.asarray(rig.finger.beam_positions_m, dtype=np.float64)
-        self._cache: dict[int, _Regions] = {}
+        #: Where the face's outline is drawn along the finger (m from the root).
+        self._along_m = np.linspace(0.0, rig.finger.length_m,
+                                    max(1, math.ceil(rig.finger.length_m / _SEGMENT_M)) + 1)
+        self._cache: dict[tuple[int, int, int], _Regions] = {}
 
-    def extract(self, frame: Frame, motor_position_mm: float) -> ThermalFeatures:
+    def extract(self, frame: Frame, motor_position_mm: float,
+                bend: tuple[float, float] | None = None) -> ThermalFeatures:
         """Thermal features of one frame.
 
         Parameters
@@ -275,6 +281,12 @@ class ThermalPerception:
             that contain it.
         motor_position_mm : float
             Encoder position of the closing motor when the frame was taken (mm).
+        bend : (deflection_m, slope_rad), optional
+            The marker finger's bend at the marker's tab, as the marker reads
+            it: with ``rig.ir_follow_bend`` both fingers are read bent so
+            (:func:`~relaxgrip.rig.bend_profile_m`; the fingers carry equal
+            and opposite forces), to 0.1 mm and 1 mrad.  Ignored otherwise,
+            and None reads them unbent.
 
         Returns
         -------
@@ -291,7 +303,7 @@ class ThermalPerception:
         """
         img = check_ir_frame(frame.image, self.rig.ir.intrinsics)
         aperture = self.rig.aperture_m(check_finite(motor_position_mm, "motor_position_mm"))
-        regions = self._regions(aperture)
+        regions = self._regions(aperture, bend if self.rig.ir_follow_bend else None)
         flat = img.reshape(-1)
 
         samples = flat[regions.background] if regions.background.size else flat.copy()
@@ -380,19 +392,26 @@ class ThermalPerception:
             )
         return out
 
-    def _regions(self, aperture_m: float) -> _Regions:
-        """The image regions of an aperture, cached per 0.1 mm."""
-        key = round(aperture_m / _APERTURE_STEP_M)
+    def _regions(self, aperture_m: float, bend: tuple[float, float] | None) -> _Regions:
+        """The image regions of an aperture and a bend, cached per 0.1 mm (and 1 mrad)."""
+        deflection, slope = (0.0, 0.0) if bend is None else bend
+        if not (math.isfinite(deflection) and math.isfinite(slope)):
+            deflection, slope = 0.0, 0.0
+        key = (round(aperture_m / _APERTURE_STEP_M), round(deflection / _APERTURE_STEP_M),
+               round(slope / _SLOPE_STEP_RAD))
         regions = self._cache.get(key)
         if regions is None:
             if len(self._cache) >= _CACHE_SIZE:
                 del self._cache[next(iter(self._cache))]
-            regions = self._compute_regions(key * _APERTURE_STEP_M)
+            profile = bend_profile_m(self._along_m, self.rig.marker.position_m,
+                                     key[1] * _APERTURE_STEP_M, key[2] * _SLOPE_STEP_RAD)
+            regions = self._compute_regions(key[0] * _APERTURE_STEP_M, profile)
             self._cache[key] = regions
         return regions
 
-    def _compute_regions(self, aperture_m: float) -> _Regions:
-        """Beam windows, face masks and background samples at one aperture."""
+    def _compute_regions(self, aperture_m: float, bend_m: FloatArray) -> _Regions:
+        """Beam windows, face masks and background samples at one aperture, the fingers
+        bent by ``bend_m`` at :attr:`_along_m`."""
         h, w = self.rig.ir.intrinsics.shape
         clearance = self.edge_clearance_px
         erode_px = math.ceil(clearance)
@@ -404,9 +423,9 @@ class ThermalPerception:
         faces: list[IndexArray] = []
         near_fingers = np.zeros((h, w), dtype=np.uint8)
         for j in (0, 1):
-            outline, inner_outline = self._outlines(j, aperture_m)
+            outline, inner_outline = self._outlines(j, aperture_m, bend_m)
             valid: list[int] = []
-            for i, centre in enumerate(self._beam_pixels(j, aperture_m)):
+            for i, centre in enumerate(self._beam_pixels(j, aperture_m, bend_m)):
                 window = self._window(centre, outline)
                 if window is not None:
                     valid.append(i)
@@ -443,10 +462,12 @@ class ThermalPerception:
             search=search,
         )
 
-    def _beam_pixels(self, j: int, aperture_m: float) -> FloatArray:
+    def _beam_pixels(self, j: int, aperture_m: float, bend_m: FloatArray) -> FloatArray:
         """Sub-pixel image positions of finger ``j``'s beams, ``(n_beams, 2)``; nan if unseen."""
+        bend = np.interp(self._beams_m, self._along_m, bend_m)
         pts = transform_points(
-            self.rig.ir.gripper2cam, self.rig.top_points_gripper(j, aperture_m, self._beams_m)
+            self.rig.ir.gripper2cam,
+            self.rig.top_points_gripper(j, aperture_m, self._beams_m, bend_m=bend),
         )
         out = np.full((pts.shape[0], 2), np.nan)
         front = pts[:, 2] > _NEAR_M
@@ -488,7 +509,7 @@ class ThermalPerception:
         return None
 
     def _outlines(
-        self, j: int, aperture_m: float
+        self, j: int, aperture_m: float, bend_m: FloatArray
     ) -> tuple[FloatArray | None, FloatArray | None]:
         """Projected outline of finger ``j``'s top face, and of its central part.
 
@@ -497,13 +518,13 @@ class ThermalPerception:
         of the face's width.
         """
         rig = self.rig
-        n_seg = max(1, math.ceil(rig.finger.length_m / _SEGMENT_M))
-        along = np.linspace(0.0, rig.finger.length_m, n_seg + 1)
+        along = self._along_m
         half_m = 0.5 * rig.finger.thickness_m
         inner_m = _FACE_WIDTH_FRACTION * half_m
         across = np.array([-half_m, half_m, -inner_m, inner_m])
         cam = transform_points(
-            rig.ir.gripper2cam, rig.top_points_gripper(j, aperture_m, along[:, None], across)
+            rig.ir.gripper2cam,
+            rig.top_points_gripper(j, aperture_m, along[:, None], across, bend_m[:, None]),
         )
         px = np.full((*cam.shape[:-1], 2), np.inf)
         front = cam[..., 2] > _NEAR_M

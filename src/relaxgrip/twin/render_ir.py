@@ -164,8 +164,7 @@ class IrRenderer:
         self._ray_x = np.ascontiguousarray(normalized[..., 0])
         self._ray_y = np.ascontiguousarray(normalized[..., 1])
         self._hit_cache: tuple[
-            tuple[float, tuple[tuple[tuple[float, float, float], float], ...]],
-            list[_FaceHits], list[_SphereHits | None],
+            tuple[object, ...], list[_FaceHits], list[_SphereHits | None]
         ] | None = None
 
     @property
@@ -181,6 +180,7 @@ class IrRenderer:
         aperture_m: float,
         objects: Sequence[IrObject],
         ambient_c: float,
+        bend: tuple[FloatArray, FloatArray] | None = None,
     ) -> NDArray[np.float32]:
         """Render frame ``seq``.
 
@@ -200,6 +200,10 @@ class IrRenderer:
             Objects in the scene, in any order.
         ambient_c : float
             Temperature of the room: the background and what surfaces reflect (°C).
+        bend : (grid, deflections), optional
+            The fingers' deflection outwards (m), ``(2, n)``, at positions
+            ``grid`` along them (m from the root, increasing; interpolated
+            linearly): their top faces are drawn bent.  None: unbent.
 
         Returns
         -------
@@ -217,7 +221,7 @@ class IrRenderer:
         h, w = self.intrinsics.shape
         background = float(_radiance(ambient, cfg.background_emissivity, ambient))
         img = np.full((h, w), background, dtype=np.float32)
-        faces, spheres = self._hits(aperture, objects)
+        faces, spheres = self._hits(aperture, objects, bend)
         for j, (rows, cols, seen, along) in enumerate(faces):
             field = np.interp(along, nodes, temps[j])
             img[rows, cols][seen] = _radiance(field, cfg.finger_emissivity, ambient)
@@ -275,28 +279,39 @@ class IrRenderer:
         return slice(y0, max(y0, y1)), slice(x0, max(x0, x1))
 
     def _hits(
-        self, aperture_m: float, objects: Sequence[IrObject]
+        self, aperture_m: float, objects: Sequence[IrObject],
+        bend: tuple[FloatArray, FloatArray] | None = None,
     ) -> tuple[list[_FaceHits], list[_SphereHits | None]]:
         """The pixels that see each finger's face and each object, nearest surface first.
 
-        The geometry moves only with the aperture and the objects, which a
-        hold keeps for minutes: the ray cast of the last geometry is kept, and
-        only the temperatures are painted anew.
+        The geometry moves only with the aperture, the bend and the objects,
+        which a hold keeps nearly still for minutes: the ray cast of the last
+        geometry is kept, and only the temperatures are painted anew.
         """
-        key = (aperture_m, tuple((o.center_gripper_m, o.radius_m) for o in objects))
+        bend_key = None if bend is None else (bend[0].tobytes(), np.asarray(bend[1]).tobytes())
+        key = (aperture_m, tuple((o.center_gripper_m, o.radius_m) for o in objects), bend_key)
         if self._hit_cache is not None and self._hit_cache[0] == key:
             return self._hit_cache[1], self._hit_cache[2]
         h, w = self.intrinsics.shape
         depth = np.full((h, w), np.inf)
-        faces = [self._cast_face(depth, j, aperture_m) for j in (0, 1)]
+        faces = [self._cast_face(depth, j, aperture_m,
+                                 None if bend is None else (bend[0], np.asarray(bend[1])[j]))
+                 for j in (0, 1)]
         spheres = [self._cast_sphere(depth, o) for o in objects]
         self._hit_cache = (key, faces, spheres)
         return faces, spheres
 
-    def _cast_face(self, depth: FloatArray, j: int, aperture_m: float) -> _FaceHits:
-        """Ray cast finger ``j``'s top face where it is nearest; mark its depth in ``depth``."""
+    def _cast_face(self, depth: FloatArray, j: int, aperture_m: float,
+                   bend: tuple[FloatArray, FloatArray] | None = None) -> _FaceHits:
+        """Ray cast finger ``j``'s top face where it is nearest; mark its depth in ``depth``.
+
+        The face stays in its plane as the finger bends (the bend is across it): bent,
+        it is the band ``|across - bend(along)| <= half`` of the plane.
+        """
         finger = self.rig.finger
         half = 0.5 * finger.thickness_m
+        low, high = (0.0, 0.0) if bend is None else (min(0.0, float(bend[1].min())),
+                                                      max(0.0, float(bend[1].max())))
         # The face's frame in the camera: origin at the root, unit vectors along and across.
         ref = transform_points(
             self._gripper2cam,
@@ -305,7 +320,8 @@ class IrRenderer:
         origin, e_along, e_across = ref[0], ref[1] - ref[0], ref[2] - ref[0]
         normal = np.cross(e_along, e_across)
         corners = origin + np.array(
-            [a * finger.length_m * e_along + c * half * e_across for a in (0, 1) for c in (-1, 1)]
+            [a * finger.length_m * e_along + c * e_across
+             for a in (0, 1) for c in (low - half, high + half)]
         )
         rows, cols = self._window(corners)
         rx, ry = self._ray_x[rows, cols], self._ray_y[rows, cols]
@@ -320,6 +336,8 @@ class IrRenderer:
         across = t * (e_across[0] * rx + e_across[1] * ry + e_across[2]) - float(
             e_across @ origin
         )
+        if bend is not None:
+            across = across - np.interp(along, bend[0], bend[1])
         sub_depth = depth[rows, cols]
         seen = (
             (t > _NEAR_M)

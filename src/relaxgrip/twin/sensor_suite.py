@@ -54,6 +54,10 @@ class SceneState:
         Air temperature (°C).
     objects : tuple of (ObjectSpec, centre in the gripper frame)
         Everything standing in view.
+    finger_bend_m : (grid, deflections), optional
+        Both fingers' deflection outwards (m), ``(2, n)``, at ``grid`` along
+        them (m from the root); given when the infrared camera draws the bend
+        (``IrSensorConfig.draw_bend``).
     """
 
     marker_deflection_m: float
@@ -62,6 +66,7 @@ class SceneState:
     finger_temps_c: FloatArray
     ambient_c: float
     objects: tuple[tuple[ObjectSpec, tuple[float, float, float]], ...]
+    finger_bend_m: tuple[FloatArray, FloatArray] | None = None
 
 
 class _Stream:
@@ -173,7 +178,7 @@ class SensorSuite:
                 for spec, centre in scene.objects
             ]
             image = renderer.render(seq, scene.finger_temps_c, self._nodes_m, scene.aperture_m,
-                                    objects, scene.ambient_c)
+                                    objects, scene.ambient_c, scene.finger_bend_m)
             stream.frame = Frame(t_s, seq, image)
         return stream.frame
 

@@ -71,6 +71,12 @@ class IrSensorConfig:
         Emissivity of the scene behind the fingers (at ambient temperature).
     psf_sigma_px : float
         Gaussian blur of the optics (pixels).
+    draw_bend : bool
+        Draw the fingers bent by their load (their top faces move outwards,
+        12 mm at the distal beam under 8 N at 55 °C), as a camera sees them.
+        Off by default: the shipped models are trained on frames of unbent
+        fingers, read where the unloaded fingers are (``RigGeometry.ir_follow_bend``
+        off); with it, perception must follow the bend.
     """
 
     netd_k: float = 0.05
@@ -78,6 +84,7 @@ class IrSensorConfig:
     finger_emissivity: float = 0.95
     background_emissivity: float = 0.95
     psf_sigma_px: float = 0.7
+    draw_bend: bool = False
 
     def __post_init__(self) -> None:
         if self.netd_k < 0 or self.max_offset_k < 0 or self.psf_sigma_px < 0:

@@ -124,8 +124,8 @@ class TwinMaterial:
 class _FingerStiffness:
     """A finger's temperature-dependent contact parameters at one temperature field."""
 
-    __slots__ = ("_coeffs", "contact_slope_ratio", "k_e", "k_i", "marker_ratio", "slope_ratio",
-                 "tau", "temp_eff_c", "temps_c")
+    __slots__ = ("_coeffs", "bend_ratio", "contact_slope_ratio", "k_e", "k_i", "marker_ratio",
+                 "slope_ratio", "tau", "temp_eff_c", "temps_c")
 
     def __init__(self, temps_c: FloatArray, finger: FingerParams, nodes_m: FloatArray,
                  contact_m: float, marker_m: float, config: TwinConfig, stiffness_scale: float,
@@ -149,6 +149,8 @@ class _FingerStiffness:
         a_t = float(shift_factor(temp_eff, smp))
         self.tau = np.asarray(config.relax.tau_ref_s) * a_t * tau_scale
         self._coeffs: tuple[float, tuple[float, ...], tuple[float, ...], float] | None = None
+        #: The deflection along the finger (on :func:`beam_grid`) per unit at the contact.
+        self.bend_ratio = z / c_a
         self.marker_ratio = float(np.interp(marker_m, x, z)) / c_a
         self.slope_ratio = float(np.interp(marker_m, x, slope)) / c_a
         self.contact_slope_ratio = float(np.interp(contact_m, x, slope)) / c_a
@@ -418,6 +420,10 @@ class GripperTwin:
             centre = (self.material.contact_position_m + self.object_ahead_m, 0.0,
                       (self._object_height_mm - self._arm_mm) * 1e-3)
             objects.append((self._object, centre))
+        bend = None
+        if cfg.ir is not None and cfg.ir.draw_bend:
+            bend = (beam_grid(cfg.finger), np.stack([self._x[k] * self._stiff[k].bend_ratio
+                                                     for k in (0, 1)]))
         return SceneState(
             marker_deflection_m=self._x[j] * stiff.marker_ratio,
             marker_slope_rad=math.atan(self._x[j] * stiff.slope_ratio),
@@ -425,6 +431,7 @@ class GripperTwin:
             finger_temps_c=self._temps.copy(),
             ambient_c=self.material.ambient_c,
             objects=tuple(objects),
+            finger_bend_m=bend,
         )
 
     def _step(self, dt: float) -> None:
