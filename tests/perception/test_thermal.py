@@ -256,7 +256,9 @@ def _clean_frame(aperture_m: float = 0.075) -> np.ndarray:
 
 def _beam_pixel(j: int, i: int, aperture_m: float = 0.075) -> tuple[int, int]:
     """(row, column) of the pixel under beam ``i`` of finger ``j``."""
-    u, v = ThermalPerception(RIG)._beam_pixels(j, aperture_m)[i]
+    perception = ThermalPerception(RIG)
+    unbent = np.zeros_like(perception._along_m)
+    u, v = perception._beam_pixels(j, aperture_m, unbent)[i]
     return math.floor(v), math.floor(u)
 
 
