@@ -47,6 +47,7 @@ __all__ = [
     "check_writable",
     "entries",
     "file_entry",
+    "json_digest",
     "made_directory",
     "named_errors",
     "npz_bytes",
@@ -63,6 +64,12 @@ def npz_bytes(arrays: Mapping[str, Any]) -> bytes:
     buffer = io.BytesIO()
     np.savez(buffer, **arrays)
     return buffer.getvalue()
+
+
+def json_digest(value: Any) -> str:
+    """Short hash (16 hex digits) of a JSON value, whatever its keys' order."""
+    text = json.dumps(value, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def file_entry(name: str, data: bytes) -> dict[str, Any]:

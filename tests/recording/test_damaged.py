@@ -9,7 +9,7 @@ import numpy as np
 from mcap.reader import NonSeekingReader, make_reader
 
 from relaxgrip.experiments.controlled_hold import HoldResult
-from relaxgrip.recording import iter_messages, iter_periods, recover
+from relaxgrip.recording import iter_messages, iter_periods, read_session, recover
 from tests.recording.conftest import copy_recording
 
 
@@ -80,3 +80,32 @@ def test_a_frame_lost_with_its_period_is_not_shown_under_a_later_frame_s_stamp(
         assert round(p.rgb.t_s * 1e9) in stamps, p.t_s  # a frame the file holds
         assert p.rgb.t_s == original[p.rgb.seq].t_s
         np.testing.assert_array_equal(p.rgb.image, original[p.rgb.seq].image)
+
+
+def test_recover_restores_the_session_a_damaged_first_chunk_took(
+        relax_hold: tuple[Path, HoldResult], tmp_path: Path) -> None:
+    """The session message is in the first chunk: damaged, the recovered file had no
+    session, and nothing read it (replay: "not a relaxgrip recording").  The recorder
+    writes a copy outside the chunks, which recover puts back first."""
+    good = relax_hold[0]
+    session = read_session(good)
+    for cut in (False, True):
+        damaged = tmp_path / "damaged.mcap"
+        _damage_first_chunk(good, damaged)
+        if cut:  # killed: no summary, no footer
+            damaged.write_bytes(damaged.read_bytes()[: damaged.stat().st_size * 2 // 3])
+        out = tmp_path / "recovered.mcap"
+        recover(damaged, out)
+        assert read_session(out) == session
+        first = next(iter_messages(out))
+        assert first[0] == "/relaxgrip/session"
+        assert sum(1 for topic, _, _ in iter_messages(out) if topic == first[0]) == 1
+        assert sum(1 for _ in iter_periods(out)) > 0
+        again = tmp_path / "again.mcap"  # its copy goes along
+        _damage_first_chunk(out, again)
+        recover(again, tmp_path / "again-recovered.mcap")
+        assert read_session(tmp_path / "again-recovered.mcap") == session
+    # Recovered whole, the session is read once, not twice.
+    whole = tmp_path / "whole.mcap"
+    recover(good, whole)
+    assert sum(1 for topic, _, _ in iter_messages(whole) if topic == "/relaxgrip/session") == 1

@@ -16,25 +16,30 @@ if TYPE_CHECKING:
     from relaxgrip.recording.replay import ReplayResult
 
 
-def _models(models: Path | None) -> ModelBundle:
-    """The models in ``models``, or the shipped ones."""
+def _models(models: Path | None, recordings: list[Path]) -> ModelBundle:
+    """The models in ``models``, or those the recordings ran with (the shipped ones for
+    recordings that do not name theirs)."""
     from relaxgrip.learning.store import load_models
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
+    from relaxgrip.recording.provenance import recorded_models
 
-    return load_default_models() if models is None else load_models(
-        models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
+    if models is not None:
+        return load_models(models, icfn_feature_schema=ICFN_SCHEMA,
+                           rcfn_feature_schema=RCFN_SCHEMA)
+    return recorded_models(recordings) or load_default_models()
 
 
 @app.command("replay")
 def replay_cmd(
     recording: Annotated[Path, typer.Argument(help="MCAP recording.", show_default=False)],
     models: Annotated[Path | None, typer.Option(
-        "--models", help="Model directory (default: the shipped models).", show_default=False)
-    ] = None,
+        "--models", help="Model directory (default: the models the recording ran with, "
+                         "if they are still where it names them, or the shipped ones).",
+        show_default=False)] = None,
     observer_dir: Annotated[Path | None, typer.Option(
-        "--observer", help="Observer directory an observer recording ran with (relaxgrip "
-                           "fit-observer; default: the shipped observer).",
+        "--observer", help="Observer directory for an observer recording (relaxgrip "
+                           "fit-observer; default: the one the recording ran with).",
         show_default=False)] = None,
     plot: Annotated[Path | None, typer.Option(
         "--plot", help="Figure of recorded and replayed estimate (.png/.pdf/.svg).",
@@ -44,12 +49,14 @@ def replay_cmd(
     """Re-run perception and estimation on a recording and compare with what it recorded."""
     from relaxgrip.learning.observer import load_observer
     from relaxgrip.plots.common import check_plot_path
+    from relaxgrip.recording.provenance import recorded_observer
     from relaxgrip.recording.replay import replay
 
     if plot is not None:
         check_plot_path(plot)
-    observer = None if observer_dir is None else load_observer(observer_dir)
-    result = replay(recording, _models(models), observer=observer)
+    observer = (recorded_observer([recording]) if observer_dir is None
+                else load_observer(observer_dir))
+    result = replay(recording, _models(models, [recording]), observer=observer)
     if plot is not None:
         _plot_replay(result, plot)
     if json_out:
@@ -64,6 +71,10 @@ def replay_cmd(
         f"ICFN per frame: max {m['icfn_max_abs_diff_n']:.4f} N, mean "
         f"{m['icfn_mean_abs_diff_n']:.4f} N; marker status agreement "
         f"{m['marker_status_agreement']:.1%}")
+    differ = [d for d in result.models_differ if d != "calibration"]
+    if differ:
+        console.print(f"replayed with other models than the recording ran with "
+                      f"({', '.join(differ)} differ): the differences include theirs")
     if m["calibration_valid_agreement"] < 1.0:
         console.print("the calibration taken off the estimate was not the same: the model "
                       "directory was calibrated (relaxgrip calibrate-hold) differently from the "
@@ -139,11 +150,13 @@ def dataset_from_recordings_cmd(
     json_out: Annotated[bool, typer.Option("--json", help="Print the manifest as JSON.")] = False,
 ) -> None:
     """Turn recordings with a force ground truth into a dataset for ``relaxgrip train``."""
+    from relaxgrip.learning.training import load_default_models
     from relaxgrip.recording.dataset import dataset_from_recordings
 
     if seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
-    manifest = dataset_from_recordings(recordings, out, _models(None), seed=seed,
+    # Only perception is used of the replay (the labels are the force reference's).
+    manifest = dataset_from_recordings(recordings, out, load_default_models(), seed=seed,
                                        icfn_every_s=icfn_every_s)
     if json_out:
         emit_json(manifest)

@@ -75,7 +75,7 @@ import enum
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -104,6 +104,7 @@ __all__ = [
     "IcfnEstimator",
     "RelaxEstimator",
     "bundle_estimator",
+    "estimator_provenance",
     "make_estimator",
     "travel_slope",
 ]
@@ -180,6 +181,9 @@ class ForceEstimator(Protocol):
 
     name: str
     regulates_hold: bool
+    #: The models it runs, as a recording names them (:func:`bundle_estimator` sets it;
+    #: empty for an estimator built on bare models).
+    provenance: dict[str, Any]
 
     def reset(self) -> None:
         """Forget everything (a new grasp)."""
@@ -268,6 +272,7 @@ class IcfnEstimator:
         self.tare_window_s = tare_window_s
         self.tare_margin_s = tare_margin_s
         self.tare_min_n = tare_min_n
+        self.provenance: dict[str, Any] = {}
         self.reset()
 
     def reset(self) -> None:
@@ -427,6 +432,7 @@ class RelaxEstimator:
         self.onset_before_s = onset_before_s
         self.bias = bias
         self.chain = ClosedChain(chain)
+        self.provenance: dict[str, Any] = {}
         self.reset()
 
     def reset(self) -> None:
@@ -608,7 +614,29 @@ def bundle_estimator(kind: EstimatorKind | str, bundle: ModelBundle,
                      observer: ObserverModel | None = None) -> ForceEstimator:
     """The estimator named ``kind`` on a model directory's models.
 
-    Its unrelaxed ICFN and, for ``relax``, its calibrated closed-loop error included.
+    Its unrelaxed ICFN and, for ``relax``, its calibrated closed-loop error included.  Its
+    :attr:`~ForceEstimator.provenance` names the models (and the ``observer``'s parameters)
+    for a recording.
     """
-    return make_estimator(kind, bundle.icfn, bundle.rcfn, observer, unrelaxed=bundle.unrelaxed,
-                          hold_bias=bundle.hold_bias)
+    if EstimatorKind(kind) is EstimatorKind.OBSERVER and observer is None:
+        from relaxgrip.learning.observer import load_default_observer
+
+        observer = load_default_observer()
+    est = make_estimator(kind, bundle.icfn, bundle.rcfn, observer, unrelaxed=bundle.unrelaxed,
+                         hold_bias=bundle.hold_bias)
+    est.provenance = estimator_provenance(kind, bundle, observer)
+    return est
+
+
+def estimator_provenance(kind: EstimatorKind | str, bundle: ModelBundle,
+                         observer: ObserverModel | None = None) -> dict[str, Any]:
+    """What a recording names of the models :func:`bundle_estimator` runs ``kind`` on:
+    :meth:`ModelBundle.provenance`, and for the ``observer`` its parameters' (``observer``
+    None: the shipped ones)."""
+    used = bundle.provenance()
+    if EstimatorKind(kind) is EstimatorKind.OBSERVER:
+        from relaxgrip.learning.observer import load_default_observer
+
+        used["observer"] = (observer if observer is not None
+                            else load_default_observer()).provenance()
+    return used

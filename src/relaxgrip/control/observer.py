@@ -69,6 +69,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -180,6 +181,7 @@ class ObserverEstimator:
             raise ValueError("the share fit's anchor window must start before it ends, got "
                              f"{anchor_window_s[0]} s to {anchor_window_s[1]} s before")
         self.model = model
+        self.provenance: dict[str, Any] = {}
         self.history = LoadingHistory(model, CONTACT_DEFLECTION_M)
         self.onset_window_s = onset_window_s
         self.relax = None if rcfn is None else RelaxEstimator(

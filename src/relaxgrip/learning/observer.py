@@ -192,6 +192,15 @@ class ObserverModel:
         self.band_level = band_level
         self.band_scale = band_scale
         self.drift_scale = drift_scale
+        #: The directory it was loaded from and its file's sha256 (None: built in memory).
+        self.source: tuple[Path, str] | None = None
+
+    def provenance(self) -> dict[str, Any]:
+        """What a recording says of this observer: where it was loaded from, its file's
+        sha256 (both None for one built in memory) and its band's scales."""
+        directory, sha256 = (None, None) if self.source is None else self.source
+        return {"directory": None if directory is None else str(directory), "sha256": sha256,
+                "band_scale": self.band_scale, "drift_scale": self.drift_scale}
 
     def get_params(self) -> dict[str, Any]:
         """Hyperparameters (scikit-learn style)."""
@@ -622,10 +631,12 @@ def load_observer(directory: Path) -> ObserverModel:
         raise ObserverFileError(f"{path}: manifest lacks the 'observer' section or its fields")
     npz_path, arrays = read_npz_entry(directory, section, ObserverFileError)
     try:
-        return ObserverModel.from_arrays(arrays, section["params"])
+        model = ObserverModel.from_arrays(arrays, section["params"])
     except Exception as exc:  # shape and value checks of the arrays and parameters
         # The parameters are the manifest's, the arrays the npz file's: name both.
         raise ObserverFileError(f"{path} and {npz_path.name}: {one_line(exc)}") from None
+    model.source = (directory.resolve(), str(section["sha256"]))
+    return model
 
 
 def set_band_scale(directory: Path, band_scale: float, record: Mapping[str, Any],

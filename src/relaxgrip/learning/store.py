@@ -34,6 +34,7 @@ from relaxgrip.fileio import (
     check_output_dir,
     check_writable,
     file_entry,
+    json_digest,
     made_directory,
     npz_bytes,
     one_line,
@@ -96,6 +97,8 @@ class ModelBundle:
         ``relax``'s closed-loop error as ``relaxgrip calibrate-hold`` measured
         it with these models (:mod:`relaxgrip.learning.hold_bias`); None in
         directories not calibrated, where ``relax`` is the paper's Eq. 10.
+    directory : Path or None
+        Where they were loaded from (absolute); None for models built in memory.
     """
 
     icfn: ICFN
@@ -103,6 +106,16 @@ class ModelBundle:
     manifest: dict[str, Any]
     unrelaxed: UnrelaxedIcfn | None = None
     hold_bias: HoldBias | None = None
+    directory: Path | None = None
+
+    def provenance(self) -> dict[str, Any]:
+        """What a recording says of these models: where they were loaded from, the sha256
+        of each model file, and a digest of the calibration taken off the estimate (None
+        when there is none)."""
+        bias = self.manifest.get(HOLD_BIAS_KEY)
+        return {"directory": None if self.directory is None else str(self.directory),
+                "sha256": model_checksums(self.manifest),
+                "hold_bias_sha256": None if bias is None else json_digest(bias.get("relax"))}
 
     @property
     def icfn_feature_schema(self) -> FeatureSchema:
@@ -413,7 +426,8 @@ def load_models(
         )
     return ModelBundle(icfn=icfn, rcfn=rcfn, manifest=manifest,
                        unrelaxed=_load_unrelaxed(directory, manifest),
-                       hold_bias=_load_hold_bias(manifest_path, manifest))
+                       hold_bias=_load_hold_bias(manifest_path, manifest),
+                       directory=directory.resolve())
 
 
 #: The manifest section ``relaxgrip calibrate-hold`` writes.

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
-import json
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -14,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import json_digest
 from relaxgrip.learning.datastore import Dataset
 from relaxgrip.learning.history import (
     UNRELAXED_FEATURES,
@@ -83,9 +82,7 @@ def dataset_fingerprint(data: Dataset) -> str:
     Two builds of one spec by the same twin and schemas have the same
     fingerprint, whatever the build's time, workers or warnings.
     """
-    defining = {k: v for k, v in data.manifest.items() if k not in _NOT_THE_DATA}
-    text = json.dumps(defining, sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    return json_digest({k: v for k, v in data.manifest.items() if k not in _NOT_THE_DATA})
 
 
 def train_models(data: Dataset, random_state: int = 0,

@@ -33,7 +33,12 @@ from relaxgrip.backend import Frame
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import atomic_file, check_input_file, check_writable, one_line
 from relaxgrip.recording.recorder import require_mcap
-from relaxgrip.recording.schemas import RECORDING_FORMAT, RECORDING_VERSION
+from relaxgrip.recording.schemas import (
+    RECORDING_FORMAT,
+    RECORDING_VERSION,
+    SESSION_METADATA,
+    SESSION_TOPIC,
+)
 from relaxgrip.rig import RigGeometry
 
 __all__ = ["Period", "RecoverReport", "iter_messages", "iter_periods", "malformed_fields",
@@ -151,7 +156,7 @@ def read_session(path: Path, tolerant: bool = False) -> dict[str, Any]:
         The file is not a relaxgrip recording, or one newer than this code reads.
     """
     for topic, _, message in iter_messages(path, tolerant):
-        if topic == "/relaxgrip/session":
+        if topic == SESSION_TOPIC:
             return _check_session(path, message)
         break
     raise InputError(f"{path}: not a relaxgrip recording (no session message first)")
@@ -319,7 +324,7 @@ def _periods(path: Path, tolerant: bool) -> Iterator[Period]:
     seen_session = False
     for topic, _, message in iter_messages(path, tolerant):
         if not seen_session:
-            if topic != "/relaxgrip/session":
+            if topic != SESSION_TOPIC:
                 raise InputError(f"{path}: not a relaxgrip recording (no session message first)")
             _check_session(path, message)
             seen_session = True
@@ -418,7 +423,10 @@ def recover(src: Path, dst: Path) -> RecoverReport:
     copied (the writer makes a new one) but its message count is reported
     beside what was recovered, and the schemas and channels it lists stand
     in for any the data section lost (a damaged first chunk of a recording
-    written before the recorder put a copy of them ahead of it).  The output
+    written before the recorder put a copy of them ahead of it).  So does the
+    copy of the session message the recorder writes outside the chunks
+    (:data:`~relaxgrip.recording.schemas.SESSION_METADATA`) for a session
+    message the damage took: without it nothing reads the rest.  The output
     appears whole or not at all.
 
     Raises
@@ -430,7 +438,7 @@ def recover(src: Path, dst: Path) -> RecoverReport:
         not writable.
     """
     require_mcap()
-    from mcap.records import Channel, Chunk, DataEnd, Message, Schema, Statistics
+    from mcap.records import Channel, Chunk, DataEnd, Message, Metadata, Schema, Statistics
     from mcap.stream_reader import StreamReader, breakup_chunk
     from mcap.writer import Writer
 
@@ -450,9 +458,19 @@ def recover(src: Path, dst: Path) -> RecoverReport:
     end_ns = -1
     expected: int | None = None
     stopped_early = False
+    # The session message's copy outside the chunks, while the message is not copied.
+    session: Any = None
+    session_copied = False
+    session_channel = next((c for c in listed_channels.values() if c.topic == SESSION_TOPIC),
+                           None)
 
     def copy(record: Any, writer: Writer) -> None:
-        nonlocal count, end_ns
+        nonlocal count, end_ns, session, session_copied, session_channel
+        if isinstance(record, Metadata) and record.name == SESSION_METADATA:
+            writer.add_metadata(record.name, dict(record.metadata))
+            session = None if session_copied else record
+        elif isinstance(record, Channel) and record.topic == SESSION_TOPIC:
+            session_channel = session_channel or record
         if isinstance(record, Schema) and record.id not in schemas:
             schemas[record.id] = writer.register_schema(record.name, record.encoding,
                                                         record.data)
@@ -466,6 +484,13 @@ def recover(src: Path, dst: Path) -> RecoverReport:
                 if listed.schema_id in listed_schemas:
                     copy(listed_schemas[listed.schema_id], writer)
                 copy(listed, writer)
+            if session_channel is not None and record.channel_id == session_channel.id:
+                session, session_copied = None, True
+            elif session is not None and session_channel is not None:
+                lost, session = session, None  # the damage took the message: put it first
+                ns = int(lost.metadata["log_time_ns"])
+                copy(Message(channel_id=session_channel.id, sequence=0, log_time=ns,
+                             publish_time=ns, data=lost.metadata["message"].encode()), writer)
             if record.channel_id in channels:
                 writer.add_message(channels[record.channel_id], record.log_time, record.data,
                                    record.publish_time, record.sequence)

@@ -51,7 +51,13 @@ from relaxgrip.fileio import named_errors
 from relaxgrip.interrupts import deferred
 from relaxgrip.perception.features import marker_pose
 from relaxgrip.perception.marker import TrackStatus
-from relaxgrip.recording.schemas import CHANNELS, RECORDING_FORMAT, RECORDING_VERSION, schema_bytes
+from relaxgrip.recording.schemas import (
+    CHANNELS,
+    RECORDING_FORMAT,
+    RECORDING_VERSION,
+    SESSION_METADATA,
+    schema_bytes,
+)
 from relaxgrip.serialize import json_safe
 
 if TYPE_CHECKING:
@@ -247,7 +253,7 @@ class McapRecorder:
     # -- LoopRecorder ----------------------------------------------------------------------
 
     def start(self, info: BackendInfo, controller: GraspController, t_s: float) -> None:
-        """Write the session message (backend, estimator, plan, rig).
+        """Write the session message (backend, estimator and its models, plan, rig).
 
         A recording started during a grasp (the dashboard's Record button)
         says so (``grasp_in_progress``): the marker's zero and the
@@ -261,7 +267,7 @@ class McapRecorder:
         zeroed = tracker.zero_pose is not None
         in_progress = phase not in (GraspPhase.DONE, GraspPhase.STOPPED) and not (
             phase is GraspPhase.OPEN and tracker.zero_samples == 0)
-        self._write("/relaxgrip/session", t_s, {
+        self._write_session(t_s, {
             "format": RECORDING_FORMAT, "format_version": RECORDING_VERSION,
             "relaxgrip_version": __version__,
             "backend": {"name": info.name, "version": info.version, "has_truth": info.has_truth},
@@ -271,6 +277,7 @@ class McapRecorder:
             "rig": asdict(controller.rig), "t0_s": t_s, "rgb_format": self.rgb_format,
             "ir_encoding": IR_ENCODING, "started_in_phase": phase.value,
             "grasp_in_progress": in_progress, "scenario": self.scenario,
+            "models": controller.estimator.provenance or None,
         })
         self._last_flush_s = t_s
         log = controller.log
@@ -418,6 +425,18 @@ class McapRecorder:
             self._write("/relaxgrip/events", t, {"t_s": event.t_s, "kind": event.kind.value,
                                                  "detail": event.detail})
         self._n_events = len(log.events)
+
+    def _write_session(self, t_s: float, session: dict[str, Any]) -> None:
+        """The session message, and a copy of it outside the chunks (MCAP metadata,
+        :data:`SESSION_METADATA`): the chunk it is in could be damaged, and without it
+        nothing reads the rest."""
+        if self._closed:
+            raise InputError(f"{self.path}: the recording is closed")
+        data = json.dumps(json_safe(session), allow_nan=False, separators=(",", ":"))
+        with self._writing():
+            self._writer.add_metadata(SESSION_METADATA, {"log_time_ns": str(_ns(t_s)),
+                                                         "message": data})
+        self._write("/relaxgrip/session", t_s, session)
 
     def _write(self, topic: str, t_s: float, message: dict[str, Any]) -> None:
         if self._closed:

@@ -31,11 +31,13 @@ from relaxgrip.control.estimators import (
     ForceEstimate,
     ForceEstimator,
     bundle_estimator,
+    estimator_provenance,
 )
 from relaxgrip.errors import InputError
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.perception.pipeline import Percept, Perception
+from relaxgrip.recording.provenance import model_differences
 from relaxgrip.recording.reader import (
     Period,
     iter_periods,
@@ -164,6 +166,10 @@ class ReplayResult:
         The calibrated closed-loop error taken off the estimate, recorded and
         replayed (N; nan: none, and in recordings from before it was recorded):
         a model directory calibrated since the recording shows here.
+    models_differ : tuple of str
+        What of the models the recording ran with the replay's are not
+        (:func:`~relaxgrip.recording.provenance.model_differences`; empty for
+        the same models, and for recordings that do not name theirs).
     """
 
     path: str
@@ -178,6 +184,7 @@ class ReplayResult:
     truth_n: FloatArray
     recorded_calibration_n: FloatArray
     replayed_calibration_n: FloatArray
+    models_differ: tuple[str, ...] = ()
 
     def metrics(self) -> dict[str, Any]:
         """Differences of the estimate and the ICFN, and the agreement of validity and status."""
@@ -199,7 +206,8 @@ class ReplayResult:
 
     def to_dict(self) -> dict[str, Any]:
         """The ``relaxgrip replay --json`` object."""
-        return {"recording": self.path, "estimator": self.estimator, **self.metrics()}
+        return {"recording": self.path, "estimator": self.estimator,
+                "models_differ": list(self.models_differ), **self.metrics()}
 
 
 def _f(value: Any) -> float:
@@ -233,7 +241,11 @@ def replay(path: Path, models: ModelBundle, tolerant: bool = False,
                          _f(rec.get("calibration_n")), estimate.calibration_n))
             rec_status.append("" if perception is None else str(perception["marker_status"]))
             rep_status.append(percept.marker.status.value)
-    name = str(read_session(path, tolerant).get("estimator"))
+    session = read_session(path, tolerant)
+    name = str(session.get("estimator"))
+    differ = model_differences(session.get("models"),
+                               estimator_provenance(name, models, observer))
     cols = np.array(rows, dtype=np.float64).reshape(-1, 8)
     return ReplayResult(str(path), name, cols[:, 0], cols[:, 1], cols[:, 2], cols[:, 3],
-                        cols[:, 4], rec_status, rep_status, cols[:, 5], cols[:, 6], cols[:, 7])
+                        cols[:, 4], rec_status, rep_status, cols[:, 5], cols[:, 6], cols[:, 7],
+                        tuple(differ))

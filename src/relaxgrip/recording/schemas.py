@@ -74,6 +74,13 @@ RAW_IMAGE = _obj("foxglove.RawImage", "A raw image", {
     "data": {"type": "string", "contentEncoding": "base64", "description": "Raw image data"},
 })
 
+#: Topic of the session message, the first of every recording.
+SESSION_TOPIC = "/relaxgrip/session"
+#: Name of the MCAP metadata record that holds a copy of the session message, written at
+#: once outside any chunk: ``relaxgrip recover`` restores the session from it when the
+#: chunk that held the message is lost.  Its keys: ``log_time_ns`` and ``message`` (JSON).
+SESSION_METADATA = "relaxgrip.session"
+
 SESSION = _obj("relaxgrip.Session", "Who recorded what: written once, first.", {
     "format": {"const": RECORDING_FORMAT},
     "format_version": {"type": "integer"},
@@ -90,6 +97,10 @@ SESSION = _obj("relaxgrip.Session", "Who recorded what: written once, first.", {
     "scenario": {"type": "object", "additionalProperties": {"type": "string"},
                  "description": "profiles the run applied besides the plan, as given "
                                 "(temp_profile, target_profile, disturbance)"},
+    "models": {"type": ["object", "null"],
+               "description": "the estimator's models: directory, sha256 of each model file, "
+                              "hold_bias_sha256, and the observer's directory, sha256 and band "
+                              "scales (null: built on bare models)"},
 }, ("format", "format_version", "backend", "estimator", "rig", "t0_s"))
 
 OBSERVATION = _obj("relaxgrip.Observation",
