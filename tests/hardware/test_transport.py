@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import subprocess
 import sys
@@ -175,3 +176,34 @@ def test_core_imports_without_pyserial_and_says_how_to_install() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=60
     ).stdout
     assert "pip install 'relaxgrip[hardware]'" in out
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0,
+                    reason="opens the port as another user: needs root to switch to one")
+def test_the_kernel_refuses_other_programs_the_open_port(pty_pair: tuple[int, str]) -> None:
+    """pyserial's flock binds only programs that ask for it: a serial monitor (screen,
+    minicom) or an older relaxgrip opened the port beside a running hold.  The terminal's
+    exclusive mode makes the kernel refuse them (a superuser excepted)."""
+    _, path = pty_pair
+    os.chmod(path, 0o666)
+
+    def open_as_nobody() -> int:
+        """0 if a user without privileges opens the port, else the errno."""
+        pid = os.fork()
+        if pid == 0:  # pragma: no cover  (the child)
+            code = 0
+            try:
+                os.setuid(65534)
+                os.close(os.open(path, os.O_RDWR | os.O_NOCTTY))
+            except OSError as exc:
+                code = exc.errno or 1
+            os._exit(code)
+        return os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
+
+    assert open_as_nobody() == 0
+    port = SerialTransport(path)
+    try:
+        assert open_as_nobody() == errno.EBUSY
+    finally:
+        port.close()
+    assert open_as_nobody() == 0  # free again once closed

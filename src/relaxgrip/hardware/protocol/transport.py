@@ -267,6 +267,28 @@ def import_serial() -> Any:
     return serial
 
 
+def _termios_request(name: str) -> int | None:
+    """A terminal ioctl request by name, None where the platform has none."""
+    import termios
+
+    value = getattr(termios, name, None)
+    return value if isinstance(value, int) else None
+
+
+def _set_exclusive(port: serial.Serial, request: int | None) -> bool:
+    """Issue ``TIOCEXCL`` or ``TIOCNXCL`` on an open port; whether it took (a device that is
+    not a terminal, or a platform without them, keeps the flock alone)."""
+    if request is None:
+        return False
+    import fcntl
+
+    try:
+        fcntl.ioctl(port.fileno(), request)
+    except (OSError, ValueError):
+        return False
+    return True
+
+
 class SerialTransport:
     """Transport over a serial port (or a pseudo-terminal path) through pyserial.
 
@@ -283,6 +305,13 @@ class SerialTransport:
         If the port cannot be opened, or another process has it open (the
         port is locked for as long as it is open: a second host's Hello would
         reset the running session).
+
+    Notes
+    -----
+    The lock is pyserial's ``flock``, which every relaxgrip honours, and the
+    terminal's exclusive mode (``TIOCEXCL``), which makes the kernel refuse
+    anyone else's open of the device (``EBUSY``; ``screen``, a serial
+    monitor, an older relaxgrip) except a superuser's.
     """
 
     def __init__(self, port: str, baudrate: int = 115_200) -> None:
@@ -298,6 +327,7 @@ class SerialTransport:
             raise LinkError(f"cannot open serial port {port}: {exc}") from exc
         except (OSError, ValueError) as exc:  # e.g. a NUL byte in the path
             raise LinkError(f"cannot open serial port {port!r}: {exc}") from exc
+        self._exclusive = _set_exclusive(self._serial, _termios_request("TIOCEXCL"))
         self._timeout: float | None = 0.0
         self.port = port
 
@@ -323,5 +353,8 @@ class SerialTransport:
         return first + (self._serial.read(waiting) if waiting else b"")
 
     def close(self) -> None:
-        """Close the port."""
+        """Leave the exclusive mode (it outlives the descriptor while another holds the
+        device open) and close the port."""
+        if self._exclusive and self._serial.is_open:
+            _set_exclusive(self._serial, _termios_request("TIOCNXCL"))
         self._serial.close()
