@@ -4,9 +4,14 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
+import pytest
+
+import relaxgrip.experiments.controlled_hold as controlled_hold
+from relaxgrip.control import EstimatorKind
 from relaxgrip.experiments.tasks import TASKS
-from relaxgrip.reproduce import SECTIONS
+from relaxgrip.reproduce import SECTIONS, holding_section
 from tests.clitools import run_main
 
 
@@ -33,3 +38,34 @@ def test_quick_reproduce_regenerates_every_section(monkeypatch, capsys, tmp_path
         assert f"| {name} | success |" in table, name
     assert "stale" not in report
     assert "report.md" in stdout
+    holding = results["sections"]["holding"]
+    assert list(holding["results"]["holds"]) == [kind.value for kind in EstimatorKind]
+    assert any("observer" in row["quantity"] for row in holding["paper_vs_ours"])
+
+
+def test_the_holding_section_holds_what_hold_compare_holds(monkeypatch: pytest.MonkeyPatch,
+                                                           capsys: pytest.CaptureFixture[str],
+                                                           tmp_path: Path) -> None:
+    """The report's Fig. "sphere" and ``relaxgrip hold --compare`` run the same estimators, the
+    observer among them (the section's holds shortened to the CLI's 6 s here)."""
+    code, out, err = run_main(["hold", "--compare", "--duration-s", "6", "--json"],
+                              monkeypatch, capsys)
+    assert code == 0, err
+    compared = json.loads(out)["holds"]
+    real = controlled_hold.compare_holds
+
+    def short(*args: Any, **kwargs: Any) -> controlled_hold.HoldComparison:
+        assert len(args) < 3, "the section passes its duration by name"
+        return real(*args, **{**kwargs, "duration_s": 6.0})
+
+    monkeypatch.setattr(controlled_hold, "compare_holds", short)
+    section = holding_section(tmp_path, quick=True, seed=0)
+    holds = section.results["holds"]
+    assert list(holds) == list(compared) == [kind.value for kind in EstimatorKind]
+    for name, hold in holds.items():
+        assert hold["mae_n"] == pytest.approx(compared[name]["mae_n"]), name
+    observer = [row for row in section.rows if "observer" in row.quantity]
+    assert len(observer) == 1
+    assert observer[0].ours == f"{holds['observer']['mae_n']:.3f} N"
+    assert f"observer within {holds['observer']['mae_n']:.3f} N" in section.finding
+    assert (tmp_path / "holding.png").stat().st_size > 10_000

@@ -16,6 +16,7 @@ from relaxgrip.experiments.hold_calibration import (
     calibrate_hold,
     calibration_from_holds,
     calibration_record,
+    hidden_note,
     smooth_bias,
     time_bins,
 )
@@ -221,6 +222,66 @@ def test_a_bin_one_seed_missed_is_the_mean_of_the_others() -> None:
         calibration_from_holds([5.0], [40.0], [1, 2], 4.0, holds)
 
 
+def _holds(count: int, mean_n: float, sd_n: float, force_n: float = 5.0,
+           ) -> list[dict[str, float | int | list[float]]]:
+    """``count`` holds whose error is ``mean_n`` on average with sample SD ``sd_n``, every bin."""
+    x = np.arange(count, dtype=np.float64)
+    errors = mean_n + sd_n * (x - x.mean()) / x.std(ddof=1)
+    return [{**_row(seed, [float(e)] * 3), "f_inst_n": force_n}
+            for seed, e in enumerate(errors)]
+
+
+def test_too_few_seeds_keep_too_little_and_the_seeds_said_keep_half() -> None:
+    """A lone condition of mean m and SE se keeps 1 - se²/m² of m: two holds at SE 0.045 N
+    keep 19 % of 0.05 N, and the note's "about 4 seeds" keep half at the same scatter;
+    three still do not."""
+    sd = 0.045 * np.sqrt(2.0)
+    two = calibration_from_holds([5.0], [40.0], [0, 1], 4.0, {"5N 40C": _holds(2, 0.05, sd)})
+    kept = two.kept()
+    assert kept["steady_state_s"] == pytest.approx([100 / 280 * 4.0, 4.0])
+    condition = kept["conditions"]["5N 40C"]
+    assert condition["error_n"] == pytest.approx(0.05)
+    assert condition["se_n"] == pytest.approx(0.045)
+    assert condition["correction_n"] == pytest.approx(two.bias.values_n.max())
+    assert condition["correction_n"] == pytest.approx(0.05 * (1 - 0.9**2), abs=1e-3)
+    assert kept["hidden"] == ["5N 40C"]
+    assert condition["seeds_to_keep_half"] == 4
+    note = hidden_note(kept)
+    assert "1 of 1 conditions" in note
+    assert "+0.0095 N at 5N 40C" in note
+    assert "+0.050 N, hidden by their scatter (SE 0.045 N over 2 seeds)" in note
+    assert "about 4 seeds per condition would keep half" in note
+    assert "--add" in note
+    assert "record more holds" in hidden_note(kept, recorded=True)
+    for count, hidden in ((3, True), (4, False)):
+        more = calibration_from_holds([5.0], [40.0], list(range(count)), 4.0,
+                                      {"5N 40C": _holds(count, 0.05, sd)}).kept()
+        assert bool(more["hidden"]) is hidden, count
+        assert (more["conditions"]["5N 40C"]["correction_n"] >= 0.025) is not hidden
+
+
+def test_a_condition_shrunk_with_the_others_is_told_so() -> None:
+    """A mean twice its SE, among conditions measured to have none: the fit takes the size of
+    the error from all of them, and keeps nothing of it; its own scatter is not why."""
+    forces = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+    holds = {f"{f:g}N 40C": _holds(2, 0.05, 0.03 * np.sqrt(2.0), f) if f == 3.0
+             else _holds(2, 0.0, 0.005 * np.sqrt(2.0), f) for f in forces}
+    kept = calibration_from_holds(forces, [40.0], [0, 1], 4.0, holds).kept()
+    assert kept["hidden"] == ["3N 40C"]
+    assert kept["conditions"]["3N 40C"]["seeds_to_keep_half"] <= 2
+    note = hidden_note(kept)
+    assert "1 of 6 conditions" in note
+    assert "shrunk with the other conditions" in note
+    assert "about" not in note
+
+
+def test_well_measured_conditions_hide_nothing(uncalibrated: ModelBundle) -> None:
+    kept = calibrate_hold([5.0], [40.0], [1000, 1001], DURATION_S, models=uncalibrated).kept()
+    condition = kept["conditions"]["5N 40C"]
+    assert kept["hidden"] == []
+    assert abs(condition["correction_n"]) >= 0.5 * abs(condition["error_n"]) > 0.005
+
+
 @pytest.mark.parametrize(("args", "match"), [
     (([], [40.0], [0, 1]), "target"),
     (([5.0], [], [0, 1]), "temperature"),
@@ -260,6 +321,33 @@ def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: py
     taken = -held["error_budget"]["calibration_n"]
     assert taken != 0.0
     assert bias.values_n.min() - 1e-9 <= taken <= bias.values_n.max() + 1e-9
+
+
+def test_cli_says_when_the_holds_scatter_hides_the_error(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Two 6 s holds on seeds 1004 and 1005 keep less than half of their mean: the command
+    says so in one line beside the table and "written", and its JSON has the figures."""
+    directory = tmp_path / "models"
+    shutil.copytree(default_models_dir(), directory)
+    args: list[str | Path] = ["calibrate-hold", directory, "--targets", "5", "--temps", "40",
+                              "--seeds", "1004,1005", "--duration-s", "6", "--jobs", "1"]
+    code, out, err = run_main(args, monkeypatch, capsys)
+    assert code == 0, err
+    assert "written to" in out
+    warnings = [line for line in err.splitlines() if line.startswith("warning:")]
+    assert len(warnings) == 1
+    assert "keeps less than half of the error at 1 of 1 conditions" in warnings[0]
+    assert "hidden by their scatter" in warnings[0]
+    assert "seeds per condition" in warnings[0]
+    code, out, _ = run_main([*args, "--json", "--dry-run"], monkeypatch, capsys)
+    assert code == 0
+    kept = json.loads(out)["kept"]
+    assert kept["hidden"] == ["5N 40C"]
+    assert kept["note"] == warnings[0].removeprefix("warning: ")
+    condition = kept["conditions"]["5N 40C"]
+    assert abs(condition["correction_n"]) < 0.5 * abs(condition["error_n"])
+    assert condition["seeds_to_keep_half"] > 2
 
 
 @pytest.mark.parametrize(("args", "expected"), [

@@ -256,7 +256,8 @@ def calibrate_band_command(
                              "force reference; repeat the option for more.",
         show_default=False)] = None,
     models: Annotated[Path | None, typer.Option(
-        "--models", help="ICFN/RCFN directory (default: the shipped models).",
+        "--models", help="ICFN/RCFN directory (default: the shipped models; with "
+                         "--recordings, the models they ran with).",
         show_default=False)] = None,
     jobs: Annotated[int, int_option("--jobs", help="Holds in parallel.")] = 2,
     dry_run: Annotated[bool, typer.Option(
@@ -287,16 +288,24 @@ def calibrate_band_command(
     bundle = None if models is None else load_models(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
     start = time.perf_counter()
+    note = None
     if recordings is not None:
+        from relaxgrip.control.estimators import estimator_provenance
         from relaxgrip.experiments.recorded_calibration import calibrate_band_on_recordings
         from relaxgrip.learning.training import load_default_models
         from relaxgrip.recording import require_mcap
+        from relaxgrip.recording.dataset import recording_files
+        from relaxgrip.recording.provenance import differences_note, recorded_models
 
         require_mcap()
+        files = recording_files(recordings)
+        if bundle is None:
+            bundle = recorded_models(files) or load_default_models()
+        note = differences_note(files, estimator_provenance("observer", bundle, model),
+                                ignore=("calibration", "observer band"))
         with (console.status("replaying the recorded holds …") if not json_out
               else nullcontext()):
-            result = calibrate_band_on_recordings(
-                model, recordings, bundle if bundle is not None else load_default_models(), jobs)
+            result = calibrate_band_on_recordings(model, files, bundle, jobs)
     else:
         with (console.status(f"{len(names) * len(seed_list)} closed-loop holds …")
               if not json_out else nullcontext()):
@@ -305,8 +314,10 @@ def calibrate_band_command(
         set_band_scale(observer, result.band_scale, result.record(), result.drift_scale)
     if json_out:
         emit_json({"observer": str(observer), "written": not dry_run, **result.record(),
-                   "summary": result.summary()})
+                   "summary": result.summary(), "models_note": note})
         return
+    if note is not None:
+        err_console.print(f"note: {note}", markup=False, highlight=False, soft_wrap=True)
     table = Table(title=f"band coverage at {result.level:.0%}: scale {result.previous_scale:.3g}"
                         f" -> {result.band_scale:.3g}, drift scale "
                         f"{result.previous_drift_scale:.3g} -> {result.drift_scale:.3g}")
@@ -393,6 +404,7 @@ def calibrate_hold_command(
         calibrate_hold,
         calibration_record,
         condition_name,
+        hidden_note,
     )
     from relaxgrip.fileio import check_writable
     from relaxgrip.learning.store import MANIFEST_NAME, load_models, set_hold_bias
@@ -419,11 +431,19 @@ def calibrate_hold_command(
     if not dry_run:
         check_writable(models / MANIFEST_NAME, InputError)
     start = time.perf_counter()
+    models_note = None
     if recordings is not None:
+        from relaxgrip.control.estimators import estimator_provenance
         from relaxgrip.experiments.recorded_calibration import calibration_from_recordings
         from relaxgrip.recording import require_mcap
+        from relaxgrip.recording.dataset import recording_files
+        from relaxgrip.recording.provenance import differences_note
 
         require_mcap()
+        # The calibration taken off relax is what this measures anew: not a difference.
+        models_note = differences_note(recording_files(recordings),
+                                       estimator_provenance("relax", bundle),
+                                       ignore=("calibration",))
         with (console.status("replaying the recorded holds …") if not json_out
               else nullcontext()):
             result = calibration_from_recordings(recordings, bundle, jobs)
@@ -452,10 +472,14 @@ def calibrate_hold_command(
         record = {**result.record(), "commands": [*earlier_commands, command]}
     if not dry_run:
         set_hold_bias(models, result.bias, record, measured_on=bundle.manifest)
+    kept = result.kept()
+    note = hidden_note(kept, recorded=recordings is not None) if kept["hidden"] else None
     if json_out:
         emit_json({"models": str(models), "written": not dry_run, "bias": result.bias.to_dict(),
-                   **record})
+                   **record, "kept": {**kept, "note": note}, "models_note": models_note})
         return
+    if models_note is not None:
+        err_console.print(f"note: {models_note}", markup=False, highlight=False, soft_wrap=True)
     table = Table(title="relax, estimate − true force over the steady state, uncalibrated "
                         "(the last column: the held force's MAE from the target)")
     for column in ("target (N)", "temperature (°C)", "holds", "mean (N)", "SE (N)",
@@ -473,4 +497,6 @@ def calibrate_hold_command(
     verb = "measured (not written)" if dry_run else f"written to {models}"
     added = f" added to {sum(map(len, result.holds.values())) - count}" if add else ""
     kind = f"recorded holds of {result.duration_s:g} s" if recordings is not None else "holds"
+    if note is not None:
+        err_console.print(f"warning: {note}", markup=False, highlight=False, soft_wrap=True)
     console.print(f"{count} {kind}{added}, {verb}, {time.perf_counter() - start:.0f} s")

@@ -50,7 +50,7 @@ from relaxgrip.twin import TWIN_VERSION
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TARGETS_N", "DEFAULT_TEMPS_C", "MIN_BIN_S", "MIN_SE_N",
            "RECORDINGS_SOURCE", "TIME_EDGES_S",
            "HoldCalibration", "calibrate_hold", "calibration_from_holds", "calibration_record",
-           "condition_name", "hold_row", "smooth_bias",
+           "condition_name", "hidden_note", "hold_row", "smooth_bias",
            "time_bins"]
 
 FloatArray = NDArray[np.float64]
@@ -215,6 +215,64 @@ class HoldCalibration:
                          "mae_n": float(np.mean([r["mae_n"] for r in rows]))}
         return out
 
+    def kept(self) -> dict[str, Any]:
+        """What the correction keeps of each condition's error over the steady state.
+
+        The fit shrinks a condition's mean towards no correction as far as its
+        standard error hides it (:func:`smooth_bias`): a condition alone, of
+        mean ``m`` and standard error ``se`` (N), keeps ``1 - se²/m²`` of it,
+        and nothing once ``se >= |m|``.  With too few seeds the calibration
+        then stores almost nothing, though its conditions' means are large.
+        Over the steady state (:func:`steady_window_s`), each hold's error per
+        time bin (the one the table corrects: less the closed chain's
+        addition) counts by its bin's overlap with it, and so does the
+        correction at the condition's onset force and temperature as read.
+
+        Returns
+        -------
+        dict
+            ``steady_state_s``: the interval (s).  ``conditions``: per
+            condition its ``holds``, their mean error ``error_n`` and its
+            standard error ``se_n``, and the correction taken off there
+            ``correction_n`` (N).  ``hidden``: the conditions whose correction
+            keeps less than half of a mean larger than :data:`MIN_SE_N`,
+            largest mean first; each of them also has
+            ``seeds_to_keep_half``, the seeds per condition at which the
+            rule above keeps half of a mean this large at this scatter (no
+            more than ``holds`` when the other conditions, not its scatter,
+            shrank it).
+        """
+        bins = time_bins(self.duration_s)
+        lo, hi = steady_window_s(self.duration_s)
+        weights = np.array([max(0.0, min(b, hi) - max(a, lo)) for a, b in bins])
+        centres = [_bin_centre(a, b) for a, b in bins]
+        conditions: dict[str, dict[str, Any]] = {}
+        for name, rows in self.holds.items():
+            errors = np.array([r["bins_n"] for r in rows], dtype=np.float64)
+            counted = np.where(np.isfinite(errors), weights, 0.0)
+            total = counted.sum(axis=1)
+            per_hold = (np.nan_to_num(errors) * counted).sum(axis=1)[total > 0] / total[total > 0]
+            force = float(np.nanmean([r["f_inst_n"] for r in rows]))
+            temp = float(np.nanmean([r["temp_c"] for r in rows]))
+            correction = [self.bias.at(force, temp, t) for t in centres]
+            mean = float(per_hold.mean()) if per_hold.size else math.nan
+            se = (float(per_hold.std(ddof=1) / math.sqrt(per_hold.size)) if per_hold.size > 1
+                  else math.nan)
+            conditions[name] = {"holds": int(per_hold.size), "error_n": mean, "se_n": se,
+                                "correction_n": float(np.dot(weights, correction)
+                                                      / weights.sum())}
+        hidden = sorted((name for name, c in conditions.items()
+                         if abs(c["error_n"]) > MIN_SE_N
+                         and abs(c["correction_n"]) < 0.5 * abs(c["error_n"])),
+                        key=lambda name: -abs(conditions[name]["error_n"]))
+        for name in hidden:
+            c = conditions[name]
+            # se² ≤ m²/2 keeps half; the scatter per hold, se²·holds, stays as measured.
+            c["seeds_to_keep_half"] = (
+                math.ceil(2.0 * c["holds"] * (c["se_n"] / c["error_n"]) ** 2)
+                if math.isfinite(c["se_n"]) else None)
+        return {"steady_state_s": [lo, hi], "conditions": conditions, "hidden": hidden}
+
     def record(self) -> dict[str, Any]:
         """The manifest's record beside the grid (JSON: a figure there is none of is null)."""
         holds = ("recorded holds replayed with relax uncalibrated"
@@ -288,6 +346,41 @@ def smooth_bias(points: FloatArray, means: FloatArray, ses: FloatArray, at_force
     values: FloatArray = np.asarray(gp.predict(grid), dtype=np.float64).reshape(
         at_forces.size, at_temps.size)
     return values, str(gp.kernel_)
+
+
+def hidden_note(kept: Mapping[str, Any], recorded: bool = False) -> str:
+    """One line on the conditions whose correction keeps less than half of their error.
+
+    Parameters
+    ----------
+    kept : mapping
+        :meth:`HoldCalibration.kept`, with at least one ``hidden`` condition.
+    recorded : bool
+        The holds were recordings (more are recorded, not added with ``--add``).
+
+    Returns
+    -------
+    str
+        The largest such error beside what the correction takes off there,
+        and why: its scatter (with about the seeds that would keep half of
+        it) or the other conditions the fit shrank it with.
+    """
+    conditions = kept["conditions"]
+    name = kept["hidden"][0]
+    c = conditions[name]
+    lo, hi = kept["steady_state_s"]
+    unit, more = ("holds", "record more holds") if recorded else ("seeds", "add seeds with --add")
+    head = (f"the correction keeps less than half of the error at {len(kept['hidden'])} of "
+            f"{len(conditions)} conditions: over the steady state ({lo:.4g}-{hi:.4g} s) it takes "
+            f"off {c['correction_n']:+.2g} N at {name}, where the holds' error (less the closed "
+            f"chain's) averaged {c['error_n']:+.3f} N")
+    seeds = c.get("seeds_to_keep_half")
+    if seeds is not None and seeds > c["holds"]:
+        return (f"{head}, hidden by their scatter (SE {c['se_n']:.3f} N over {c['holds']} "
+                f"{unit}); about {seeds} {unit} per condition would keep half of a mean this "
+                f"large ({more})")
+    return (f"{head} (SE {c['se_n']:.3f} N over {c['holds']} {unit}), shrunk with the other "
+            f"conditions, whose means are smaller or more scattered ({more} there)")
 
 
 def condition_name(target_n: float, temp_c: float) -> str:
