@@ -10,7 +10,12 @@ from __future__ import annotations
 import time
 from typing import Protocol, runtime_checkable
 
-__all__ = ["Clock", "VirtualClock", "WallClock"]
+__all__ = ["TIME_SLACK_S", "Clock", "VirtualClock", "WallClock"]
+
+#: Times closer than this count as the same instant (s): clock arithmetic slack, for a
+#: clock stepped by sums of a period (``VirtualClock.advance(1 / 30)``) too, whose
+#: round-off passes a nanosecond after half an hour.
+TIME_SLACK_S = 1e-6
 
 
 @runtime_checkable

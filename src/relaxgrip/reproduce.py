@@ -194,13 +194,11 @@ def holding_section(out_dir: Path, quick: bool, seed: int) -> Section:
     The paper's three (fixed, icfn, relax) and the observer, as ``relaxgrip
     hold --compare`` runs them.
     """
-    from relaxgrip.control import EstimatorKind
     from relaxgrip.experiments.controlled_hold import compare_holds
     from relaxgrip.plots.holding import plot_hold_comparison
 
     duration = 140.0 if quick else 280.0
-    result = compare_holds([kind.value for kind in EstimatorKind], duration_s=duration,
-                           seed=seed)
+    result = compare_holds(duration_s=duration, seed=seed)
     figure = "holding.png"
     plot_hold_comparison(result, out_dir / figure)
     d = result.to_dict()

@@ -118,6 +118,14 @@ def test_seeds_report_each_seed_and_the_mean_over_them(monkeypatch, capsys):
      "--disturbance starts at 400 s, not before the 20 s hold ends"),
     (["--temp-profile", "step:50:280"], "--temp-profile starts at 280 s"),
     (["--target-profile", "ramp:5:3:300:10"], "--target-profile starts at 300 s"),
+    # A ramp from another value than the hold's made it jump there at the onset (these ran).
+    (["--duration-s", "14", "--target-profile", "ramp:4:3:5:2"],
+     "--target-profile ramps from 4 N but the hold's target is 5 N (--target-n)"),
+    (["--duration-s", "14", "--temp-c", "45", "--temp-profile", "ramp:40:55:5:3"],
+     "--temp-profile ramps from 40 °C but the hold's temperature is 45 °C (--temp-c)"),
+    (["--duration-s", "14", "--seeds", "1,2", "--jobs", "1", "--target-n", "3",
+      "--target-profile", "ramp:5:3:5:2"],
+     "--target-profile ramps from 5 N but the hold's target is 3 N (--target-n)"),
     (["--seed", "-1"], "--seed"),
     (["--plot", "out.gif"], "plot format"),
     (["--plot", "/no/such/dir/x.png"], "does not exist"),
@@ -183,10 +191,10 @@ def test_budget_survey_prints_the_parts_over_seeds(monkeypatch, capsys):
     assert f"taken off {d['bias_free_mae_n']:.3f} N" in text
     # What relax reads of its run: each percept's row, and (two seeds) no correction fits.
     seen = d["observability"]
-    assert seen["at_s"] == 14.0
+    assert seen["at_s"] == 5.0  # the steady state's start: 100 s of 280 s, 5 s of 14 s
     assert seen["percepts"]
     assert set(d["runs"][0]["percepts"]) >= set(seen["percepts"])
-    assert "What relax reads by 14 s of the hold" in text
+    assert "What relax reads by 5 s of the hold (the steady state's start)" in text
     assert all(name in text for name in seen["percepts"])
     assert "would leave – N" in text
     assert f"the bias alone {d['bias_free_mae_n']:.3f} N" in text

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from relaxgrip.errors import InputError
+from relaxgrip.experiments import budget_survey
 from relaxgrip.experiments.budget_survey import (
     BUDGET_PARTS,
     PERCEPTS,
@@ -19,7 +20,7 @@ from relaxgrip.experiments.budget_survey import (
     hold_percepts,
     survey_budget,
 )
-from relaxgrip.experiments.controlled_hold import run_hold
+from relaxgrip.experiments.controlled_hold import run_hold, steady_window_s
 from relaxgrip.twin import TwinConfig
 from relaxgrip.twin.twin import TwinMaterial
 
@@ -67,9 +68,12 @@ def test_the_percepts_are_what_the_estimator_read_of_its_run(survey) -> None:
     assert survey.percepts[1] == seen
     assert set(seen) == set(PERCEPTS)
     assert all(math.isfinite(v) for v in seen.values())
-    # Read at the hold's end when it is shorter than PERCEPT_AT_S, over the 5 s before it.
+    # Read at the steady state's start, 5 s of a 14 s hold (100 s of 280 s), over the
+    # 0.25 s before it, and the drift from 0.05-0.2 s: a 280 s hold's 5 s and 1-4 s, scaled.
     t, motor, icfn = hold.t_s, hold.series("motor_mm"), hold.series("icfn_n")
-    late, early = (t >= 9.0 - 1e-9) & (t <= 14.0 + 1e-9), (t >= 1.0 - 1e-9) & (t <= 4.0 + 1e-9)
+    late, early = (t >= 4.75 - 1e-9) & (t <= 5.0 + 1e-9), (t >= 0.05 - 1e-9) & (t <= 0.2 + 1e-9)
+    assert late.sum() == 8  # 30 Hz
+    assert early.sum() == 5
     assert seen["motor_travel_mm"] == pytest.approx(motor[late].mean() - motor[0])
     assert seen["icfn_drift_n"] == pytest.approx(icfn[late].mean() - icfn[early].mean())
     f_onset = hold.series("f_onset_n")
@@ -83,6 +87,7 @@ def test_the_percepts_are_what_the_estimator_read_of_its_run(survey) -> None:
     assert hold_percepts(blind) == seen
     # Three seeds: correlations, but too few runs for any corrective fit.
     observed = survey.observability()
+    assert observed["at_s"] == 5.0
     assert observed["percepts"] == list(PERCEPTS)
     assert set(observed["correlation"]) == {*PERCEPTS, "total_n"}
     assert observed["correlation"]["total_n"]["total_n"] == pytest.approx(1.0)
@@ -90,6 +95,14 @@ def test_the_percepts_are_what_the_estimator_read_of_its_run(survey) -> None:
     assert corrected["bias"] == survey.bias_free_mae_n()
     assert all(math.isnan(corrected[k]) for k in ("percepts", "finger_0_share", "both_shares"))
     assert survey.to_dict()["runs"][1]["percepts"] == seen
+
+
+@pytest.mark.parametrize(("duration_s", "at_s"), [(280.0, 100.0), (14.0, 5.0), (20.0, 100 / 14),
+                                                  (140.0, 50.0), (3600.0, 9000 / 7)])
+def test_the_percepts_are_read_at_the_steady_states_start(duration_s: float, at_s: float) -> None:
+    # min(100 s, the hold) read a 20 s hold at its end and a 140 s one at 100 s, not at 50 s.
+    assert budget_survey.percept_at_s(duration_s) == pytest.approx(at_s)
+    assert budget_survey.percept_at_s(duration_s) == steady_window_s(duration_s)[0]
 
 
 def _synthetic(n: int, total_of) -> BudgetSurvey:

@@ -72,11 +72,13 @@ def hold(
         "--record", help="Record the run to this MCAP file (not with --compare).",
         show_default=False)] = None,
     temp_profile: Annotated[str | None, typer.Option(
-        "--temp-profile", help="Setpoint over hold time: ramp:FROM_C:TO_C:START_S:OVER_S or "
-                               "step:TO_C:AT_S.", show_default=False)] = None,
+        "--temp-profile", help="Setpoint over hold time: ramp:FROM_C:TO_C:START_S:OVER_S "
+                               "(FROM_C: --temp-c) or step:TO_C:AT_S.",
+        show_default=False)] = None,
     target_profile: Annotated[str | None, typer.Option(
         "--target-profile", help="Target over hold time: step:TO_N:AT_S or "
-                                 "ramp:FROM_N:TO_N:START_S:OVER_S.", show_default=False)] = None,
+                                 "ramp:FROM_N:TO_N:START_S:OVER_S (FROM_N: --target-n).",
+        show_default=False)] = None,
     disturbance: Annotated[str | None, typer.Option(
         "--disturbance", help="Push on the object: push:FORCE_N:AT_S[:FOR_S].",
         show_default=False)] = None,
@@ -91,6 +93,7 @@ def hold(
     from relaxgrip.experiments.controlled_hold import (
         check_hold_duration_s,
         check_hold_temp_c,
+        check_ramp_starts,
         check_scenario_times,
         compare_holds,
         run_hold,
@@ -118,6 +121,7 @@ def hold(
     check_hold_duration_s(duration_s, "--duration-s")
     check_scenario_times(duration_s, temp_profile=temps, target_profile=targets,
                          disturbance=push)
+    check_ramp_starts(target_n, temp_c, temps, targets)
     if seed is not None and seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
     seed_list = None if seeds is None else parse_seeds(seeds)
@@ -157,7 +161,7 @@ def hold(
     if seed_list is not None:
         from relaxgrip.experiments.hold_survey import survey_holds
 
-        names = ("fixed", "icfn", "relax", "observer") if compare else (estimator,)
+        names = tuple(EstimatorKind) if compare else (estimator,)
         given = {"temp_profile": temp_profile, "target_profile": target_profile,
                  "disturbance": disturbance}
         with console.status(f"{len(names) * len(seed_list)} holds …") if not json_out \
@@ -174,8 +178,7 @@ def hold(
     if compare:
         with console.status("holding with fixed, icfn, relax and observer …") if not json_out \
                 else nullcontext():
-            comparison = compare_holds(("fixed", "icfn", "relax", "observer"), target_n=target_n,
-                                       duration_s=duration_s, temp_c=temp_c,
+            comparison = compare_holds(target_n=target_n, duration_s=duration_s, temp_c=temp_c,
                                        seed=seed, models=bundle, n_jobs=jobs,
                                        observer=observer)
         figure = None
@@ -400,7 +403,8 @@ def _fmt(value: float, spec: str) -> str:
 
 def _print_observability(seen: dict[str, Any]) -> None:
     """The budget survey's second table: what relax reads of its run, against the draw."""
-    table = Table(title=f"What relax reads by {seen['at_s']:.0f} s of the hold, across seeds",
+    table = Table(title=f"What relax reads by {seen['at_s']:.4g} s of the hold (the steady "
+                        "state's start), across seeds",
                   caption="r: correlation with the log of finger 0's and finger 1's relaxing "
                           "share (the twin's draw), and with the total")
     for col in ("read", "r f0 share", "r f1 share", "r total"):

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from relaxgrip.backend import Command, Observation
+from relaxgrip.clock import TIME_SLACK_S
 from relaxgrip.control.estimators import (
     SLOPE_FORCE_SHARE,
     ForceEstimate,
@@ -93,7 +94,8 @@ class GraspPlan:
         Stay open until the fingers are within :attr:`ForceControlConfig.temp_band_k`
         of the setpoint.
     hold_s : float
-        Time in Hold before lifting or releasing (s); ``inf`` holds until told.
+        Time held from the hold's onset (the motor settled, ``settle_s`` into
+        Hold) before lifting or releasing (s); ``inf`` holds until told.
     lift_mm : float
         Arm lift after the hold (mm); 0: no Lift or Sustain.
     sustain_s : float
@@ -284,6 +286,7 @@ class GraspController:
         self._temp_ok_since: float | None = None
         self._rezeroed = False
         self._hold_started = False
+        self._onset_t = 0.0
         self._lift_start_mm = 0.0
         self._recent: list[tuple[float, float]] = []
         self._temp_status = TemperatureStatus.OFF
@@ -566,6 +569,7 @@ class GraspController:
             self._stiffness_n_per_mm = _loading_stiffness(self._loading, est.force_n,
                                                           cfg.loading_share)
             self._regulated_n, self._move_mm = target, 0.0
+            self._onset_t = t
             detail = f"estimate {est.force_n:.3f} N"
             if math.isfinite(contact_m):
                 detail += f"; {ONSET_OBJECT} {contact_m * 1e3:.3f} mm"
@@ -577,7 +581,10 @@ class GraspController:
             velocity = min(velocity, 0.0)
         arm = 0.0
         if phase is GraspPhase.HOLD:
-            if t - self._phase_t >= self.plan.hold_s + cfg.settle_s:
+            # Counted from the onset, which ends the settle on its own clock: counted from
+            # entering Hold, a settle of six periods summing a rounding under 0.2 s took
+            # seven, and the hold ended a period short (most 20 s holds did).
+            if t - self._onset_t >= self.plan.hold_s - TIME_SLACK_S:
                 self._after_hold(t, arm_mm)
         elif phase is GraspPhase.LIFT:
             self._watch_slip(t, est)

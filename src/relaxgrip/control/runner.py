@@ -160,7 +160,8 @@ def run_loop(
     if recorder is not None:
         recorder.start(backend.info, controller, t0)
     rows: list[tuple[float, ...]] = []
-    n_steps = math.ceil(max_duration_s * rate_hz)
+    # Rounded to 1e-9 first: 8.3 s at 30 Hz is 249.00000000000003 periods, not 250.
+    n_steps = math.ceil(round(max_duration_s * rate_hz, 9))
     # A period's work longer than the period (wall-clock time) makes the steps late:
     # the run ends by the clock, one period past its last step's time at most.
     deadline = t0 + (n_steps + 1) * dt

@@ -25,8 +25,9 @@ Two summaries bound what a redesign of the estimator could reach:
 
 And one measures what the estimator could learn of its own run:
 
-* ``observability``: what the estimator reads by :data:`PERCEPT_AT_S` into
-  the hold (:data:`PERCEPTS`, from its own series, never the truth), each
+* ``observability``: what the estimator reads by the steady state's start
+  (:data:`PERCEPTS`, from its own series, never the truth; at
+  :func:`percept_at_s`, 100 s of a 280 s hold, scaled with the duration), each
   correlated across runs with each finger's relaxing share; and the MAE a
   per-run correction would leave, fitted (each run left out) on those
   percepts, on finger 0's true share, or on both fingers' true shares.  A
@@ -52,11 +53,12 @@ from relaxgrip.experiments.controlled_hold import (
     check_hold_temp_c,
     map_holds,
     run_hold,
+    steady_window_s,
 )
 from relaxgrip.learning.store import ModelBundle
 
-__all__ = ["BUDGET_PARTS", "PERCEPTS", "PERCEPT_AT_S", "SCATTER_GROUPS", "BudgetSurvey",
-           "hold_percepts", "survey_budget"]
+__all__ = ["BUDGET_PARTS", "PERCEPTS", "SCATTER_GROUPS", "BudgetSurvey", "hold_percepts",
+           "percept_at_s", "survey_budget"]
 
 FloatArray = NDArray[np.float64]
 
@@ -79,21 +81,33 @@ _SHARES = {"finger_0": "relax_scale_0", "finger_1": "relax_scale_1"}
 #: creep); the motor's travel since the onset; Eq. 10's ``K`` and ``tau``; and
 #: what the closed chain's reading adds.
 PERCEPTS = ("f_onset_n", "icfn_drift_n", "motor_travel_mm", "k_n", "tau_s", "chain_n")
-#: Time into the hold the percepts are read at (s): the steady state's start,
-#: from which a correction on them would count in full.
-PERCEPT_AT_S = 100.0
-#: The percepts' averaging window before that time, and the drift's reference (s).
+#: The percepts' averaging window before their time, and the drift's reference
+#: (s into a hold of :data:`PAPER_DURATION_S` or longer; a shorter hold's scaled with it).
 _PERCEPT_WINDOW_S = 5.0
 _DRIFT_FROM_S = (1.0, 4.0)
 
 
-def hold_percepts(hold: HoldResult, at_s: float = PERCEPT_AT_S) -> dict[str, float]:
-    """:data:`PERCEPTS` of one hold, read ``at_s`` into it (at its end if it is shorter).
+def percept_at_s(duration_s: float) -> float:
+    """Time into a hold of ``duration_s`` the percepts are read at (s).
 
-    Means over the :data:`_PERCEPT_WINDOW_S` before that time; NaN where the
-    estimator had no value there (``chain_n`` without a chain blended in).
+    The steady state's start (:func:`~relaxgrip.experiments.controlled_hold.steady_window_s`:
+    100 s of a 280 s hold, 5 s of a 14 s one), from which a correction on them
+    would count in full.
     """
-    at = min(at_s, hold.duration_s)
+    return steady_window_s(duration_s)[0]
+
+
+def hold_percepts(hold: HoldResult, at_s: float | None = None) -> dict[str, float]:
+    """:data:`PERCEPTS` of one hold, read ``at_s`` into it (default :func:`percept_at_s`).
+
+    Means over the :data:`_PERCEPT_WINDOW_S` before that time, the drift from
+    :data:`_DRIFT_FROM_S`; in a hold shorter than the paper's both shrink with
+    it, as the read time does, so that they stay apart (a 14 s hold: the
+    drift from 0.05-0.2 s, read over 4.75-5 s).  NaN where the estimator had
+    no value there (``chain_n`` without a chain blended in).
+    """
+    at = percept_at_s(hold.duration_s) if at_s is None else min(at_s, hold.duration_s)
+    scale = min(1.0, hold.duration_s / PAPER_DURATION_S)
     t = hold.t_s
 
     def mean(name: str, lo: float, hi: float) -> float:
@@ -101,13 +115,14 @@ def hold_percepts(hold: HoldResult, at_s: float = PERCEPT_AT_S) -> dict[str, flo
         values = values[np.isfinite(values)]
         return float(values.mean()) if values.size else float("nan")
 
-    lo = at - _PERCEPT_WINDOW_S
+    lo = at - _PERCEPT_WINDOW_S * scale
+    drift_from = (_DRIFT_FROM_S[0] * scale, _DRIFT_FROM_S[1] * scale)
     f_onset = hold.series("f_onset_n")
     f_onset = f_onset[np.isfinite(f_onset)]
     motor = hold.series("motor_mm")
     return {
         "f_onset_n": float(f_onset[-1]) if f_onset.size else float("nan"),
-        "icfn_drift_n": mean("icfn_n", lo, at) - mean("icfn_n", *_DRIFT_FROM_S),
+        "icfn_drift_n": mean("icfn_n", lo, at) - mean("icfn_n", *drift_from),
         "motor_travel_mm": mean("motor_mm", lo, at) - float(motor[0]),
         "k_n": mean("k_n", lo, at),
         "tau_s": mean("tau_s", lo, at),
@@ -220,7 +235,7 @@ class BudgetSurvey:
             "finger_0_share": _loo_mae(shares[:, :1], total),
             "both_shares": _loo_mae(shares, total),
         }
-        return {"at_s": min(PERCEPT_AT_S, self.duration_s), "percepts": names,
+        return {"at_s": percept_at_s(self.duration_s), "percepts": names,
                 "correlation": correlation, "corrected_mae_n": corrected}
 
     def _design(self, keys: Sequence[str]) -> FloatArray:

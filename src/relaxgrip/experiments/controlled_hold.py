@@ -65,6 +65,7 @@ __all__ = [
     "check_hold",
     "check_hold_duration_s",
     "check_hold_temp_c",
+    "check_ramp_starts",
     "check_scenario_times",
     "compare_holds",
     "map_holds",
@@ -80,6 +81,9 @@ PAPER_WINDOW_S = (100.0, 280.0)
 HOLD_TEMP_RANGE_C = (28.0, 65.0)
 #: Time allowed to reach the hold (zeroing, heating, closing), on top of the hold (s).
 SETUP_ALLOWANCE_S = 120.0
+#: The loop's rate, the camera's (Hz): a hold of ``duration_s`` lasts ``duration_s`` times
+#: it periods from its onset.
+CONTROL_RATE_HZ = 30.0
 #: The longest hold the experiment runs (s): an hour, 108,000 periods at 30 Hz.  The
 #: models were fitted on holds of 100-280 s; a day's hold would keep 2.6 million rows.
 MAX_HOLD_S = 3600.0
@@ -118,6 +122,22 @@ def check_scenario_times(duration_s: float, **profiles: Profile | None) -> None:
             option = "--" + name.replace("_", "-")
             raise InputError(f"{option} starts at {profile.start_s:g} s, not before the "
                              f"{duration_s:g} s hold ends")
+
+
+def check_ramp_starts(target_n: float, temp_c: float, temp_profile: Profile | None = None,
+                      target_profile: Profile | None = None) -> None:
+    """Refuse a ramp that does not start from the hold's own target or temperature.
+
+    The profile's ``before`` holds from the hold's onset to the ramp's start, so
+    a ramp from another value would make the target or the setpoint jump at the
+    onset, which no ramp asks for.  A step starts from the hold's value anyway.
+    """
+    ramps = ((target_profile, target_n, "--target-profile", "target", "N", "--target-n"),
+             (temp_profile, temp_c, "--temp-profile", "temperature", "°C", "--temp-c"))
+    for profile, held, option, what, unit, given in ramps:
+        if profile is not None and not math.isnan(profile.before) and profile.before != held:
+            raise InputError(f"{option} ramps from {profile.before:g} {unit} but the hold's "
+                             f"{what} is {held:g} {unit} ({given}): the ramp must start from it")
 
 
 def steady_window_s(duration_s: float) -> tuple[float, float]:
@@ -406,13 +426,15 @@ def run_hold(
     Raises
     ------
     InputError
-        A target, temperature or estimator out of range; a budget asked of
-        another estimator or backend; or the hold never started (no contact,
-        target out of reach).
+        A target, temperature or estimator out of range; a ramp that does not
+        start from the hold's target or temperature (:func:`check_ramp_starts`);
+        a budget asked of another estimator or backend; or the hold never
+        started (no contact, target out of reach).
     """
     kind = check_hold(estimator, target_n, temp_c, duration_s)
     check_scenario_times(duration_s, temp_profile=temp_profile, target_profile=target_profile,
                          disturbance=disturbance)
+    check_ramp_starts(target_n, temp_c, temp_profile, target_profile)
     check_backend(backend, disturbance)
     if budget and (kind is not EstimatorKind.RELAX or backend != "twin"):
         raise InputError("an error budget splits relax's Eq. 10 on the twin: use --estimator "
@@ -433,7 +455,7 @@ def run_hold(
             assert isinstance(twin, GripperTwin)
             on_step = _copy_at_onset(twin, frozen, on_step)
         loop = run_loop(twin, controller, clock, plan, duration_s + SETUP_ALLOWANCE_S,
-                        recorder=recorder, on_step=on_step)
+                        rate_hz=CONTROL_RATE_HZ, recorder=recorder, on_step=on_step)
     finally:
         twin.close()
     onset = loop.hold_onset_s()
@@ -579,7 +601,7 @@ def _run_one(args: tuple[str, float, float, float, int, ModelBundle, ObserverMod
 
 
 def compare_holds(
-    estimators: Sequence[str] = ("fixed", "icfn", "relax"),
+    estimators: Sequence[str] = tuple(EstimatorKind),
     target_n: float = 5.0,
     duration_s: float = PAPER_DURATION_S,
     temp_c: float = 40.0,
@@ -588,7 +610,8 @@ def compare_holds(
     n_jobs: int = 1,
     observer: ObserverModel | None = None,
 ) -> HoldComparison:
-    """Run every estimator on the same seed (in parallel with ``n_jobs`` > 1)."""
+    """Run each estimator (every one by default) on the same seed (in parallel with
+    ``n_jobs`` > 1)."""
     for kind in estimators:
         check_hold(kind, target_n, temp_c, duration_s)
     bundle = models if models is not None else load_default_models()

@@ -7,6 +7,11 @@ Grammar (times in seconds since the hold onset, fields separated by ``:``):
   ``START_S``; ``FROM_C`` before) or ``step:TO_C:AT_S``.
 * ``--target-profile``: ``step:TO_N:AT_S`` (the hold's target before, ``TO_N``
   from ``AT_S``) or ``ramp:FROM_N:TO_N:START_S:OVER_S``.
+
+A ramp starts from the hold's own value (``FROM_C`` is ``--temp-c``,
+``FROM_N`` is ``--target-n``): the hold refuses one that does not
+(:func:`relaxgrip.experiments.controlled_hold.check_ramp_starts`), for its
+``FROM`` would hold from the onset on, a jump at the onset.
 * ``--disturbance``: ``push:FORCE_N:AT_S`` or ``push:FORCE_N:AT_S:FOR_S``
   (a hand pushes the held object with ``FORCE_N`` from ``AT_S``, for
   ``FOR_S`` if given).

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relaxgrip.backend import ForceSamples, Frame
+from relaxgrip.clock import TIME_SLACK_S
 from relaxgrip.rig import invert_transform, transform_points
 from relaxgrip.twin.config import TwinConfig
 from relaxgrip.twin.objects import ObjectSpec
@@ -31,11 +32,6 @@ from relaxgrip.twin.render_rgb import RgbObject, RgbRenderer
 FloatArray = NDArray[np.float64]
 
 __all__ = ["SceneState", "SensorSuite"]
-
-#: Captures closer than this to a requested time count as due (s): clock arithmetic slack,
-#: for a clock stepped by sums of a period (``VirtualClock.advance(1 / 30)``) too, whose
-#: round-off passes a nanosecond after half an hour (a frame then came a period late).
-TIME_SLACK_S = 1e-6
 
 
 @dataclass(frozen=True)

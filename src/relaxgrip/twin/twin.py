@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relaxgrip.backend import BackendInfo, Command, Observation, Truth
-from relaxgrip.clock import Clock, VirtualClock
+from relaxgrip.clock import TIME_SLACK_S, Clock, VirtualClock
 from relaxgrip.errors import InputError
 from relaxgrip.physics.beam import (
     FingerParams,
@@ -38,7 +38,7 @@ from relaxgrip.physics.thermal import (
 from relaxgrip.physics.viscoelastic import phi1
 from relaxgrip.twin.config import TWIN_VERSION, TwinConfig
 from relaxgrip.twin.objects import ObjectSpec, get_object
-from relaxgrip.twin.sensor_suite import TIME_SLACK_S, SceneState, SensorSuite
+from relaxgrip.twin.sensor_suite import SceneState, SensorSuite
 from relaxgrip.twin.sensors import SceneObject
 
 FloatArray = NDArray[np.float64]
