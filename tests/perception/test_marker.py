@@ -429,10 +429,10 @@ def test_two_markers_of_its_id_from_the_start_need_the_expected_place() -> None:
     blind = MarkerTracker(RIG.rgb.intrinsics, RIG.marker)
     state = blind.update(Frame(0.0, 0, image))
     assert state.status is TrackStatus.REJECTED
-    assert state.message == ("2 markers with id 0 in view and none tracked yet: give home_px "
+    assert state.message == ("2 markers with id 0 in view and none tracked yet: give home_m "
                              "to tell the finger's apart")
-    home = renderer.marker_corners_px(rest).mean(axis=0)
-    told = MarkerTracker(RIG.rgb.intrinsics, RIG.marker, home_px=(home[0], home[1]))
+    x, y, z = (float(v) for v in rest[:3, 3])
+    told = MarkerTracker(RIG.rgb.intrinsics, RIG.marker, home_m=(x, y, z))
     state = told.update(Frame(0.0, 0, image))
     assert state.status is TrackStatus.ZEROING
     assert state.pose is not None
@@ -473,6 +473,26 @@ def test_perception_tracks_the_finger_s_marker_of_two_with_its_id_from_the_start
         assert np.abs(state.pose.tvec_m - rest[:3, 3]).max() < 1e-4
 
 
+def test_a_lone_marker_of_its_id_far_from_the_finger_s_is_not_zeroed_on() -> None:
+    """Before the zero, only the rig's place tells the finger's marker: one 25 mm from it,
+    alone in view (the finger's hidden), had been taken for the zero."""
+    from relaxgrip.perception.pipeline import Perception
+
+    hidden = RgbRenderer(RIG, RgbSensorConfig(occlusion=0.4), 0)
+    clear = RgbRenderer(RIG, RgbSensorConfig(), 0)
+    rest = RIG.marker2cam()
+    decoy = shifted(rest, 1, 0.025)
+    perception = Perception(RIG)
+    for k in range(3):
+        image = with_decoy(hidden.render(k, rest), decoy, k)
+        state = perception.update(Frame(k / 30, k, image), None, 0.0).marker
+        assert state.status is TrackStatus.REJECTED, state
+        assert state.message.startswith("marker 25.0 mm from where the rig puts the unbent "
+                                        "finger's, beyond the 20 mm")
+    state = perception.update(Frame(0.1, 3, clear.render(3, rest)), None, 0.0).marker
+    assert state.status is TrackStatus.ZEROING
+
+
 @pytest.mark.parametrize("travel_m", [0.0, -0.01, math.nan])
 def test_a_marker_travel_that_is_no_bound_is_refused(travel_m: float) -> None:
     from relaxgrip.errors import InputError
@@ -484,5 +504,7 @@ def test_a_marker_travel_that_is_no_bound_is_refused(travel_m: float) -> None:
 def test_a_home_that_is_no_place_is_refused() -> None:
     from relaxgrip.errors import InputError
 
-    with pytest.raises(InputError, match="home_px must be two finite pixel coordinates"):
-        MarkerTracker(RIG.rgb.intrinsics, RIG.marker, home_px=(math.nan, 1.0))
+    with pytest.raises(InputError, match="home_m must be a point in front of the camera"):
+        MarkerTracker(RIG.rgb.intrinsics, RIG.marker, home_m=(math.nan, 0.0, 0.1))
+    with pytest.raises(InputError, match="home_m must be a point in front of the camera"):
+        MarkerTracker(RIG.rgb.intrinsics, RIG.marker, home_m=(0.0, 0.0, -0.1))

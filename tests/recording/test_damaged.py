@@ -6,10 +6,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 from mcap.reader import NonSeekingReader, make_reader
 
+from relaxgrip.errors import InputError
 from relaxgrip.experiments.controlled_hold import HoldResult
 from relaxgrip.recording import iter_messages, iter_periods, read_session, recover
+from relaxgrip.recording.reader import read_replayable_session
 from tests.recording.conftest import copy_recording
 
 
@@ -86,7 +89,9 @@ def test_recover_restores_the_session_a_damaged_first_chunk_took(
         relax_hold: tuple[Path, HoldResult], tmp_path: Path) -> None:
     """The session message is in the first chunk: damaged, the recovered file had no
     session, and nothing read it (replay: "not a relaxgrip recording").  The recorder
-    writes a copy outside the chunks, which recover puts back first."""
+    writes a copy outside the chunks, which recover puts back first, saying where the
+    recording resumes: replay and datasets, which need the marker's zero from the lost
+    start, refuse it in one line."""
     good = relax_hold[0]
     session = read_session(good)
     for cut in (False, True):
@@ -95,8 +100,16 @@ def test_recover_restores_the_session_a_damaged_first_chunk_took(
         if cut:  # killed: no summary, no footer
             damaged.write_bytes(damaged.read_bytes()[: damaged.stat().st_size * 2 // 3])
         out = tmp_path / "recovered.mcap"
-        recover(damaged, out)
-        assert read_session(out) == session
+        report = recover(damaged, out)
+        restored = read_session(out)
+        assert report.lost_start_s == restored["lost_start_s"]
+        resumes_s = restored.pop("lost_start_s") - session["t0_s"]
+        assert restored == session
+        assert 0.0 < resumes_s < 5.0
+        # Its marker's zero went with the first chunk: not replayed on the frames after.
+        with pytest.raises(InputError, match=r"recovered without its start \(a damaged first "
+                                             rf"chunk; it resumes at {resumes_s:.2f} s\)"):
+            read_replayable_session(out)
         first = next(iter_messages(out))
         assert first[0] == "/relaxgrip/session"
         assert sum(1 for topic, _, _ in iter_messages(out) if topic == first[0]) == 1
@@ -104,8 +117,10 @@ def test_recover_restores_the_session_a_damaged_first_chunk_took(
         again = tmp_path / "again.mcap"  # its copy goes along
         _damage_first_chunk(out, again)
         recover(again, tmp_path / "again-recovered.mcap")
-        assert read_session(tmp_path / "again-recovered.mcap") == session
+        again_restored = read_session(tmp_path / "again-recovered.mcap")
+        assert "lost_start_s" in again_restored
+        assert {k: v for k, v in again_restored.items() if k != "lost_start_s"} == session
     # Recovered whole, the session is read once, not twice.
     whole = tmp_path / "whole.mcap"
-    recover(good, whole)
+    assert recover(good, whole).lost_start_s is None
     assert sum(1 for topic, _, _ in iter_messages(whole) if topic == "/relaxgrip/session") == 1

@@ -121,7 +121,8 @@ def recover_cmd(
                    "damaged_chunks": report.damaged_chunks,
                    "expected_messages": report.expected_messages,
                    "lost_messages": report.lost_messages,
-                   "stopped_early": report.stopped_early})
+                   "stopped_early": report.stopped_early,
+                   "lost_start_s": report.lost_start_s})
         return
     state = "was complete" if report.complete else "was truncated"
     damage = []
@@ -132,6 +133,9 @@ def recover_cmd(
     if report.lost_messages:
         damage.append(f"{report.lost_messages} of its {report.expected_messages} "
                       "messages lost")
+    if report.lost_start_s is not None:
+        damage.append(f"its start, up to {report.lost_start_s:.2f} s, with the marker's zero: "
+                      "it can be read, not replayed")
     if damage:
         state = f"{state} but damaged ({'; '.join(damage)})"
     console.print(f"{recording} {state}: {report.messages} messages on {report.channels} "

@@ -577,13 +577,16 @@ class MarkerTracker:
         averaged starts again from it.  A pose further than the mount's
         ``max_travel_m`` from the zero pose is rejected however long it stays:
         it is another marker of the same id, not the finger.
-    home_px : tuple of float, optional
-        Where the marker's centre is expected in the image (pixels), e.g. the
-        projection of :meth:`relaxgrip.rig.RigGeometry.marker2cam`.  Of several
-        detections of the tracked id, the tracker keeps the one nearest the
-        last accepted corners; before any is accepted, the one nearest
-        ``home_px``.  Without it, a frame showing several is rejected until one
-        can be told apart.
+    home_m : tuple of float, optional
+        Where the unbent finger's marker is in the camera frame (m): the
+        translation of :meth:`relaxgrip.rig.RigGeometry.marker2cam`.  Of
+        several detections of the tracked id, the tracker keeps the one nearest
+        the last accepted corners; before any is accepted, the one nearest
+        where this projects.  Without it, a frame showing several is rejected
+        until one can be told apart.  Before the zero pose is taken, a marker
+        further than the mount's ``max_travel_m`` from it is rejected too: it is
+        another marker of the id (or the rig file puts the marker or the camera
+        that far from where they are; ``relaxgrip check-rig`` shows it).
     verify_every : int
         Between detections the corners are followed by the edge fit alone,
         started from where the last frames put them (a marker moves a pixel
@@ -602,14 +605,18 @@ class MarkerTracker:
     max_rate_rad_s: float = 3.0
     reacquire_after: int = 5
     verify_every: int = 5
-    home_px: tuple[float, float] | None = None
+    home_m: tuple[float, float, float] | None = None
     _full: cv2.aruco.ArucoDetector = field(init=False, repr=False)
     _roi: cv2.aruco.ArucoDetector = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if self.home_px is not None and not (
-                len(self.home_px) == 2 and all(math.isfinite(v) for v in self.home_px)):
-            raise InputError(f"home_px must be two finite pixel coordinates, got {self.home_px}")
+        self._home_px: FloatArray | None = None
+        if self.home_m is not None:
+            home = np.asarray(self.home_m, dtype=np.float64)
+            if home.shape != (3,) or not (np.all(np.isfinite(home)) and home[2] > 0):
+                raise InputError(f"home_m must be a point in front of the camera (x, y, z > 0 "
+                                 f"m), got {self.home_m}")
+            self._home_px = self.intrinsics.project(home[None, :])[0]
         dictionary = self.marker.aruco_dictionary
         self._full = make_detector(dictionary)
         self._roi = make_detector(dictionary, roi=True)
@@ -734,19 +741,19 @@ class MarkerTracker:
 
         Of several with the tracked id (a second marker printed with it, 25 mm
         away on the next finger or the bench), the one whose centre is nearest
-        the last accepted corners' centre, or ``home_px`` before any was
-        accepted; with neither, none, and the reason.
+        the last accepted corners' centre, or where ``home_m`` projects before
+        any was accepted; with neither, none, and the reason.
         """
         mine = [d for d in found if d.marker_id == self.marker.marker_id]
         if len(mine) < 2:
             return (mine[0] if mine else None), ""
         if self._last is not None:
             ref = self._last.corners_px.mean(axis=0) - np.asarray(origin, dtype=np.float64)
-        elif self.home_px is not None:
-            ref = np.asarray(self.home_px, dtype=np.float64) - np.asarray(origin)
+        elif self._home_px is not None:
+            ref = self._home_px - np.asarray(origin, dtype=np.float64)
         else:
             return None, (f"{len(mine)} markers with id {self.marker.marker_id} in view and "
-                          f"none tracked yet: give home_px to tell the finger's apart")
+                          f"none tracked yet: give home_m to tell the finger's apart")
 
         def distance_px(det: MarkerDetection) -> float:
             return float(np.linalg.norm(det.corners_px.mean(axis=0) - ref))
@@ -825,18 +832,20 @@ class MarkerTracker:
 
     def _beyond_reach(self, pose: MarkerPose) -> str:
         """Why ``pose`` cannot be the finger's marker (further than the mount's
-        ``max_travel_m`` from the zero pose, or from the first frame taken towards it, while
-        that is averaged); empty if it can be."""
+        ``max_travel_m`` from the zero pose, from the first frame taken towards it while
+        that is averaged, or before any from ``home_m``); empty if it can be."""
         if self._zero is not None:
-            home = self._zero[1]
+            home, what = self._zero[1], "its zero pose"
         elif self._zero_samples:
-            home = self._zero_samples[0].tvec_m
+            home, what = self._zero_samples[0].tvec_m, "its zero pose"
+        elif self.home_m is not None:
+            home, what = np.asarray(self.home_m), "where the rig puts the unbent finger's"
         else:
             return ""
         step = pose.tvec_m - home
         travel_m = math.sqrt(float(step @ step))
         if travel_m <= self.marker.max_travel_m:
             return ""
-        return (f"marker {1e3 * travel_m:.1f} mm from its zero pose, beyond the "
+        return (f"marker {1e3 * travel_m:.1f} mm from {what}, beyond the "
                 f"{1e3 * self.marker.max_travel_m:g} mm a bent finger reaches (the rig's "
                 f"marker max_travel_mm): another marker of id {self.marker.marker_id}?")

@@ -120,9 +120,8 @@ class Perception:
         self.rig = rig
         if tracker is None:
             # Where the unbent finger's marker is: of two markers of its id, the finger's.
-            home = rig.rgb.intrinsics.project(rig.marker2cam()[:3, 3])
-            tracker = MarkerTracker(rig.rgb.intrinsics, rig.marker,
-                                    home_px=(float(home[0]), float(home[1])))
+            x, y, z = (float(v) for v in rig.marker2cam()[:3, 3])
+            tracker = MarkerTracker(rig.rgb.intrinsics, rig.marker, home_m=(x, y, z))
         self.tracker = tracker
         self.thermal = thermal if thermal is not None else ThermalPerception(rig)
         self.ir = StreamSync(max_ir_age_s)

@@ -168,11 +168,18 @@ def read_replayable_session(path: Path, tolerant: bool = False) -> dict[str, Any
     Raises
     ------
     InputError
-        As :func:`read_session`, or a recording begun during a grasp (the
+        As :func:`read_session`, a recording ``recover`` restored without its
+        start (``lost_start_s``), or one begun during a grasp (the
         dashboard's Record button): the marker's zero and the estimator's
         state from before it are not in it.
     """
     session = read_session(path, tolerant)
+    lost = session.get("lost_start_s")
+    if isinstance(lost, (int, float)) and not isinstance(lost, bool):
+        raise InputError(
+            f"{path}: recovered without its start (a damaged first chunk; it resumes at "
+            f"{lost - float(session.get('t0_s') or 0.0):.2f} s): the marker's zero and the "
+            "estimator's state from before then are lost")
     if session.get("grasp_in_progress"):
         raise InputError(
             f"{path}: the recording began during a grasp (phase "
@@ -396,6 +403,10 @@ class RecoverReport:
     stopped_early : bool
         The file's record structure broke before its end (a killed recorder,
         or damage outside a chunk's data): nothing after that point is read.
+    lost_start_s : float or None
+        The damage took the first chunk, session message included: the
+        session was restored from its copy, and the recording resumes at this
+        log time (s); it can no longer be replayed (the marker's zero is lost).
     """
 
     complete: bool
@@ -405,6 +416,7 @@ class RecoverReport:
     damaged_chunks: int = 0
     expected_messages: int | None = None
     stopped_early: bool = False
+    lost_start_s: float | None = None
 
     @property
     def lost_messages(self) -> int | None:
@@ -461,11 +473,12 @@ def recover(src: Path, dst: Path) -> RecoverReport:
     # The session message's copy outside the chunks, while the message is not copied.
     session: Any = None
     session_copied = False
+    lost_start_s: float | None = None
     session_channel = next((c for c in listed_channels.values() if c.topic == SESSION_TOPIC),
                            None)
 
     def copy(record: Any, writer: Writer) -> None:
-        nonlocal count, end_ns, session, session_copied, session_channel
+        nonlocal count, end_ns, session, session_copied, session_channel, lost_start_s
         if isinstance(record, Metadata) and record.name == SESSION_METADATA:
             writer.add_metadata(record.name, dict(record.metadata))
             session = None if session_copied else record
@@ -489,8 +502,12 @@ def recover(src: Path, dst: Path) -> RecoverReport:
             elif session is not None and session_channel is not None:
                 lost, session = session, None  # the damage took the message: put it first
                 ns = int(lost.metadata["log_time_ns"])
+                # ... saying what it lost with it: the marker's zero, the estimator's start.
+                lost_start_s = record.log_time * 1e-9
+                restored = {**json.loads(lost.metadata["message"]),
+                            "lost_start_s": lost_start_s}
                 copy(Message(channel_id=session_channel.id, sequence=0, log_time=ns,
-                             publish_time=ns, data=lost.metadata["message"].encode()), writer)
+                             publish_time=ns, data=json.dumps(restored).encode()), writer)
             if record.channel_id in channels:
                 writer.add_message(channels[record.channel_id], record.log_time, record.data,
                                    record.publish_time, record.sequence)
@@ -537,7 +554,7 @@ def recover(src: Path, dst: Path) -> RecoverReport:
     return RecoverReport(complete, count, len(channels),
                          end_ns * 1e-9 if end_ns >= 0 else float("nan"),
                          damaged_chunks=damaged, expected_messages=expected,
-                         stopped_early=stopped_early)
+                         stopped_early=stopped_early, lost_start_s=lost_start_s)
 
 
 def _summary_definitions(path: Path) -> tuple[dict[int, Any], dict[int, Any]]:

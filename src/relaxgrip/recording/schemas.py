@@ -97,6 +97,9 @@ SESSION = _obj("relaxgrip.Session", "Who recorded what: written once, first.", {
     "scenario": {"type": "object", "additionalProperties": {"type": "string"},
                  "description": "profiles the run applied besides the plan, as given "
                                 "(temp_profile, target_profile, disturbance)"},
+    "lost_start_s": {"type": "number",
+                     "description": "set by relaxgrip recover when the damage took the first "
+                                    "chunk: the loop time the recording resumes at (s)"},
     "models": {"type": ["object", "null"],
                "description": "the estimator's models: directory, sha256 of each model file, "
                               "hold_bias_sha256, and the observer's directory, sha256 and band "
