@@ -183,7 +183,8 @@ class Perception:
             return self._last
         self._last_rgb_seq, self._last_rgb_t = rgb.seq, rgb.t_s
         marker = self.tracker.update(rgb)
-        if marker.delta_t_m is not None and marker.delta_r_rad is not None:
+        if (self.rig.ir_follow_bend and marker.delta_t_m is not None
+                and marker.delta_r_rad is not None):
             self._bend = finger_bend(self.rig, marker.delta_t_m, marker.delta_r_rad)
         proximity = None
         if self._proximity is not None and marker.status is not TrackStatus.INVALID:
