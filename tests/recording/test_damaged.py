@@ -16,14 +16,17 @@ from relaxgrip.recording.reader import read_replayable_session
 from tests.recording.conftest import copy_recording
 
 
-def _damage_first_chunk(src: Path, dst: Path) -> None:
-    """``src`` with a byte of its first chunk's records flipped."""
+def _damage_first_chunk(src: Path, dst: Path, killed: bool = False) -> None:
+    """``src`` with a byte of its first chunk's records flipped; ``killed``: cut as a kill
+    leaves it too (no summary, no footer)."""
     with open(src, "rb") as f:
         summary = make_reader(f).get_summary()
     assert summary is not None
     first = min(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
     data = bytearray(src.read_bytes())
     data[first.chunk_start_offset + first.chunk_length - 100] ^= 0xFF
+    if killed:
+        del data[len(data) * 2 // 3:]
     dst.write_bytes(bytes(data))
 
 
@@ -38,9 +41,7 @@ def test_recover_keeps_the_rest_of_a_file_whose_first_chunk_is_damaged(
     copy_recording(good, old_style, lambda topic, data, t: data)
     for src, cut in ((old_style, False), (good, False), (good, True)):
         damaged = tmp_path / "damaged.mcap"
-        _damage_first_chunk(src, damaged)
-        if cut:  # killed: no summary, no footer
-            damaged.write_bytes(damaged.read_bytes()[: damaged.stat().st_size * 2 // 3])
+        _damage_first_chunk(src, damaged, killed=cut)
         out = tmp_path / "recovered.mcap"
         report = recover(damaged, out)
         assert report.damaged_chunks == 1, src
@@ -96,9 +97,7 @@ def test_recover_restores_the_session_a_damaged_first_chunk_took(
     session = read_session(good)
     for cut in (False, True):
         damaged = tmp_path / "damaged.mcap"
-        _damage_first_chunk(good, damaged)
-        if cut:  # killed: no summary, no footer
-            damaged.write_bytes(damaged.read_bytes()[: damaged.stat().st_size * 2 // 3])
+        _damage_first_chunk(good, damaged, killed=cut)
         out = tmp_path / "recovered.mcap"
         report = recover(damaged, out)
         restored = read_session(out)

@@ -21,9 +21,9 @@ models are used for them, as before.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from relaxgrip.errors import InputError
 from relaxgrip.learning.observer import (
@@ -38,6 +38,8 @@ from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 from relaxgrip.recording.reader import read_session
 
 __all__ = ["differences_note", "model_differences", "recorded_models", "recorded_observer"]
+
+_T = TypeVar("_T")
 
 
 def _named(paths: Sequence[Path], part: str | None) -> dict[str, tuple[dict[str, Any], Path]]:
@@ -65,6 +67,22 @@ def _one(named: dict[str, tuple[dict[str, Any], Path]], what: str, flag: str
     return next(iter(named.values()), None)
 
 
+def _first_holding(entry: Mapping[str, Any], shipped: Path, load: Callable[[Path], _T],
+                   error: type[Exception], holds: Callable[[_T], bool]) -> _T | None:
+    """What ``load`` reads from the shipped directory, or else from the one a recording names
+    (``entry["directory"]``), if it ``holds`` what the recording ran with; None if neither."""
+    for directory in (shipped, entry.get("directory")):
+        if not directory or not Path(directory).is_dir():
+            continue
+        try:
+            loaded = load(Path(directory))
+        except error:
+            continue
+        if holds(loaded):
+            return loaded
+    return None
+
+
 def recorded_models(paths: Sequence[Path]) -> ModelBundle | None:
     """The models the recordings ran with, loaded; None when they name none.
 
@@ -79,16 +97,12 @@ def recorded_models(paths: Sequence[Path]) -> ModelBundle | None:
         return None
     entry, path = found
     wanted = entry.get("sha256")
-    for directory in (default_models_dir(), entry.get("directory")):
-        if not directory or not Path(directory).is_dir():
-            continue
-        try:
-            bundle = load_models(Path(directory), icfn_feature_schema=ICFN_SCHEMA,
-                                 rcfn_feature_schema=RCFN_SCHEMA)
-        except ModelFileError:
-            continue
-        if model_checksums(bundle.manifest) == wanted:
-            return bundle
+    bundle = _first_holding(
+        entry, default_models_dir(),
+        lambda d: load_models(d, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA),
+        ModelFileError, lambda b: model_checksums(b.manifest) == wanted)
+    if bundle is not None:
+        return bundle
     raise InputError(
         f"{path}: it ran with the models in {entry.get('directory')} "
         f"(icfn sha256 {str((wanted or {}).get('icfn', '?'))[:12]}…), which are not there now: "
@@ -107,15 +121,11 @@ def recorded_observer(paths: Sequence[Path]) -> ObserverModel | None:
     if found is None:
         return None
     entry, path = found
-    for directory in (default_observer_dir(), entry.get("directory")):
-        if not directory or not Path(directory).is_dir():
-            continue
-        try:
-            observer = load_observer(Path(directory))
-        except ObserverFileError:
-            continue
-        if observer.source is not None and observer.source[1] == entry.get("sha256"):
-            return observer
+    observer = _first_holding(
+        entry, default_observer_dir(), load_observer, ObserverFileError,
+        lambda o: o.source is not None and o.source[1] == entry.get("sha256"))
+    if observer is not None:
+        return observer
     raise InputError(
         f"{path}: it ran with the observer in {entry.get('directory')} "
         f"(sha256 {str(entry.get('sha256'))[:12]}…), which is not there now: "
