@@ -306,8 +306,9 @@ class MarkerMount:
             raise InputError(f"marker size must be > 0 m, got {self.size_m}")
         if not abs(self.tilt_deg) < 75.0:
             raise InputError(f"marker tilt must be within ±75°, got {self.tilt_deg}")
-        if not self.max_travel_m > 0.0:  # inf turns the bound off; nan is none
-            raise InputError(f"marker travel must be > 0 m, got {self.max_travel_m}")
+        # Finite: a rig is stored as JSON in recordings, where inf is no number.
+        if not 0.0 < self.max_travel_m < math.inf:
+            raise InputError(f"marker travel must be > 0 m and finite, got {self.max_travel_m}")
 
     @property
     def aruco_dictionary(self) -> cv2.aruco.Dictionary:

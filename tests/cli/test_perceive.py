@@ -255,3 +255,82 @@ def test_an_orientation_that_is_none_leaves_the_image_as_stored(
         upright.save(tmp_path / name, exif=exif)
         assert _exif_orientation((tmp_path / name).read_bytes()) == 1
     assert _exif_orientation(b"not an image at all") == 1
+
+
+@pytest.mark.parametrize(("dtype", "scale", "alpha"), [
+    (np.float64, 1.0 / 255.0, False), (np.int32, 1000.0, False), (np.int16, 100.0, False),
+    (np.float64, 1.0 / 255.0, True), (np.int32, 1000.0, True), (np.int16, 100.0, True),
+])
+def test_a_colour_tiff_of_any_depth_reads_as_the_plain_one(
+    marker_png: tuple[Path, np.ndarray], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str], dtype: type, scale: float, alpha: bool,
+) -> None:
+    """cv2.cvtColor takes 8-bit, 16-bit and float32 colour only: a float64 or signed
+    integer colour TIFF was a traceback; a signed one's opaque alpha (its type's largest
+    value) was read as far beyond opaque, and the marker lost."""
+    path, _ = marker_png
+    colour = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    assert colour is not None
+    image: np.ndarray = (colour * scale).astype(dtype)
+    if alpha:
+        opaque = np.iinfo(dtype).max if np.dtype(dtype).kind == "i" else 1.0
+        image = np.dstack([image, np.full(image.shape[:2], opaque, dtype)])
+    out = tmp_path / "marker.tiff"
+    assert cv2.imwrite(str(out), image)
+    code, plain, _ = run_main(["perceive", path, "--json"], monkeypatch, capsys)
+    code2, other, err = run_main(["perceive", out, "--json"], monkeypatch, capsys)
+    assert (code, code2) == (0, 0), err
+    (want,), (got,) = json.loads(plain)["markers"], json.loads(other)["markers"]
+    assert np.allclose(got["tvec_m"], want["tvec_m"], atol=2e-5)
+
+
+def _png_with_exif(exif: bytes) -> bytes:
+    """A small PNG whose ``eXIf`` chunk holds ``exif``."""
+    import io
+    import struct
+    import zlib
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.new("RGB", (8, 6)).save(buf, "PNG")
+    png = buf.getvalue()
+    body = b"eXIf" + exif
+    chunk = struct.pack(">I", len(exif)) + body + struct.pack(">I", zlib.crc32(body))
+    return png[:33] + chunk + png[33:]  # after the signature and IHDR
+
+
+@pytest.mark.parametrize("exif", [
+    b"II*\x00",  # cut off before its first directory's offset: a struct.error in Pillow
+    # an orientation whose 1000 values lie beyond the data: a warning from Pillow
+    b"II*\x00\x08\x00\x00\x00\x01\x00\x12\x01\x03\x00\xe8\x03\x00\x00\x00\x01\x00\x00",
+])
+def test_damaged_exif_reads_the_image_as_stored(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+    recwarn: pytest.WarningsRecorder, exif: bytes,
+) -> None:
+    path = tmp_path / "damaged.png"
+    path.write_bytes(_png_with_exif(exif))
+    code, out, err = run_main(["perceive", path, "--json"], monkeypatch, capsys)
+    assert (code, err) == (0, "")
+    assert not recwarn.list  # on the command line, two lines on stderr
+    assert (json.loads(out)["width_px"], json.loads(out)["height_px"]) == (8, 6)
+
+
+def test_a_picture_over_pillows_pixel_limit_is_turned_too(
+    marker_png: tuple[Path, np.ndarray], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str], recwarn: pytest.WarningsRecorder,
+) -> None:
+    """Pillow refuses to open a picture of over twice its MAX_IMAGE_PIXELS (a 200 MP phone
+    photo), and warns over it: only its EXIF is read, OpenCV has decoded it."""
+    from PIL import Image
+
+    turned = tmp_path / "portrait.png"
+    _stored_as(Image.open(marker_png[0]).convert("RGB"), 6, turned)
+    for limit in (480 * 640 // 3, 480 * 640 // 2 + 1):  # refused; warned
+        monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", limit)
+        code, out, err = run_main(["perceive", turned, "--json"], monkeypatch, capsys)
+        assert (code, err) == (0, "")
+        assert (json.loads(out)["width_px"], json.loads(out)["height_px"]) == (640, 480)
+        assert limit == Image.MAX_IMAGE_PIXELS  # put back
+    assert not recwarn.list

@@ -178,6 +178,8 @@ def test_implausible_jump_is_rejected_then_reacquired() -> None:
         (np.zeros((480, 640, 3), np.float32), "dtype float32"),
         (np.zeros((480, 640, 4), np.uint8), "4 channels"),
         ("not an image", "not an image array"),
+        (np.zeros(480 * 640 * 3, np.uint8), "1 dimensions, not an image's rows"),  # a raw buffer
+        (np.array(7, np.uint8), "0 dimensions, not an image's rows"),
     ],
 )
 def test_bad_frames_give_an_invalid_state(image: object, message: str) -> None:
@@ -493,7 +495,7 @@ def test_a_lone_marker_of_its_id_far_from_the_finger_s_is_not_zeroed_on() -> Non
     assert state.status is TrackStatus.ZEROING
 
 
-@pytest.mark.parametrize("travel_m", [0.0, -0.01, math.nan])
+@pytest.mark.parametrize("travel_m", [0.0, -0.01, math.nan, math.inf])
 def test_a_marker_travel_that_is_no_bound_is_refused(travel_m: float) -> None:
     from relaxgrip.errors import InputError
 

@@ -148,6 +148,7 @@ def test_a_cold_aluminium_can_is_not_an_object():
         (np.full((192, 256), np.nan, np.float32), "non-finite"),
         (np.zeros((192, 256, 3), np.float32), "dimensions"),
         ([[25.0]], "not an image"),
+        (np.zeros(192 * 256, np.float32), "1 dimensions, not an image's rows"),  # a raw buffer
     ],
 )
 def test_bad_frames_raise_frame_error(image, message):

@@ -5,6 +5,8 @@ from __future__ import annotations
 import io
 import math
 import re
+import struct
+import warnings
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -34,16 +36,25 @@ _ORIENTATION_TAG = 0x0112
 def _exif_orientation(data: bytes) -> int:
     """The orientation (1-8) an image file's EXIF gives it (Pillow reads a JPEG's APP1, a
     PNG's ``eXIf`` and a WebP's ``EXIF`` chunk); 1 (as stored) for none, a value outside
-    1-8, a file Pillow cannot read, and a TIFF, whose decoder in OpenCV turns it itself."""
+    1-8, a file Pillow cannot read or EXIF it cannot parse, and a TIFF, whose decoder in
+    OpenCV turns it itself."""
     from PIL import Image, UnidentifiedImageError
 
+    # OpenCV has decoded the pixels already and only the EXIF is read here: Pillow's pixel
+    # limit (a 200 MP phone photo is over it) and its warnings on damaged EXIF do not apply.
+    limit = Image.MAX_IMAGE_PIXELS
+    Image.MAX_IMAGE_PIXELS = None
     try:
-        with Image.open(io.BytesIO(data)) as image:
-            if image.format == "TIFF":
-                return 1
-            value = image.getexif().get(_ORIENTATION_TAG, 1)
-    except (UnidentifiedImageError, OSError, ValueError, SyntaxError):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            with Image.open(io.BytesIO(data)) as image:
+                if image.format == "TIFF":
+                    return 1
+                value = image.getexif().get(_ORIENTATION_TAG, 1)
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, struct.error):
         return 1
+    finally:
+        Image.MAX_IMAGE_PIXELS = limit
     return value if isinstance(value, int) and 1 <= value <= 8 else 1
 
 
@@ -106,11 +117,13 @@ def _read_gray(path: Path) -> np.ndarray[Any, np.dtype[np.uint8]]:
     if image is None:
         raise InputError(f"{path}: not an image OpenCV can read")
     if image.ndim == 3 and image.shape[2] in (2, 4):  # an alpha channel: over white
-        white = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(image.dtype, 1.0)
+        white = float(np.iinfo(image.dtype).max) if image.dtype.kind in "iu" else 1.0
         alpha = image[..., -1:].astype(np.float32) / white
         colour = image[..., :-1].astype(np.float32)
         image = (colour * alpha + white * (1.0 - alpha)).astype(image.dtype)
     if image.ndim == 3:  # grey first: the scaling below then touches one channel
+        if image.shape[2] > 1 and image.dtype not in (np.uint8, np.uint16, np.float32):
+            image = image.astype(np.float32)  # a float64 or integer TIFF: cvtColor takes neither
         image = image[..., 0] if image.shape[2] == 1 else cv2.cvtColor(
             image, cv2.COLOR_BGR2GRAY)
     if image.dtype != np.uint8:  # 16-bit or float images: scale to 8 bits

@@ -416,7 +416,9 @@ def _marker(t: _Table) -> MarkerMount:
 
 
 def _finger(t: _Table) -> FingerGeometry:
-    length = t.number("length_mm", positive=True)
+    # At most a metre, as the aperture: perception draws the finger in 5 mm pieces, and a
+    # length of 1e308 mm is a typo, not a finger.
+    length = t.number("length_mm", positive=True, max_value=MAX_APERTURE_MM)
     thickness = t.number("thickness_mm", positive=True)
     height = t.number("height_mm", positive=True)
     beams = t.numbers("beam_positions_mm", (11.0, 33.0, 55.0, 77.0, 99.0))

@@ -49,6 +49,9 @@ def _check_shape(image: object, intrinsics: CameraIntrinsics, kind: str) -> NDAr
         raise FrameError(f"{kind} frame is {type(image).__name__}, not an image array")
     if image.size == 0:
         raise FrameError(f"{kind} frame is empty")
+    if image.ndim < 2:  # a driver's flat buffer, not reshaped to rows and columns
+        raise FrameError(f"{kind} frame has {image.ndim} dimensions, not an image's rows and "
+                         f"columns")
     if image.shape[:2] != intrinsics.shape:
         h, w = intrinsics.shape
         raise FrameError(
