@@ -247,3 +247,36 @@ def test_help_shows_the_defaults_it_states(monkeypatch, capsys, command, shown):
     code, out, _ = run_main([*command, "--help"], monkeypatch, capsys)
     assert code == 0
     assert shown in " ".join(out.replace("│", " ").split())
+
+
+def test_budget_survey_of_one_short_hold_reads_and_says_it(monkeypatch, capsys):
+    """A 1 s hold on one seed: the percepts were NaN (windows under a frame), the title's
+    steady state read 0–1 s for 0.3571–1 s, and the bias-free MAE of one seed printed nan."""
+    code, out, err = run_main(["budget", "--seeds", "3", "--duration-s", "1", "--jobs", "1",
+                               "--json"], monkeypatch, capsys)
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["observability"]["percepts"] == ["f_onset_n", "icfn_drift_n", "motor_travel_mm",
+                                              "k_n", "tau_s"]
+    code, out, err = run_main(["budget", "--seeds", "3", "--duration-s", "1", "--jobs", "1"],
+                              monkeypatch, capsys)
+    assert code == 0, err
+    text = " ".join(out.split())
+    assert "estimate − true force over 0.3571–1 s" in text
+    assert "taken off – N" in text
+    assert "nan" not in text
+
+
+def test_a_push_off_the_twin_is_refused_before_the_recording_opens(monkeypatch, capsys,
+                                                                    tmp_path: Path):
+    """The emulator cannot push the object: refused, but after --record had opened the file,
+    and an earlier recording there was overwritten by a 10 kB stub."""
+    record = tmp_path / "earlier.mcap"
+    record.write_text("an earlier recording")
+    code, out, err = run_main(["hold", "--backend", "emulator", "--disturbance", "push:1:1",
+                               "--duration-s", "2", "--record", record], monkeypatch, capsys)
+    assert code == 2
+    assert "a disturbance (a push on the object) needs the twin backend" in err
+    assert err.count("\n") == 1
+    assert out == ""
+    assert record.read_text() == "an earlier recording"

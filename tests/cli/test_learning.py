@@ -210,3 +210,37 @@ def test_a_damaged_dataset_is_one_line_before_any_work(
     code, out, err = run_main(args, monkeypatch, capsys)
     assert_one_error_line(code, out, err, expected)
     assert not (tmp_path / "out").exists()
+
+
+def test_calibrate_hold_lists_the_recordings_once(tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """The models note and the calibration read the same files: the directory listed once
+    (the calibration was given the directory and listed it again)."""
+    from relaxgrip.errors import InputError
+    from relaxgrip.experiments import recorded_calibration
+    from relaxgrip.learning.training import default_models_dir
+    from relaxgrip.recording import provenance
+
+    models = tmp_path / "models"
+    shutil.copytree(default_models_dir(), models)
+    holds = tmp_path / "holds"
+    holds.mkdir()
+    for name in ("b.mcap", "a.mcap"):
+        (holds / name).write_bytes(b"")
+    seen: dict[str, list[Path]] = {}
+
+    def note(files: list[Path], *args: object, **kwargs: object) -> None:
+        seen["note"] = list(files)
+
+    def calibrate(paths: list[Path], *args: object) -> None:
+        seen["calibration"] = list(paths)
+        raise InputError("stop here")
+
+    monkeypatch.setattr(provenance, "differences_note", note)
+    monkeypatch.setattr(recorded_calibration, "calibration_from_recordings", calibrate)
+    code, _, err = run_main(["calibrate-hold", models, "--recordings", holds, "--dry-run"],
+                            monkeypatch, capsys)
+    assert code == 2
+    assert "stop here" in err
+    assert seen["note"] == seen["calibration"] == [holds / "a.mcap", holds / "b.mcap"]

@@ -212,7 +212,27 @@ def test_leave_one_out_r2_is_the_brute_force_one() -> None:
     ({"seeds": [0], "target_n": 11.0}, "target force"),
     ({"seeds": [0], "temp_c": 90.0}, "safe range"),
     ({"seeds": [0], "duration_s": 0.0}, "duration"),
+    # The same run twice: each one's bias "measured on the other seeds" was its own.
+    ({"seeds": [2, 5, 2]}, "seeds repeat in \\[2, 5, 2\\]"),
 ])
 def test_bad_input_is_refused_before_any_hold(kwargs, message) -> None:
     with pytest.raises(InputError, match=message):
         survey_budget(**kwargs)
+
+
+
+@pytest.mark.parametrize("duration_s", [1.0, 2.0, 5.0])
+def test_a_short_holds_percepts_are_read_over_frames(duration_s: float) -> None:
+    """Scaled from 280 s, a 1 s hold's windows were 18 ms and 11 ms, under a frame at 30 Hz:
+    every percept but F_inst was NaN.  They span three frames at least.  (The closed chain
+    blends nothing in this early: its ``chain_n`` is NaN, as documented.)"""
+    hold = run_hold("relax", duration_s=duration_s, seed=0)
+    seen = hold_percepts(hold)
+    assert all(math.isfinite(v) for k, v in seen.items() if k != "chain_n"), seen
+    if duration_s == 1.0:  # read over 0.2571-0.3571 s, the drift from 0.0036-0.1036 s
+        t, icfn = hold.t_s, hold.series("icfn_n")
+        at = 100 / 280
+        late = (t >= at - 0.1 - 1e-9) & (t <= at + 1e-9)
+        early = (t >= 1 / 280 - 1e-9) & (t <= 1 / 280 + 0.1 + 1e-9)
+        assert late.sum() == early.sum() == 3
+        assert seen["icfn_drift_n"] == pytest.approx(icfn[late].mean() - icfn[early].mean())

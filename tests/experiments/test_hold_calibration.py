@@ -260,6 +260,23 @@ def test_too_few_seeds_keep_too_little_and_the_seeds_said_keep_half() -> None:
         assert (more["conditions"]["5N 40C"]["correction_n"] >= 0.025) is not hidden
 
 
+
+def test_the_warning_says_which_error_it_gives_beside_the_tables_mean() -> None:
+    """The table's mean is each hold's estimate − true force; the correction is for that
+    less the closed chain's addition.  The warning gave the latter alone (-0.040 N against
+    the table's -0.028 N at 280 s): it names it, and gives the table's beside it."""
+    sd = 0.045 * np.sqrt(2.0)
+    holds = [{**r, "est_error_mean_n": r["bins_n"][-1] + 0.012} for r in _holds(2, 0.05, sd)]
+    result = calibration_from_holds([5.0], [40.0], [0, 1], 4.0, {"5N 40C": holds})
+    kept = result.kept()
+    condition = kept["conditions"]["5N 40C"]
+    assert condition["error_n"] == pytest.approx(0.05)
+    assert condition["est_error_mean_n"] == result.summary()["5N 40C"]["est_error_mean_n"]
+    assert condition["est_error_mean_n"] == pytest.approx(0.062)
+    note = hidden_note(kept)
+    assert ("the holds' error without the closed chain's addition (the part it corrects; "
+            "the table's mean, with it: +0.062 N) averaged +0.050 N") in note
+
 def test_a_condition_shrunk_with_the_others_is_told_so() -> None:
     """A mean twice its SE, among conditions measured to have none: the fit takes the size of
     the error from all of them, and keeps nothing of it; its own scatter is not why."""
@@ -287,6 +304,8 @@ def test_well_measured_conditions_hide_nothing(uncalibrated: ModelBundle) -> Non
     (([5.0], [], [0, 1]), "temperature"),
     (([5.0], [40.0], [0]), "two seeds"),
     (([5.0], [40.0], [-1, 0]), ">= 0"),
+    # One hold counted twice: an SE of 0, and the correction kept all of its mean.
+    (([5.0], [40.0], [1000, 1000]), "seeds repeat"),
     (([12.0], [40.0], [0, 1]), "target"),
     (([5.0], [90.0], [0, 1]), "temperature"),
 ])
@@ -342,10 +361,14 @@ def test_cli_says_when_the_holds_scatter_hides_the_error(
     assert "seeds per condition" in warnings[0]
     code, out, _ = run_main([*args, "--json", "--dry-run"], monkeypatch, capsys)
     assert code == 0
-    kept = json.loads(out)["kept"]
+    record = json.loads(out)
+    kept = record["kept"]
     assert kept["hidden"] == ["5N 40C"]
     assert kept["note"] == warnings[0].removeprefix("warning: ")
     condition = kept["conditions"]["5N 40C"]
+    # The table's mean is in the warning too, named as such.
+    table_mean = record["summary"]["5N 40C"]["est_error_mean_n"]
+    assert f"the table's mean, with it: {table_mean:+.3f} N" in warnings[0]
     assert abs(condition["correction_n"]) < 0.5 * abs(condition["error_n"])
     assert condition["seeds_to_keep_half"] > 2
 

@@ -91,6 +91,7 @@ def hold(
     """Close on the force ball to the target and hold it, scoring the steady state (100-280 s)."""
     from relaxgrip.control import EstimatorKind, check_target_n
     from relaxgrip.experiments.controlled_hold import (
+        check_backend,
         check_hold_duration_s,
         check_hold_temp_c,
         check_ramp_starts,
@@ -135,6 +136,7 @@ def hold(
     check_jobs(jobs)
     if backend not in ("twin", "emulator"):
         raise InputError(f"--backend must be twin or emulator, got {backend!r}")
+    check_backend(backend, push)  # a push needs the twin, before --record opens its file
     if compare and (temps, targets, push) != (None, None, None):
         raise InputError("--compare runs the standard hold: run each estimator with "
                          "--estimator NAME and the profiles instead")
@@ -377,7 +379,7 @@ def budget_survey(
     parts, r2 = survey.parts(), survey.r2()
     lo, hi = steady_window_s(duration_s)
     table = Table(title=f"relax, {target_n:g} N, {temp_c:g} °C, seeds {seeds}: estimate − "
-                        f"true force over {lo:.0f}–{hi:.0f} s",
+                        f"true force over {lo:.4g}–{hi:.4g} s",
                   caption="R²: share of the part's spread across seeds that the twin's draw "
                           "predicts, each seed left out of its fit; f0 / f1: that finger's "
                           "relaxing shares and times (the marker is on f0), run: contact "
@@ -391,7 +393,8 @@ def budget_survey(
                       *(_fmt(r2[name][g], ".2f") for g in SCATTER_GROUPS))
     console.print(table)
     console.print(f"MAE from the target {survey.column('mae_n').mean():.3f} N; with the bias "
-                  f"measured on the other seeds taken off {survey.bias_free_mae_n():.3f} N")
+                  "measured on the other seeds taken off "
+                  f"{_fmt(survey.bias_free_mae_n(), '.3f')} N")
     _print_observability(survey.observability())
     console.print(f"{survey.twin_version}, {time.perf_counter() - start:.1f} s")
 

@@ -440,13 +440,13 @@ def calibrate_hold_command(
         from relaxgrip.recording.provenance import differences_note
 
         require_mcap()
+        files = recording_files(recordings)
         # The calibration taken off relax is what this measures anew: not a difference.
-        models_note = differences_note(recording_files(recordings),
-                                       estimator_provenance("relax", bundle),
+        models_note = differences_note(files, estimator_provenance("relax", bundle),
                                        ignore=("calibration",))
         with (console.status("replaying the recorded holds …") if not json_out
               else nullcontext()):
-            result = calibration_from_recordings(recordings, bundle, jobs)
+            result = calibration_from_recordings(files, bundle, jobs)
         count = sum(map(len, result.holds.values()))
         command = shlex.join(["relaxgrip", "calibrate-hold", str(models),
                               *(arg for path in recordings for arg in ("--recordings", str(path)))])

@@ -47,6 +47,7 @@ from numpy.typing import NDArray
 from relaxgrip.control import check_target_n
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.controlled_hold import (
+    CONTROL_RATE_HZ,
     PAPER_DURATION_S,
     HoldResult,
     check_hold_duration_s,
@@ -85,6 +86,9 @@ PERCEPTS = ("f_onset_n", "icfn_drift_n", "motor_travel_mm", "k_n", "tau_s", "cha
 #: (s into a hold of :data:`PAPER_DURATION_S` or longer; a shorter hold's scaled with it).
 _PERCEPT_WINDOW_S = 5.0
 _DRIFT_FROM_S = (1.0, 4.0)
+#: The least either window spans (s): three frames at the loop's rate (scaled from 280 s,
+#: a 1 s hold's would span 18 ms and 11 ms, and hold no frame).
+_MIN_PERCEPT_WINDOW_S = 3.0 / CONTROL_RATE_HZ
 
 
 def percept_at_s(duration_s: float) -> float:
@@ -103,8 +107,10 @@ def hold_percepts(hold: HoldResult, at_s: float | None = None) -> dict[str, floa
     Means over the :data:`_PERCEPT_WINDOW_S` before that time, the drift from
     :data:`_DRIFT_FROM_S`; in a hold shorter than the paper's both shrink with
     it, as the read time does, so that they stay apart (a 14 s hold: the
-    drift from 0.05-0.2 s, read over 4.75-5 s).  NaN where the estimator had
-    no value there (``chain_n`` without a chain blended in).
+    drift from 0.05-0.2 s, read over 4.75-5 s), to no less than
+    :data:`_MIN_PERCEPT_WINDOW_S` (a 1 s hold: from 0.0036-0.1036 s, over
+    0.2571-0.3571 s).  NaN where the estimator had no value there
+    (``chain_n`` without a chain blended in).
     """
     at = percept_at_s(hold.duration_s) if at_s is None else min(at_s, hold.duration_s)
     scale = min(1.0, hold.duration_s / PAPER_DURATION_S)
@@ -115,8 +121,9 @@ def hold_percepts(hold: HoldResult, at_s: float | None = None) -> dict[str, floa
         values = values[np.isfinite(values)]
         return float(values.mean()) if values.size else float("nan")
 
-    lo = at - _PERCEPT_WINDOW_S * scale
-    drift_from = (_DRIFT_FROM_S[0] * scale, _DRIFT_FROM_S[1] * scale)
+    lo = at - max(_PERCEPT_WINDOW_S * scale, _MIN_PERCEPT_WINDOW_S)
+    drift_lo = _DRIFT_FROM_S[0] * scale
+    drift_from = (drift_lo, max(_DRIFT_FROM_S[1] * scale, drift_lo + _MIN_PERCEPT_WINDOW_S))
     f_onset = hold.series("f_onset_n")
     f_onset = f_onset[np.isfinite(f_onset)]
     motor = hold.series("motor_mm")
@@ -328,13 +335,15 @@ def survey_budget(seeds: Sequence[int], target_n: float = 5.0, temp_c: float = 4
     Raises
     ------
     InputError
-        No seeds, a negative one, or a condition :func:`run_hold` refuses;
-        checked before any hold starts.
+        No seeds, a negative one or one given twice, or a condition
+        :func:`run_hold` refuses; checked before any hold starts.
     """
     if not seeds:
         raise InputError("an error-budget survey needs at least one seed")
     if min(seeds) < 0:
         raise InputError(f"seeds must be >= 0, got {min(seeds)}")
+    if len(set(seeds)) != len(seeds):  # a run twice: its bias "from the others" is its own
+        raise InputError(f"seeds repeat in {list(seeds)}: give each seed once")
     check_target_n(target_n)
     check_hold_temp_c(temp_c)
     check_hold_duration_s(duration_s)

@@ -233,8 +233,10 @@ class HoldCalibration:
         dict
             ``steady_state_s``: the interval (s).  ``conditions``: per
             condition its ``holds``, their mean error ``error_n`` and its
-            standard error ``se_n``, and the correction taken off there
-            ``correction_n`` (N).  ``hidden``: the conditions whose correction
+            standard error ``se_n``, the correction taken off there
+            ``correction_n``, and :meth:`summary`'s ``est_error_mean_n``
+            beside them, the table's mean (the closed chain's addition in
+            it) (N).  ``hidden``: the conditions whose correction
             keeps less than half of a mean larger than :data:`MIN_SE_N`,
             largest mean first; each of them also has
             ``seeds_to_keep_half``, the seeds per condition at which the
@@ -247,6 +249,7 @@ class HoldCalibration:
         weights = np.array([max(0.0, min(b, hi) - max(a, lo)) for a, b in bins])
         centres = [_bin_centre(a, b) for a, b in bins]
         conditions: dict[str, dict[str, Any]] = {}
+        summary = self.summary()
         for name, rows in self.holds.items():
             errors = np.array([r["bins_n"] for r in rows], dtype=np.float64)
             counted = np.where(np.isfinite(errors), weights, 0.0)
@@ -260,7 +263,8 @@ class HoldCalibration:
                   else math.nan)
             conditions[name] = {"holds": int(per_hold.size), "error_n": mean, "se_n": se,
                                 "correction_n": float(np.dot(weights, correction)
-                                                      / weights.sum())}
+                                                      / weights.sum()),
+                                "est_error_mean_n": summary[name]["est_error_mean_n"]}
         hidden = sorted((name for name, c in conditions.items()
                          if abs(c["error_n"]) > MIN_SE_N
                          and abs(c["correction_n"]) < 0.5 * abs(c["error_n"])),
@@ -361,9 +365,10 @@ def hidden_note(kept: Mapping[str, Any], recorded: bool = False) -> str:
     Returns
     -------
     str
-        The largest such error beside what the correction takes off there,
-        and why: its scatter (with about the seeds that would keep half of
-        it) or the other conditions the fit shrank it with.
+        The largest such error beside what the correction takes off there
+        (and the table's mean, the closed chain's addition in it), and why:
+        its scatter (with about the seeds that would keep half of it) or the
+        other conditions the fit shrank it with.
     """
     conditions = kept["conditions"]
     name = kept["hidden"][0]
@@ -372,8 +377,9 @@ def hidden_note(kept: Mapping[str, Any], recorded: bool = False) -> str:
     unit, more = ("holds", "record more holds") if recorded else ("seeds", "add seeds with --add")
     head = (f"the correction keeps less than half of the error at {len(kept['hidden'])} of "
             f"{len(conditions)} conditions: over the steady state ({lo:.4g}-{hi:.4g} s) it takes "
-            f"off {c['correction_n']:+.2g} N at {name}, where the holds' error (less the closed "
-            f"chain's) averaged {c['error_n']:+.3f} N")
+            f"off {c['correction_n']:+.2g} N at {name}, where the holds' error without the "
+            f"closed chain's addition (the part it corrects; the table's mean, with it: "
+            f"{c['est_error_mean_n']:+.3f} N) averaged {c['error_n']:+.3f} N")
     seeds = c.get("seeds_to_keep_half")
     if seeds is not None and seeds > c["holds"]:
         return (f"{head}, hidden by their scatter (SE {c['se_n']:.3f} N over {c['holds']} "
@@ -425,10 +431,11 @@ def calibrate_hold(targets_n: Sequence[float] = DEFAULT_TARGETS_N,
     Raises
     ------
     InputError
-        An empty axis or fewer than two seeds without ``add_to``, a target or
-        temperature out of range, conditions whose readings do not order as
-        their setpoints, or holds to add that do not fit the earlier ones
-        (another hold length or twin, a seed a condition already has).
+        An empty axis or fewer than two seeds without ``add_to``, a seed
+        given twice, a target or temperature out of range, conditions whose
+        readings do not order as their setpoints, or holds to add that do
+        not fit the earlier ones (another hold length or twin, a seed a
+        condition already has).
     """
     new_targets = _axis(targets_n, "target")
     new_temps = _axis(temps_c, "temperature")
@@ -439,6 +446,8 @@ def calibrate_hold(targets_n: Sequence[float] = DEFAULT_TARGETS_N,
         raise InputError("adding to the calibration needs at least one seed")
     if min(seeds) < 0:
         raise InputError(f"seeds must be >= 0, got {min(seeds)}")
+    if len(set(seeds)) != len(seeds):  # one hold counted as two: no spread, a mean taken as sure
+        raise InputError(f"seeds repeat in {list(seeds)}: give each seed once")
     for target in new_targets:
         check_target_n(target)
     for temp in new_temps:
