@@ -375,3 +375,21 @@ def test_crash_between_renames_is_detected_not_mixed(saved, models, monkeypatch)
     assert {p.name for p in saved.iterdir()} == FINAL_NAMES
     with pytest.raises(ModelFileError, match=r"rcfn\.npz: truncated or modified"):
         load_models(saved)
+
+
+def test_provenance_names_the_calibration_the_bundle_takes_off(saved):
+    """A bundle built without its directory's calibration (``replace(bundle,
+    hold_bias=None)``: the estimator takes none off) was said to run with it, from the
+    manifest; and one given another calibration, with the directory's."""
+    from relaxgrip.learning.hold_bias import HoldBias
+    from relaxgrip.learning.store import set_hold_bias
+
+    bias = HoldBias(np.array([5.0]), np.array([40.0]), np.array([100.0]), np.full((1, 1, 1), 0.05))
+    set_hold_bias(saved, bias, {"seeds": [7]})
+    bundle = load_models(saved)
+    calibrated = bundle.provenance()["hold_bias_sha256"]
+    assert calibrated is not None
+    assert dataclasses.replace(bundle, hold_bias=None).provenance()["hold_bias_sha256"] is None
+    other = HoldBias(np.array([5.0]), np.array([40.0]), np.array([100.0]), np.full((1, 1, 1), 0.1))
+    assert dataclasses.replace(bundle, hold_bias=other).provenance()["hold_bias_sha256"] \
+        not in (None, calibrated)

@@ -18,6 +18,7 @@ from mcap.reader import make_reader
 
 from relaxgrip.clock import VirtualClock
 from relaxgrip.control import GraspController, GraspPlan, make_estimator, run_loop
+from relaxgrip.errors import InputError
 from relaxgrip.experiments.controlled_hold import HoldResult
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import default_models_dir
@@ -378,3 +379,17 @@ def test_a_bad_frame_or_value_names_its_recording(topic: str, change, words: str
     _rewritten(relax_hold[0], bad, lambda t, m: change(m) if t == topic else None)
     code, out, err = run_main(["replay", bad], monkeypatch, capsys)
     assert_one_error_line(code, out, err, f"{bad}: {words}")
+
+
+def test_a_recording_to_a_fifo_is_refused_not_blocked_on(tmp_path: Path) -> None:
+    """``hold --record`` opened a FIFO for writing: without a reader it blocked for ever (the
+    hold never started, no error), with one the recording went into the pipe."""
+    fifo = tmp_path / "grasp.mcap"
+    os.mkfifo(fifo)
+    reader = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)  # so that the test cannot block
+    try:
+        with pytest.raises(InputError, match=f"{fifo} is a FIFO, not a regular file"):
+            McapRecorder(fifo)
+    finally:
+        os.close(reader)
+    assert fifo.is_fifo()

@@ -123,3 +123,43 @@ def test_recover_restores_the_session_a_damaged_first_chunk_took(
     whole = tmp_path / "whole.mcap"
     assert recover(good, whole).lost_start_s is None
     assert sum(1 for topic, _, _ in iter_messages(whole) if topic == "/relaxgrip/session") == 1
+
+
+def _damage_session_copy(src: Path, dst: Path, utf8: bool = False,
+                         first_chunk_too: bool = False) -> None:
+    """``src`` with a byte of the session's copy (its metadata record) damaged: not UTF-8
+    then, or (``utf8``) a control character, not JSON; ``first_chunk_too``: a byte of the
+    first chunk's records as well."""
+    if first_chunk_too:
+        _damage_first_chunk(src, dst)
+        src = dst
+    with open(src, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    (index,) = summary.metadata_indexes
+    data = bytearray(src.read_bytes())
+    at = index.offset + index.length - 20  # in the session's JSON
+    data[at] = 0x01 if utf8 else data[at] ^ 0xFF
+    dst.write_bytes(bytes(data))
+
+
+def test_a_damaged_session_copy_costs_nothing_but_itself(
+        relax_hold: tuple[Path, HoldResult], tmp_path: Path) -> None:
+    """The copy is outside the chunks, without a CRC: a byte of it damaged stopped the scan
+    there, and every intact chunk after it was lost to reading and to recover ("no complete
+    message to recover"); damaged with the first chunk, recover raised a JSONDecodeError."""
+    good = relax_hold[0]
+    total = sum(1 for _ in iter_messages(good))
+    damaged = tmp_path / "damaged.mcap"
+    _damage_session_copy(good, damaged)
+    assert sum(1 for _ in iter_messages(damaged)) == total
+    assert read_session(damaged) == read_session(good)
+    report = recover(damaged, tmp_path / "recovered.mcap")
+    assert (report.messages, report.lost_messages, report.stopped_early) == (total, 0, False)
+    _damage_session_copy(good, damaged, utf8=True, first_chunk_too=True)
+    report = recover(damaged, tmp_path / "recovered.mcap")
+    assert report.damaged_chunks == 1
+    assert report.lost_start_s is None  # no session to restore
+    assert report.messages > total // 2
+    with pytest.raises(InputError, match="not a relaxgrip recording"):
+        read_session(tmp_path / "recovered.mcap")

@@ -165,3 +165,43 @@ def test_hold_calibration_on_recordings_says_when_they_ran_other_models(
         assert code == 0, err
         said = json.loads(out)["models_note"]
         assert said is None if note is None else note in said
+
+
+def test_replay_says_what_became_of_the_recorded_models(
+        tmp_path: Path, models: ModelBundle, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Their directory there but a file of it damaged in a copy, or trained anew, replay said
+    the models were "not there now" (of a directory the user sees there); and a recording it
+    cannot replay (recovered without its start) it sent for models first, to refuse after."""
+    from mcap.reader import make_reader
+
+    from relaxgrip.recording import recover
+
+    directory = tmp_path / "models"
+    path, _ = record_hold(tmp_path / "relax.mcap", "relax", 5.0, HOLD_S, 40.0, 2,
+                          _lab_models(directory, models))
+    npz = directory / "rcfn.npz"
+    intact = npz.read_bytes()
+    npz.write_bytes(intact[:-10] + bytes([intact[-10] ^ 1]) + intact[-9:])
+    code, out, err = run_main(["replay", path], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, f"which are not there now ({npz}: truncated or "
+                                          "modified (sha256 differs from the manifest)): give "
+                                          "a copy of them with --models")
+    save_models(directory, models.icfn, models.rcfn, icfn_feature_schema=ICFN_SCHEMA,
+                rcfn_feature_schema=RCFN_SCHEMA, twin_version=TWIN_VERSION,
+                training={"test": "trained anew"})
+    code, out, err = run_main(["replay", path], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "which are not there now (it holds others now)")
+
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    first = min(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    data = bytearray(path.read_bytes())
+    data[first.chunk_start_offset + first.chunk_length - 100] ^= 0xFF
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data))
+    recovered = tmp_path / "recovered.mcap"
+    assert recover(damaged, recovered).lost_start_s is not None
+    code, out, err = run_main(["replay", recovered], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "recovered without its start")

@@ -50,10 +50,12 @@ def replay_cmd(
     from relaxgrip.learning.observer import load_observer
     from relaxgrip.plots.common import check_plot_path
     from relaxgrip.recording.provenance import recorded_observer
+    from relaxgrip.recording.reader import read_replayable_session
     from relaxgrip.recording.replay import replay
 
     if plot is not None:
         check_plot_path(plot)
+    read_replayable_session(recording)  # a file it cannot replay is said before its models
     observer = (recorded_observer([recording]) if observer_dir is None
                 else load_observer(observer_dir))
     result = replay(recording, _models(models, [recording]), observer=observer)

@@ -111,11 +111,12 @@ class ModelBundle:
     def provenance(self) -> dict[str, Any]:
         """What a recording says of these models: where they were loaded from, the sha256
         of each model file, and a digest of the calibration taken off the estimate (None
-        when there is none)."""
-        bias = self.manifest.get(HOLD_BIAS_KEY)
+        when there is none: :attr:`hold_bias`, not the manifest's, which a bundle built
+        without it still holds)."""
+        bias = self.hold_bias
         return {"directory": None if self.directory is None else str(self.directory),
                 "sha256": model_checksums(self.manifest),
-                "hold_bias_sha256": None if bias is None else json_digest(bias.get("relax"))}
+                "hold_bias_sha256": None if bias is None else json_digest(bias.to_dict())}
 
     @property
     def icfn_feature_schema(self) -> FeatureSchema:

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import one_line
 from relaxgrip.learning.observer import (
     ObserverFileError,
     ObserverModel,
@@ -68,19 +69,26 @@ def _one(named: dict[str, tuple[dict[str, Any], Path]], what: str, flag: str
 
 
 def _first_holding(entry: Mapping[str, Any], shipped: Path, load: Callable[[Path], _T],
-                   error: type[Exception], holds: Callable[[_T], bool]) -> _T | None:
+                   error: type[Exception], holds: Callable[[_T], bool]
+                   ) -> tuple[_T, str] | tuple[None, str]:
     """What ``load`` reads from the shipped directory, or else from the one a recording names
-    (``entry["directory"]``), if it ``holds`` what the recording ran with; None if neither."""
+    (``entry["directory"]``), if it ``holds`` what the recording ran with; if neither does,
+    None and what became of the one named: "" (gone), "it holds others now" or why it does
+    not load (a file damaged in a copy)."""
+    why = ""  # of the directory looked in last: the named one
     for directory in (shipped, entry.get("directory")):
+        why = ""
         if not directory or not Path(directory).is_dir():
             continue
         try:
             loaded = load(Path(directory))
-        except error:
+        except error as exc:
+            why = one_line(exc)
             continue
         if holds(loaded):
-            return loaded
-    return None
+            return loaded, ""
+        why = "it holds others now"
+    return None, why
 
 
 def recorded_models(paths: Sequence[Path]) -> ModelBundle | None:
@@ -97,7 +105,7 @@ def recorded_models(paths: Sequence[Path]) -> ModelBundle | None:
         return None
     entry, path = found
     wanted = entry.get("sha256")
-    bundle = _first_holding(
+    bundle, why = _first_holding(
         entry, default_models_dir(),
         lambda d: load_models(d, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA),
         ModelFileError, lambda b: model_checksums(b.manifest) == wanted)
@@ -105,8 +113,8 @@ def recorded_models(paths: Sequence[Path]) -> ModelBundle | None:
         return bundle
     raise InputError(
         f"{path}: it ran with the models in {entry.get('directory')} "
-        f"(icfn sha256 {str((wanted or {}).get('icfn', '?'))[:12]}…), which are not there now: "
-        "give a copy of them with --models")
+        f"(icfn sha256 {str((wanted or {}).get('icfn', '?'))[:12]}…), which are not there now"
+        f"{f' ({why})' if why else ''}: give a copy of them with --models")
 
 
 def recorded_observer(paths: Sequence[Path]) -> ObserverModel | None:
@@ -121,15 +129,15 @@ def recorded_observer(paths: Sequence[Path]) -> ObserverModel | None:
     if found is None:
         return None
     entry, path = found
-    observer = _first_holding(
+    observer, why = _first_holding(
         entry, default_observer_dir(), load_observer, ObserverFileError,
         lambda o: o.source is not None and o.source[1] == entry.get("sha256"))
     if observer is not None:
         return observer
     raise InputError(
         f"{path}: it ran with the observer in {entry.get('directory')} "
-        f"(sha256 {str(entry.get('sha256'))[:12]}…), which is not there now: "
-        "give a copy of it with --observer")
+        f"(sha256 {str(entry.get('sha256'))[:12]}…), which is not there now"
+        f"{f' ({why})' if why else ''}: give a copy of it with --observer")
 
 
 def model_differences(recorded: Mapping[str, Any] | None, used: Mapping[str, Any]) -> list[str]:

@@ -24,7 +24,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import cv2
 import numpy as np
@@ -47,6 +47,7 @@ __all__ = ["Period", "RecoverReport", "iter_messages", "iter_periods", "malforme
 _MAGIC = b"\x89MCAP0\r\n"
 _FOOTER_OPCODE = 0x02
 _FOOTER_RECORD = 1 + 8 + 8 + 8 + 4  # opcode, length, summary start, offset start, crc
+_METADATA_OPCODE = 0x0C
 
 
 def _check_file(path: Path, tolerant: bool) -> bool:
@@ -96,12 +97,11 @@ def iter_records(path: Path, tolerant: bool = False) -> Iterator[Any]:
     """
     require_mcap()
     from mcap.exceptions import McapError
-    from mcap.stream_reader import StreamReader
 
     path = Path(path)
     _check_file(path, tolerant)
     with open(path, "rb") as f:
-        records = StreamReader(f, validate_crcs=True).records
+        records = _records(f, validate_crcs=True)
         while True:
             try:
                 record = next(records)
@@ -451,7 +451,7 @@ def recover(src: Path, dst: Path) -> RecoverReport:
     """
     require_mcap()
     from mcap.records import Channel, Chunk, DataEnd, Message, Metadata, Schema, Statistics
-    from mcap.stream_reader import StreamReader, breakup_chunk
+    from mcap.stream_reader import breakup_chunk
     from mcap.writer import Writer
 
     src, dst = Path(src), Path(dst)
@@ -500,14 +500,15 @@ def recover(src: Path, dst: Path) -> RecoverReport:
             if session_channel is not None and record.channel_id == session_channel.id:
                 session, session_copied = None, True
             elif session is not None and session_channel is not None:
-                lost, session = session, None  # the damage took the message: put it first
-                ns = int(lost.metadata["log_time_ns"])
-                # ... saying what it lost with it: the marker's zero, the estimator's start.
-                lost_start_s = record.log_time * 1e-9
-                restored = {**json.loads(lost.metadata["message"]),
-                            "lost_start_s": lost_start_s}
-                copy(Message(channel_id=session_channel.id, sequence=0, log_time=ns,
-                             publish_time=ns, data=json.dumps(restored).encode()), writer)
+                # The damage took the message: put it first (unless the copy is damaged too).
+                lost, session = _session_copy(session.metadata), None
+                if lost is not None:
+                    ns, message = lost
+                    # ... saying what it lost with it: the marker's zero, the estimator's start.
+                    lost_start_s = record.log_time * 1e-9
+                    restored = {**message, "lost_start_s": lost_start_s}
+                    copy(Message(channel_id=session_channel.id, sequence=0, log_time=ns,
+                                 publish_time=ns, data=json.dumps(restored).encode()), writer)
             if record.channel_id in channels:
                 writer.add_message(channels[record.channel_id], record.log_time, record.data,
                                    record.publish_time, record.sequence)
@@ -520,7 +521,7 @@ def recover(src: Path, dst: Path) -> RecoverReport:
             writer.start(profile="", library="relaxgrip recover")
             # CRCs are checked per chunk (below), not over the data section: a
             # damaged chunk is skipped, not the end of the reading.
-            records = StreamReader(f, emit_chunks=True, validate_crcs=False).records
+            records = _records(f, emit_chunks=True, validate_crcs=False)
             in_summary = False
             while True:
                 try:
@@ -555,6 +556,49 @@ def recover(src: Path, dst: Path) -> RecoverReport:
                          end_ns * 1e-9 if end_ns >= 0 else float("nan"),
                          damaged_chunks=damaged, expected_messages=expected,
                          stopped_early=stopped_early, lost_start_s=lost_start_s)
+
+
+def _records(f: BinaryIO, **options: Any) -> Iterator[Any]:
+    """mcap's :class:`~mcap.stream_reader.StreamReader` records of ``f`` (``options`` its
+    own), but for a damaged metadata record, which is skipped.
+
+    The session's copy (:data:`SESSION_METADATA`) is the only metadata record, outside any
+    chunk and without a CRC: a damaged byte of it (not UTF-8) stopped the scan there, and
+    every chunk after it, intact, was lost for the sake of a copy.
+    """
+    from mcap.stream_reader import StreamReader
+
+    size = os.fstat(f.fileno()).st_size
+    skip_magic = False
+    while True:
+        # Where the record read next starts (a chunk's records are yielded once it is read).
+        start = f.tell()
+        try:
+            for record in StreamReader(f, skip_magic=skip_magic, **options).records:
+                yield record
+                start = f.tell()
+            return
+        except Exception:
+            f.seek(start)
+            head = f.read(9)  # opcode, length
+            if len(head) < 9 or head[0] != _METADATA_OPCODE:
+                raise
+            end = start + 9 + struct.unpack("<Q", head[1:])[0]
+            if end > size:  # cut short: the end of a killed file
+                raise
+            f.seek(end)
+            skip_magic = True  # read past already
+
+
+def _session_copy(metadata: dict[str, str]) -> tuple[int, dict[str, Any]] | None:
+    """The log time (ns) and the session message a :data:`SESSION_METADATA` record holds;
+    None if the record is damaged (not JSON, not a session object, no time)."""
+    try:
+        ns = int(metadata["log_time_ns"])
+        message = json.loads(metadata["message"])
+    except (KeyError, ValueError):
+        return None
+    return (ns, message) if ns >= 0 and isinstance(message, dict) else None
 
 
 def _summary_definitions(path: Path) -> tuple[dict[int, Any], dict[int, Any]]:

@@ -47,7 +47,7 @@ from relaxgrip import __version__
 from relaxgrip.backend import BackendInfo, Command, Frame, Observation
 from relaxgrip.control.phases import GraspPhase, PhaseLog
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import named_errors
+from relaxgrip.fileio import check_replaceable, named_errors
 from relaxgrip.interrupts import deferred
 from relaxgrip.perception.features import marker_pose
 from relaxgrip.perception.marker import TrackStatus
@@ -148,6 +148,11 @@ def _stamp(t_s: float) -> dict[str, int]:
     return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
 
 
+def _encode(message: dict[str, Any]) -> bytes:
+    """A message as the JSON its channel carries (nan and inf as null)."""
+    return json.dumps(json_safe(message), allow_nan=False, separators=(",", ":")).encode()
+
+
 def encode_rgb(image: np.ndarray[Any, Any], fmt: str, jpeg_quality: int) -> bytes:
     """An RGB ``(H, W, 3)`` uint8 image as JPEG or PNG bytes (colours as a viewer shows them)."""
     bgr = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2BGR)
@@ -210,6 +215,8 @@ class McapRecorder:
         self.rgb_format = rgb_format
         self.jpeg_quality = jpeg_quality
         self.flush_every_s = flush_every_s
+        # A FIFO would block the open until something read it, then take the recording.
+        check_replaceable(self.path, InputError)
         try:
             self._file: IO[bytes] = open(self.path, "wb")  # noqa: SIM115  (closed in close())
         except OSError as exc:
@@ -432,16 +439,19 @@ class McapRecorder:
         nothing reads the rest."""
         if self._closed:
             raise InputError(f"{self.path}: the recording is closed")
-        data = json.dumps(json_safe(session), allow_nan=False, separators=(",", ":"))
+        data = _encode(session)
         with self._writing():
             self._writer.add_metadata(SESSION_METADATA, {"log_time_ns": str(_ns(t_s)),
-                                                         "message": data})
-        self._write("/relaxgrip/session", t_s, session)
+                                                         "message": data.decode()})
+        self._write_data("/relaxgrip/session", t_s, data)
 
     def _write(self, topic: str, t_s: float, message: dict[str, Any]) -> None:
         if self._closed:
             raise InputError(f"{self.path}: the recording is closed")
-        data = json.dumps(json_safe(message), allow_nan=False, separators=(",", ":")).encode()
+        self._write_data(topic, t_s, _encode(message))
+
+    def _write_data(self, topic: str, t_s: float, data: bytes) -> None:
+        """A message already encoded (:func:`_encode`)."""
         ns = _ns(t_s)
         with self._writing():  # a full chunk is written out here
             if self._definitions:
