@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from relaxgrip.errors import InputError
-from relaxgrip.learning.datastore import TABLES, load_dataset
+from relaxgrip.learning.datastore import TABLES, load_dataset, write_dataset
 from relaxgrip.perception.features import ICFN_SCHEMA
 
 
@@ -173,3 +173,49 @@ def test_checks_are_quick(tiny: Path, tmp_path: Path) -> None:
     load_s = time.perf_counter() - start
     assert len(data.sequences) == 800
     assert load_s < 3 * read_s + 0.5
+
+
+def _rewrite(tiny: Path, out: Path) -> None:
+    """The tiny dataset's tables and manifest written again to ``out``."""
+    data = load_dataset(tiny)
+    tables = {"icfn": data.icfn, "rcfn_sequences": data.sequences,
+              "rcfn_features": data.rcfn_features, "rcfn_curves": data.curves}
+    write_dataset(out, tables, data.manifest)
+
+
+def test_a_dataset_directory_gets_the_umask_s_mode(tiny: Path, tmp_path: Path) -> None:
+    """A lab's colleagues read its datasets: not the private mode of a temporary directory."""
+    import os
+
+    umask = os.umask(0o022)
+    try:
+        _rewrite(tiny, tmp_path / "shared")
+    finally:
+        os.umask(umask)
+    assert (tmp_path / "shared").stat().st_mode & 0o777 == 0o755
+
+
+def test_an_interrupt_while_a_dataset_replaces_another_loses_neither(
+        tiny: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C between moving the old dataset aside and the new one in: the new one is
+    still put in place (there had been none at the path, the old one hidden beside it)."""
+    import os
+    import signal
+
+    from relaxgrip.interrupts import interrupt
+
+    out = _copy(tiny, tmp_path)
+    replace = os.replace
+    moves: list[str] = []
+
+    def replace_then_interrupt(src: Any, dst: Any) -> None:
+        replace(src, dst)
+        moves.append(str(dst))
+        if len(moves) == 1:  # the old dataset is aside
+            interrupt(signal.SIGINT, None)
+
+    monkeypatch.setattr(os, "replace", replace_then_interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        _rewrite(tiny, out)
+    monkeypatch.undo()
+    assert len(load_dataset(out).sequences) == 4

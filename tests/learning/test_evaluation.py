@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -42,3 +44,20 @@ def test_holds_shorter_than_the_papers_have_no_spread_at_100_s() -> None:
     assert stats["gt_std_100s_n"] is None
     assert stats["gt_end_std_n"] == pytest.approx(np.std([g.truth_n[-1] for g in group], ddof=1))
     assert spread_text(stats).startswith("GT end std ")
+
+
+def test_a_hold_with_a_flat_force_is_one_line_not_a_traceback(tiny: Path) -> None:
+    """A curve of one value (a damaged table, a sensor stuck) has no NRMSE: evaluate names
+    the hold in one line instead of raising a bare ValueError."""
+    from dataclasses import replace
+
+    from relaxgrip.errors import InputError
+    from relaxgrip.learning.datastore import load_dataset
+    from relaxgrip.learning.evaluation import evaluate
+    from relaxgrip.learning.training import load_default_models
+
+    data = load_dataset(tiny)
+    curves = data.curves.copy()
+    curves.loc[curves["sequence"] == 2, "force_n"] = 4.0
+    with pytest.raises(InputError, match=r"RCFN sequence 2 cannot be scored: f_gt is constant"):
+        evaluate(replace(data, curves=curves), load_default_models(), "test")

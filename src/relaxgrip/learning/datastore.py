@@ -19,8 +19,8 @@ from __future__ import annotations
 import json
 import math
 import os
+import secrets
 import shutil
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import check_output_dir, one_line, read_manifest
+from relaxgrip.interrupts import deferred
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA, FeatureSchema
 from relaxgrip.physics.fitting import MAX_FORCE_N, osculating_reduced
 from relaxgrip.validate import ABSOLUTE_ZERO_C
@@ -199,9 +200,11 @@ def write_dataset(out_dir: Path, tables: dict[str, pd.DataFrame], manifest: dict
         As :func:`check_dataset_out`.
     """
     out = check_dataset_out(out_dir)
+    # Not mkdtemp: its directory is private (0700); a dataset gets the umask's mode.
+    tmp = out.with_name(f".{out.name}.{os.getpid()}.{secrets.token_hex(4)}")
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+        tmp.mkdir()
     except OSError as exc:
         raise InputError(f"{out}: cannot write ({exc.strerror or exc})") from None
     try:
@@ -212,8 +215,9 @@ def write_dataset(out_dir: Path, tables: dict[str, pd.DataFrame], manifest: dict
         if out.exists():
             old = out.with_name(f".{out.name}.old")
             shutil.rmtree(old, ignore_errors=True)
-            os.replace(out, old)
-            os.replace(tmp, out)
+            with deferred():  # cut between the renames, no dataset would be at ``out``
+                os.replace(out, old)
+                os.replace(tmp, out)
             shutil.rmtree(old, ignore_errors=True)
         else:
             os.replace(tmp, out)

@@ -208,7 +208,8 @@ def evaluate(data: Dataset, models: ModelBundle, split: str = "test") -> Evaluat
     Raises
     ------
     InputError
-        If the split has no ICFN samples or no RCFN sequences.
+        If the split has no ICFN samples or no RCFN sequences, or a hold whose
+        true or reconstructed force is constant (no NRMSE or correlation).
     """
     x, y = data.icfn_xy(split)
     if y.size == 0:
@@ -235,11 +236,15 @@ def evaluate(data: Dataset, models: ModelBundle, split: str = "test") -> Evaluat
         f0 = float(row.f0_n)
         predicted = reconstruct_online(t, f0, ft, kappa, tau)
         from_icfn = reconstruct_online(t, float(f_hat), ft, kappa, tau)
+        try:
+            scores = (nrmse(t, predicted, truth), auc_rel(t, predicted, truth),
+                      curve_correlation(predicted, truth), nrmse(t, from_icfn, truth))
+        except ValueError as exc:  # a flat curve: the paper's metrics are not defined on it
+            raise InputError(f"RCFN sequence {seq_id} cannot be scored: {exc}") from None
         curves.append(CurveScore(
             sequence=seq_id, temp_set_c=float(row.temp_set_c), f0_n=f0, t_s=t, truth_n=truth,
-            predicted_n=predicted, nrmse=nrmse(t, predicted, truth),
-            auc_rel=auc_rel(t, predicted, truth), corr=curve_correlation(predicted, truth),
-            amp_n=amplitude(truth), nrmse_icfn=nrmse(t, from_icfn, truth),
+            predicted_n=predicted, nrmse=scores[0], auc_rel=scores[1], corr=scores[2],
+            amp_n=amplitude(truth), nrmse_icfn=scores[3],
         ))
     by_id = {c.sequence: c for c in curves}
     groups: dict[str, list[CurveScore]] = {}

@@ -21,7 +21,9 @@ from relaxgrip.learning.history import (
     retained_shares,
 )
 from relaxgrip.learning.icfn import ICFN, select_icfn
+from relaxgrip.learning.icfn import MIN_SAMPLES as ICFN_MIN_SAMPLES
 from relaxgrip.learning.observer import ObserverModel
+from relaxgrip.learning.rcfn import MIN_SAMPLES as RCFN_MIN_SAMPLES
 from relaxgrip.learning.rcfn import RCFN, select_rcfn
 from relaxgrip.learning.store import ModelBundle, load_models, save_models
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
@@ -100,19 +102,30 @@ def train_models(data: Dataset, random_state: int = 0,
     :data:`relaxgrip.learning.history.UNRELAXED_FEATURES`).  The first ICFN
     stays the paper's, on every feature, for the baselines.
 
+    The RCFN's training frames whose label has no relaxation (``kappa <= 0``: a
+    hold whose force rose) are left out; the training record counts them.
+
     Raises
     ------
     InputError
-        If a split the training needs is empty.
+        If a split the training needs is empty, or has fewer rows than its fit
+        takes (:data:`relaxgrip.learning.icfn.MIN_SAMPLES` ICFN train rows).
     """
     x_train, y_train = data.icfn_xy("train")
     x_val, y_val = data.icfn_xy("val")
     r_train, k_train = data.rcfn_xy("train")
     r_val, k_val = data.rcfn_xy("val")
-    for name, rows in (("ICFN train", x_train), ("ICFN val", x_val),
-                       ("RCFN train", r_train), ("RCFN val", r_val)):
+    # The RCFN fits log kappa: a frame of a hold whose force rose (a recording's whole-hold
+    # fit with K <= 0, where the force rises at that frame too) has no label it can take.
+    relaxing = k_train[:, 0] > 0
+    r_train, k_train = r_train[relaxing], k_train[relaxing]
+    for name, rows, least in (("ICFN train", x_train, ICFN_MIN_SAMPLES), ("ICFN val", x_val, 1),
+                              ("RCFN train", r_train, RCFN_MIN_SAMPLES), ("RCFN val", r_val, 1)):
         if len(rows) == 0:
             raise InputError(f"the dataset has no {name} rows: build a larger one")
+        if len(rows) < least:
+            raise InputError(f"the dataset has {len(rows)} {name} rows, the fit needs at least "
+                             f"{least}: build a larger one")
     start = time.perf_counter()
     icfn, icfn_table = select_icfn(x_train, y_train, x_val, y_val, random_state=random_state)
     icfn_s = time.perf_counter() - start
@@ -130,6 +143,7 @@ def train_models(data: Dataset, random_state: int = 0,
                  "val_mae_n": float(np.mean(np.abs(val))),
                  "candidates": icfn_table, "fit_s": icfn_s},
         "rcfn": {"train_rows": len(k_train), "val_rows": len(k_val),
+                 "rows_left_out": int((~relaxing).sum()),
                  "candidates": rcfn_table, "fit_s": rcfn_s},
         "random_state": random_state,
     }
@@ -160,9 +174,10 @@ def _fit_unrelaxed(data: Dataset, history: ObserverModel, random_state: int,
     # hold, in recordings) the label divides by almost nothing: those rows are left out.
     kept = shares >= MIN_RETAINED_SHARE
     train, val = kept & (split == "train"), kept & (split == "val")
-    if not (train.any() and val.any()):
-        raise InputError("no ICFN train or val rows retain enough of their unrelaxed force "
-                         f"(share >= {MIN_RETAINED_SHARE}) to train the unrelaxed ICFN: "
+    if train.sum() < ICFN_MIN_SAMPLES or not val.any():
+        raise InputError(f"{int(train.sum())} ICFN train and {int(val.sum())} val rows retain "
+                         f"enough of their unrelaxed force (share >= {MIN_RETAINED_SHARE}); "
+                         f"the unrelaxed ICFN needs {ICFN_MIN_SAMPLES} and 1: "
                          "train with --no-unrelaxed")
     first, table = select_icfn(x[train], y[train], x[val], y[val], random_state=random_state)
     members = [first]
