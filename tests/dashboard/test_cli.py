@@ -107,3 +107,50 @@ def test_a_recording_directory_is_checked_before_the_dashboard_serves(tmp_path) 
                                           str(record_dir)])
         assert isinstance(result.exception, InputError), result.output
         assert expected in str(result.exception)
+
+
+def test_a_second_ctrl_c_still_stops_the_session_without_a_traceback(tmp_path) -> None:
+    # uvicorn's force quit skipped the app's shutdown; its lifespan was cancelled, with a
+    # traceback. The shutdown (motor stopped, heaters off, recording closed) still runs.
+    import json
+    import signal
+    import socket
+    import subprocess
+    import time
+
+    sync_client = pytest.importorskip("websockets.sync.client")
+    probe = socket.socket()
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    proc = subprocess.Popen([sys.executable, "-m", "relaxgrip", "dashboard", "--port", str(port),
+                             "--record-dir", str(tmp_path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60.0
+        while True:
+            try:
+                ws = sync_client.connect(f"ws://127.0.0.1:{port}/ws", max_size=None)
+                break
+            except OSError:
+                assert time.monotonic() < deadline
+                assert proc.poll() is None
+                time.sleep(0.1)
+        with ws:
+            ws.send(json.dumps({"id": 1, "op": "record", "value": True}))
+            while (reply := json.loads(ws.recv()))["type"] != "reply":
+                pass
+            assert reply["ok"], reply
+            time.sleep(0.5)
+            proc.send_signal(signal.SIGINT)
+            time.sleep(0.05)
+            proc.send_signal(signal.SIGINT)  # while uvicorn closes the connections
+            _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    assert "Traceback" not in err, err
+    from relaxgrip.recording import read_session
+
+    assert read_session(Path(reply["path"]))["backend"]["name"] == "twin"  # closed, readable

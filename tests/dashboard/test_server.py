@@ -258,6 +258,18 @@ def test_loop_death_stops_motor_and_heaters_and_shows_the_error(make_session) ->
         assert "camera unplugged" in _control(ws, "close")["error"]
 
 
+def test_a_dead_loop_does_not_show_the_heaters_on(make_session) -> None:
+    # The loop's last command switched the heaters off: the page must not read them on.
+    session = make_session()
+    session.backend = Spy(session.backend, fail_after=20)
+    session.set_mode("compliant")  # heating at full duty when the loop dies
+    with TestClient(create_app(session)) as client, client.websocket_connect("/ws") as ws:
+        s = _state(ws, lambda s: s["error"] is not None)
+        assert s["duty"] == [0.0, 0.0]
+        assert s["phase"] == "stopped"
+        assert s["setpoint_c"] is None or np.isnan(s["setpoint_c"])
+
+
 def test_session_refuses_bad_construction() -> None:
     from relaxgrip.errors import InputError
 
@@ -327,6 +339,9 @@ def test_malformed_controls_get_a_reply_and_keep_the_viewer(served) -> None:
         for value in ("false", 0, None):
             assert "record needs true or false" in _control(ws, "record", value, 4)["error"]
         assert _state(ws)["recording"] is None
+        # JSON true is no number: Python's float(True) would have set a 1 N target.
+        assert _control(ws, "target", True, 6)["error"] == "target needs a number, got True"
+        assert _state(ws)["target_n"] != 1.0
         assert _control(ws, "target", 4, 5)["ok"]  # the same viewer, still served
     assert session.alive
 

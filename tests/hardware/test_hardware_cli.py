@@ -193,3 +193,32 @@ def test_emulator_stopped_by_a_signal_removes_its_link_and_socket(
     assert proc.returncode == 0, err
     assert not sock.exists()
     assert not port.is_symlink()
+
+
+def test_emulator_started_with_nohup_outlives_its_terminal(tmp_path: Path) -> None:
+    import time
+
+    port, sock = tmp_path / "tty", tmp_path / "frames.sock"
+    # SIGHUP ignored, as ``nohup`` starts a command: a closed terminal must not stop it.
+    proc = subprocess.Popen([sys.executable, "-m", "relaxgrip", "emulator", "--rig",
+                             str(_emulator_rig(tmp_path, port, sock))],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))
+    try:
+        deadline = time.monotonic() + 60.0
+        while not (sock.exists() and port.is_symlink()) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert sock.exists()
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGHUP)
+        time.sleep(1.0)
+        assert proc.poll() is None, "the hang-up stopped the emulator"
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    assert proc.returncode == 0, err
+    assert not sock.exists()
+    assert not port.is_symlink()

@@ -130,11 +130,18 @@ def _hangup_server(config: Any) -> Any:
     again for the command's own handlers (a stop with exit code 130).  A
     SIGHUP raised our ``KeyboardInterrupt`` inside its event loop instead,
     which printed the loop's tasks' tracebacks.  Ignored (``nohup``), it stays
-    ignored.
+    ignored.  A second Ctrl-C (uvicorn's force quit) still runs the application's
+    shutdown (motor stopped, heaters off, recording closed), which uvicorn skips: the
+    running lifespan was cancelled instead, and its traceback printed.
     """
     import uvicorn
 
     class HangupServer(uvicorn.Server):
+        async def shutdown(self, sockets: list[socket.socket] | None = None) -> None:
+            await super().shutdown(sockets)
+            if self.force_exit:  # skipped by uvicorn: the connections were not waited for
+                await self.lifespan.shutdown()
+
         @contextlib.contextmanager
         def capture_signals(self) -> Iterator[None]:
             with super().capture_signals():  # raises what it caught once restored

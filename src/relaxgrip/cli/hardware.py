@@ -25,7 +25,8 @@ if TYPE_CHECKING:
 MAX_DURATION_S = 86_400.0
 
 #: Signals that stop the emulator as Ctrl-C does, its link and socket removed: ``kill``,
-#: a closed terminal, and SIGINT also where the shell started it with SIGINT ignored (``&``).
+#: a closed terminal (unless ``nohup`` ignores it: that stays), and SIGINT also where the
+#: shell started it with SIGINT ignored (``&``).
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
@@ -74,7 +75,10 @@ def emulator(
     emu = McuEmulator(config, run_seed, WallClock())
     link: Path | None = None
     # Handlers can only be set from the main thread (not, say, from a test runner's thread).
-    stop_signals = _STOP_SIGNALS if threading.current_thread() is threading.main_thread() else ()
+    stop_signals = tuple(
+        sig for sig in _STOP_SIGNALS
+        if sig != signal.SIGHUP or signal.getsignal(sig) is not signal.SIG_IGN
+    ) if threading.current_thread() is threading.main_thread() else ()
     previous = {sig: signal.signal(sig, interrupt) for sig in stop_signals}
     try:
         if make_dir:

@@ -80,6 +80,8 @@ def _control(session: LiveSession, op: str, value: Any) -> dict[str, Any]:
     """Apply one control; the reply's extra fields."""
 
     def number() -> float:
+        if isinstance(value, bool):  # float(True) is 1.0: a 1 N target, a 1 °C setpoint
+            raise InputError(f"{op} needs a number, got {value!r}")
         try:
             out = float(value)
         except (TypeError, ValueError, OverflowError):

@@ -226,7 +226,9 @@ class LiveSession:
                     t_next = now
                 self.clock.sleep_until(t_next)
         except Exception as exc:  # shown on the page; finally: safe
-            self.error = f"control loop stopped: {type(exc).__name__}: {exc}"
+            with self._lock:  # one state: the page must not read the heaters on beside it
+                self.error = f"control loop stopped: {type(exc).__name__}: {exc}"
+                self.controller.stop(self._now(), "control loop stopped")
         finally:
             with self._lock:
                 self._safe_off()
