@@ -45,7 +45,9 @@ def test_bad_flags(
 
 @pytest.mark.parametrize(
     ("seconds", "shown"),
-    [(1.0095e-5, "10.1 µs"), (9.81e-4, "981 µs"), (2.15e-3, "2.15 ms"), (8.81, "8.81 s")],
+    [(1.0095e-5, "10.1 µs"), (9.81e-4, "981 µs"), (2.15e-3, "2.15 ms"), (8.81, "8.81 s"),
+     # rounded up into the next unit, and past 1000 s: never "1e+03 ms" or "1.23e+03 s"
+     (9.9996e-4, "1 ms"), (0.9996, "1 s"), (999.6, "1000 s"), (1234.5, "1230 s")],
 )
 def test_table_durations_keep_three_figures(seconds: float, shown: str) -> None:
     # A 10 µs median had been printed as "0.0 ms".

@@ -113,6 +113,21 @@ def test_task_prints_its_verdict_and_criteria(monkeypatch, capsys):
     assert "stiff_crushes" in out
 
 
+@pytest.mark.parametrize("json_flag", [[], ["--json"]])
+def test_a_failed_task_exits_1(monkeypatch, capsys, json_flag):
+    import relaxgrip.experiments.tasks as tasks
+
+    failed = TaskResult("hammer", 0, {"lifted_and_held": False}, {"peak_true_n": 1.0})
+    monkeypatch.setattr(tasks, "task_function", lambda name: lambda seed: failed)
+    code, out, err = run_main(["task", "hammer", *json_flag], monkeypatch, capsys)
+    assert code == 1, err
+    assert "Traceback" not in err
+    if json_flag:
+        assert json.loads(out)["success"] is False
+    else:
+        assert "failed" in out
+
+
 def test_reproduce_refuses_a_directory_that_is_not_a_report(monkeypatch, capsys,
                                                             tmp_path: Path):
     data = tmp_path / "dataset"

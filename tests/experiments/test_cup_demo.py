@@ -12,6 +12,7 @@ import pytest
 
 from relaxgrip.backend import Command, Truth
 from relaxgrip.clock import VirtualClock
+from relaxgrip.control.phases import PHASES, GraspPhase
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.cup_demo import (
     CupDemoResult,
@@ -111,6 +112,42 @@ def test_scoring_catches_a_crushing_force(hot_left: CupDemoResult) -> None:
     task = score_cup_demo(crushed)
     assert not task.criteria["cup_not_crushed"]
     assert not task.criteria["force_within_band_s3"]
+
+
+def test_s3_band_covers_the_hold_on_the_table(hot_left: CupDemoResult) -> None:
+    """The S3 band holds through the hold before the lift, not only once the cup is up."""
+    series = dict(hot_left.series)
+    t = series["t_s"]
+    lo, hi = hot_left.stages_s[2]
+    on_table = ((t >= lo) & (t < hi) & (series["phase"] == PHASES.index(GraspPhase.HOLD))
+                & (series["arm_mm"] == 0.0))
+    assert on_table.sum() > 20
+    force = series["truth_force_n"].copy()
+    force[on_table] = 2.0  # twice the 1 N target
+    series["truth_force_n"] = force
+    task = score_cup_demo(replace(hot_left, series=series))
+    assert not task.criteria["force_within_band_s3"]
+    assert score_cup_demo(hot_left).criteria["force_within_band_s3"]
+
+
+def test_a_glass_never_let_go_is_not_released(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Once the hand has the glass the twin holds no object: the force before that decides."""
+    from relaxgrip.control import GraspController
+
+    release = GraspController.release
+    calls: list[float] = []
+
+    def release_the_cup_only(self: GraspController, t_s: float) -> None:
+        calls.append(t_s)
+        if len(calls) == 1:  # S3's cup; S5's glass stays gripped
+            release(self, t_s)
+
+    monkeypatch.setattr(GraspController, "release", release_the_cup_only)
+    task = score_cup_demo(run_cup_demo(seed=0, quick=True, hot_side="left"))
+    assert len(calls) == 2
+    assert task.criteria["handover_detected"]
+    assert not task.criteria["released"]
+    assert task.figures["final_force_n"] > 4.0
 
 
 def test_plot_writes_a_png(hot_left: CupDemoResult, tmp_path: Path) -> None:

@@ -55,6 +55,9 @@ def bench(
 
 def format_duration(seconds: float) -> str:
     """A duration with three significant figures in a unit that fits (µs, ms or s)."""
+    seconds = float(f"{seconds:.3g}")  # rounded before the unit is chosen: 0.9996 s is 1 s
+    if seconds >= 1e3:
+        return f"{seconds:.0f} s"
     if seconds < 1e-3:
         return f"{seconds * 1e6:.3g} µs"
     if seconds < 1.0:

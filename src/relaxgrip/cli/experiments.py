@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
@@ -11,6 +11,9 @@ from rich.table import Table
 
 from relaxgrip.cli._app import app, console, emit_json, err_console, int_option
 from relaxgrip.errors import InputError
+
+if TYPE_CHECKING:
+    from relaxgrip.experiments.tasks import TaskResult
 
 
 @app.command("task")
@@ -21,7 +24,10 @@ def task(
     seed: Annotated[int, int_option("--seed", help="Twin seed.")] = 0,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
-    """Run one of the paper's grasping tasks on the twin and check its success criteria."""
+    """Run one of the paper's grasping tasks on the twin and check its success criteria.
+
+    Exits 1 when a criterion does not hold.
+    """
     from relaxgrip.experiments.tasks import task_function
 
     if seed < 0:
@@ -29,9 +35,15 @@ def task(
     result = task_function(name)(seed=seed)
     if json_out:
         emit_json(result.to_dict())
-        return
+    else:
+        _print_task(result)
+    if not result.success:
+        raise typer.Exit(1)
+
+
+def _print_task(result: TaskResult) -> None:
     verdict = "[green]success[/green]" if result.success else "[red]failed[/red]"
-    table = Table(title=f"task {name}, seed {seed}: {verdict}")
+    table = Table(title=f"task {result.name}, seed {result.seed}: {verdict}")
     table.add_column("criterion")
     table.add_column("held")
     for criterion, held in result.criteria.items():

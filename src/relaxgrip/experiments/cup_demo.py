@@ -697,7 +697,11 @@ def _figures(series: dict[str, FloatArray], bounds: tuple[tuple[float, float], .
     push = next((e["t_s"] for e in events if e["event"] == "push_starts"), math.nan)
     detected = next((e["t_s"] for e in events if e["event"] == "handover_detected"), math.nan)
     out["handover_delay_s"] = float(detected - push)
-    end = t >= bounds[4][1] - 1.0
+    # The last second the glass is still there: once the hand has it, the twin holds no
+    # object, and no force, whether the fingers opened or not.
+    with_glass = s5 & np.isfinite(series["truth_ahead_m"])
+    idx = np.flatnonzero(with_glass)
+    end = with_glass & (t >= t[idx[-1]] - 1.0) if idx.size else with_glass
     out["final_force_n"] = float(np.max(series["truth_force_n"][end])) if end.any() else math.nan
     out["total_s"] = float(t[-1] - t[0])
     return out
@@ -720,7 +724,8 @@ def cup_task(seed: int = 0) -> TaskResult:
     :data:`S3_BAND_N` over the S3 hold), ``no_slip``, ``stiff_before_glass``
     (S4 ended with the fingers' modulus above 80 % of glassy),
     ``glass_lifted``, ``force_within_band_s5`` (:data:`S5_BAND_N` before the
-    hand-over), ``handover_detected`` (within 1.5 s of the push), ``released``.
+    hand-over), ``handover_detected`` (within 1.5 s of the push), ``released`` (the
+    true force under 0.05 N before the hand took the glass).
     """
     return score_cup_demo(run_cup_demo(seed=seed, quick=True))
 
@@ -775,6 +780,9 @@ def _within(r: CupDemoResult, stage: int, band: tuple[float, float]) -> bool:
         return False
     mask &= t >= t[idx[0]] + 0.5
     if stage == 3:
-        mask &= r["arm_mm"] > 0.0  # until the cup is back on the table
+        # Until the cup is back on the table; the hold on it before the lift counts.
+        up = np.flatnonzero(mask & (r["arm_mm"] > 0.0))
+        if up.size:
+            mask &= t <= t[up[-1]]
     f = r["truth_force_n"][mask]
     return bool(f.size) and bool(np.all((f >= band[0]) & (f <= band[1])))
