@@ -163,3 +163,45 @@ def test_relax_reads_the_icfn_again_once_the_hold_ends() -> None:
     assert after.force_n == pytest.approx(0.2)
     assert math.isnan(after.hold_s)
     assert math.isnan(after.f_onset_n)
+
+
+def _with_features(t: float, x: np.ndarray) -> Percept:
+    marker = MarkerState(t, TrackStatus.TRACKING, delta_t_m=np.array([5e-4, 0.0, 0.0]),
+                         delta_r_rad=np.zeros(3))
+    return Percept(t, marker, None, math.inf, "", x, None)
+
+
+def test_features_with_a_nan_entry_are_no_reading_not_zero_newtons() -> None:
+    """Clipped at zero, the network's nan read 0 N: a valid estimate the controller closes on."""
+    est = IcfnEstimator(_Icfn())  # type: ignore[arg-type]
+    assert est.update(_with_features(0.0, np.array([5.0])), 50.0).valid
+    bad = est.update(_with_features(1.0 / RATE_HZ, np.array([math.nan])), 50.0)
+    assert math.isnan(bad.f_icfn_n)
+    assert not bad.valid
+    assert est.update(_with_features(2.0 / RATE_HZ, np.array([5.0])), 50.0).force_n == 5.0
+
+
+def test_a_nan_frame_does_not_poison_the_loading_history() -> None:
+    """With the unrelaxed ICFN a nan temperature entry went into the branches for good:
+    every later frame read 0 N."""
+    from relaxgrip.learning.training import load_default_models
+    from relaxgrip.perception.features import ICFN_SCHEMA
+
+    models = load_default_models()
+    assert models.unrelaxed is not None
+    x = np.zeros(len(ICFN_SCHEMA))
+    x[ICFN_SCHEMA.index("marker_dx_m")] = 5e-4
+    for j in (0, 1):
+        for i in range(5):
+            x[ICFN_SCHEMA.index(f"f{j}_beam{i}_c")] = 40.0
+        for stat, value in (("mean", 40.0), ("max", 41.0), ("min", 39.0), ("std", 0.5)):
+            unit = "k" if stat == "std" else "c"
+            x[ICFN_SCHEMA.index(f"f{j}_temp_{stat}_{unit}")] = value
+    blind = x.copy()
+    blind[ICFN_SCHEMA.index("f0_temp_mean_c")] = math.nan
+    est = IcfnEstimator(models.icfn, smoothing_s=0.0, unrelaxed=models.unrelaxed)
+    before = est.update(_with_features(0.0, x), 50.0).force_n
+    assert before > 1.0
+    assert not est.update(_with_features(1.0 / RATE_HZ, blind), 50.0).valid
+    after = est.update(_with_features(2.0 / RATE_HZ, x), 50.0).force_n
+    assert after == pytest.approx(before, rel=0.05)

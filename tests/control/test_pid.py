@@ -109,3 +109,34 @@ def test_reset_starts_from_a_given_output():
 def test_bad_gains_are_refused(bad):
     with pytest.raises(InputError):
         PIDGains(**bad)
+
+
+def test_a_p_only_pid_keeps_no_offset_after_saturating():
+    # ki = 0: nothing to wind up; back-calculation used to leave -1 in the integral, and the
+    # output then had the wrong sign for a small positive error and -1 at zero error.
+    pid = PID(PIDGains(kp=1.0, out_min=-1.0, out_max=1.0))
+    assert pid.update(10.0, 0.0, 0.1) == 1.0
+    assert pid.update(0.5, 0.0, 0.1) == pytest.approx(0.5)
+    assert pid.update(0.0, 0.0, 0.1) == 0.0
+    assert pid.integral == 0.0
+
+
+@pytest.mark.parametrize(("setpoint", "measurement", "dt"), [
+    (1.0, math.nan, 0.1), (1.0, math.inf, 0.1), (math.nan, 0.0, 0.1), (1.0, 0.0, math.inf),
+])
+def test_non_finite_inputs_are_refused_and_leave_the_state(setpoint, measurement, dt):
+    # Taken in, one nan measurement left the filtered measurement nan: every later output nan.
+    pid = PID(PIDGains(kp=2.5, ki=1.0, out_min=-3.0, out_max=3.0))
+    pid.update(5.0, 4.0, 0.1)
+    with pytest.raises(ValueError, match=r"finite|step"):
+        pid.update(setpoint, measurement, dt)
+    assert pid.update(5.0, 4.0, 0.1) == pytest.approx(2.5 + 0.2)
+
+
+def test_gains_that_overflow_still_give_a_limited_output():
+    # kp and ki near the float maximum: the terms overflow to inf, and the back-calculation's
+    # inf - inf left a nan integral (and nan outputs) behind.
+    pid = PID(PIDGains(kp=1e308, ki=1e308, out_min=-3.0, out_max=3.0))
+    outs = [pid.update(5.0, y, 1.0) for y in (0.0, 4.0, 6.0, 4.0)]
+    assert outs == [3.0, 3.0, -3.0, 3.0]
+    assert math.isfinite(pid.integral)

@@ -259,3 +259,46 @@ def test_a_mode_outside_the_lab_s_setpoint_range_is_refused():
     assert loop.setpoint_c is None
     loop.set_mode(StiffnessMode.MEDIUM)
     assert loop.setpoint_c == 40.0
+
+
+def test_a_finger_out_of_view_when_the_setpoint_changes_does_not_keep_the_old_integral():
+    """A new setpoint re-seeds both integrators on the next frame, a finger out of view then
+    too: its integral, wound up towards the old setpoint, heated it past the new one."""
+    loop = TemperatureLoop(HEAT)
+    loop.set_temperature(60.0)
+    below = np.full((2, HEAT.n_nodes), 55.0)
+    for t in range(30):
+        loop.update(features(float(t), below), float(t))
+    loop.set_temperature(40.0)
+    near = np.full((2, HEAT.n_nodes), 39.0)
+    blind = FingerThermal((np.nan,) * HEAT.n_nodes, np.nan, np.nan, np.nan, np.nan, np.nan)
+    seeded = ThermalFeatures(30.0, (features(30.0, near).fingers[0], blind), AMBIENT_C, ())
+    assert loop.update(seeded, 30.0)[1] == 0.0
+    # Back in view: its PID starts afresh, as a new loop's does on its first frame.
+    fresh_loop = TemperatureLoop(HEAT)
+    fresh_loop.set_temperature(40.0)
+    expected = fresh_loop.update(features(31.0, near), 31.0)[1]
+    assert loop.update(features(31.0, near), 31.0)[1] == pytest.approx(expected)
+
+
+def test_a_frame_out_of_view_before_the_grasp_does_not_lose_the_adhesive_pads():
+    """One infrared frame with no beam in view just before the fingers close: the pads were
+    then read as the object covers them, and the loop heated them to 66 °C for 58 °C."""
+    loop = TemperatureLoop(HEAT)
+    loop.set_mode(StiffnessMode.ADHESIVE)
+    temps = np.full((2, HEAT.n_nodes), 58.0)
+    blind = FingerThermal((np.nan,) * HEAT.n_nodes, np.nan, np.nan, np.nan, np.nan, np.nan)
+    for k in range(6000):
+        t = k / 10
+        if k == 1500:
+            loop.set_grasping(True)
+        if k % 10 == 0:
+            seen = temps.copy()
+            if k >= 1500:  # a room-temperature ball half over the tips
+                seen[:, -2:] = 0.6 * seen[:, -2:] + 0.4 * 26.0
+            latest = features(t, seen)
+            if k == 1490:
+                latest = ThermalFeatures(t, (blind, blind), AMBIENT_C, ())
+        duty = loop.update(latest, t)
+        temps = np.vstack([heat_step(temps[j], duty[j], 0.1, HEAT, AMBIENT_C) for j in range(2)])
+    assert temps[:, -2:].mean(axis=1) == pytest.approx([58.0, 58.0], abs=0.5)

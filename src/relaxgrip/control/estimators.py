@@ -291,10 +291,12 @@ class IcfnEstimator:
         """The force read on this frame (N, never negative); nan without features.
 
         Call it once per frame, in order: with an unrelaxed ICFN it advances
-        the loading history.
+        the loading history.  Features with a non-finite entry are none: the
+        network's nan would read as 0 N (clipped), and it would stay in the
+        loading history for the rest of the grasp.
         """
         x = percept.features
-        if x is None:
+        if x is None or not np.isfinite(x).all():
             return NAN
         if self.unrelaxed is None or self.history is None:
             return max(0.0, self._tared(percept.t_s, self.icfn.predict_one(x)))

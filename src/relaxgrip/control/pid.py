@@ -71,8 +71,9 @@ class PID:
     ``u = kp e + I - kd dy_f/dt`` with ``e = setpoint - measurement`` and
     ``dy_f`` the filtered measurement.  After limiting, the integral is moved
     back by the part of ``u`` the output limits cut off (back-calculation), so
-    it holds what the output can actually deliver.  While the rate limit
-    holds the output back, the integral does not change.
+    it holds what the output can actually deliver; with ``ki = 0`` it stays
+    where :meth:`reset` put it.  While the rate limit holds the output back,
+    the integral does not change.
     """
 
     def __init__(self, gains: PIDGains) -> None:
@@ -100,9 +101,19 @@ class PID:
         -------
         float
             The limited output.
+
+        Raises
+        ------
+        ValueError
+            If ``dt_s`` is not finite and > 0, or the setpoint or the measurement
+            is not finite (the filtered measurement would keep a nan, and every
+            later output with it).
         """
-        if not dt_s > 0:
+        if not (math.isfinite(dt_s) and dt_s > 0):
             raise ValueError(f"PID step must be > 0 s, got {dt_s}")
+        if not (math.isfinite(setpoint) and math.isfinite(measurement)):
+            raise ValueError(f"PID setpoint and measurement must be finite, got {setpoint} "
+                             f"and {measurement}")
         g = self.gains
         error = setpoint - measurement
         if self._y_filtered is None:
@@ -118,9 +129,12 @@ class PID:
         bounded = min(max(raw, g.out_min), g.out_max)
         step = g.rate_limit * dt_s
         limited = min(max(bounded, self.output - step), self.output + step)
-        if limited == bounded:
-            # Back-calculation: the integral keeps only what the limits let through.
-            self.integral = min(max(integral + bounded - raw, g.out_min), g.out_max)
+        if limited == bounded and g.ki > 0:
+            # Back-calculation: the integral keeps only what the limits let through.  (With
+            # ki = 0 there is no integral to wind up: moved back, it would stay an offset.)
+            back = integral + bounded - raw
+            if not math.isnan(back):  # inf - inf: gains so large that the terms overflowed
+                self.integral = min(max(back, g.out_min), g.out_max)
         # Rate-limited: the integral waits, for the output is still on its way (taking
         # the cut into the integral would hold the output where the ramp began).
         self.output = limited

@@ -248,8 +248,8 @@ class TemperatureLoop:
         covers in part before :func:`covered_beams` tells it (a ball at the
         tips read 46-49 °C there against 57 °C before it, with the finger's
         warmest beam at 60 °C).  While grasping, they are read as they were
-        before the fingers closed, moved by the median change of the
-        proximal beams since.
+        in the last frame that showed them before the fingers closed, moved by
+        the median change of the proximal beams since.
         """
         self._grasping = grasping
 
@@ -301,7 +301,12 @@ class TemperatureLoop:
         self._seen_t = thermal.t_s
         if not self._grasping:
             for j, finger in enumerate(thermal.fingers[: len(self._open_beams)]):
-                self._open_beams[j] = tuple(finger.beam_temps_c)
+                # Only a frame that shows the pads and a proximal beam: one out of view just
+                # before the fingers close would leave the pads read as the object covers them.
+                beams = finger.beam_temps_c
+                if (any(math.isfinite(b) for b in beams[-2:])
+                        and any(math.isfinite(b) for b in beams[:-2])):
+                    self._open_beams[j] = tuple(beams)
         for j, finger in enumerate(thermal.fingers[: len(self._clear)]):
             if math.isfinite(finger.mean_c) and not any(
                     covered_beams(finger.beam_temps_c, thermal.background_c)):
@@ -383,11 +388,11 @@ class TemperatureLoop:
         self._last_ir_t = thermal.t_s
         out = []
         for pid, reading in zip(self._pids, self.readings_c(thermal), strict=True):
+            if first:
+                pid.reset(0.0)  # out of view or not: its integral is of the old setpoint
             if not math.isfinite(reading):
                 out.append(0.0)  # a finger out of view is not heated blind
                 continue
-            if first:
-                pid.reset(0.0)
             # The PID corrects around the feed-forward; its limits keep the sum in [0, 1].
             pid.gains = _shifted(pid.gains, feedforward)
             out.append(feedforward + pid.update(setpoint_c, reading, dt))
