@@ -6,6 +6,7 @@ import json
 import shutil
 from dataclasses import replace
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 import pytest
@@ -266,7 +267,8 @@ def test_the_warning_says_which_error_it_gives_beside_the_tables_mean() -> None:
     less the closed chain's addition.  The warning gave the latter alone (-0.040 N against
     the table's -0.028 N at 280 s): it names it, and gives the table's beside it."""
     sd = 0.045 * np.sqrt(2.0)
-    holds = [{**r, "est_error_mean_n": r["bins_n"][-1] + 0.012} for r in _holds(2, 0.05, sd)]
+    holds = [{**r, "est_error_mean_n": cast(list[float], r["bins_n"])[-1] + 0.012}
+             for r in _holds(2, 0.05, sd)]
     result = calibration_from_holds([5.0], [40.0], [0, 1], 4.0, {"5N 40C": holds})
     kept = result.kept()
     condition = kept["conditions"]["5N 40C"]
@@ -410,6 +412,10 @@ def test_holds_added_to_a_calibration_are_as_if_run_together(uncalibrated: Model
                            add_to=grown.record())
     assert wider.targets_n == [3.0, 5.0]
     assert [len(wider.holds[c]) for c in ("3N 40C", "5N 40C")] == [2, 3]
+    # The shipped calibration ran on v3, whose standard holds this twin runs bit for bit.
+    older = {**first.record(), "twin_version": "relaxgrip-twin-v3"}
+    assert calibrate_hold([5.0], [40.0], [1002], 4.0, models=uncalibrated,
+                          add_to=older).holds == grown.holds
 
 
 def _record(**changes: object) -> dict[str, object]:

@@ -64,3 +64,16 @@ def test_invalid_duty_and_params():
         heat_step(np.full(5, 25.0), 1.5, 1.0, HeatParams(), 25.0)
     with pytest.raises(ValueError, match="heater_share"):
         replace(HeatParams(), heater_share=(1.0, 0.0))
+
+
+@pytest.mark.parametrize("dt_s", [-1.0, float("nan"), float("inf")])
+def test_a_step_that_is_not_a_finite_non_negative_time_is_refused(dt_s):
+    # NaN slipped past ``dt_s < 0`` and turned every temperature into NaN.
+    with pytest.raises(ValueError, match="dt_s"):
+        heat_step(np.full(5, 25.0), 0.5, dt_s, HeatParams(), 25.0)
+
+
+def test_a_huge_step_lands_on_the_steady_state():
+    temps = heat_step(np.full(5, 25.0), 0.7, 1e7, HeatParams(), 22.0)
+    assert temps == pytest.approx(steady_state_c(0.7, HeatParams(), 22.0), abs=1e-6)
+    assert np.array_equal(heat_step(temps, 0.3, 0.0, HeatParams(), 22.0), temps)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -9,7 +11,12 @@ from relaxgrip.backend import Command, Observation, Truth
 from relaxgrip.clock import VirtualClock
 from relaxgrip.errors import InputError
 from relaxgrip.twin import GripperTwin, TwinConfig
-from relaxgrip.twin.sensors import RgbSensorConfig, SceneObject
+from relaxgrip.twin.sensors import (
+    ForceSensorConfig,
+    IrSensorConfig,
+    RgbSensorConfig,
+    SceneObject,
+)
 
 
 def truth(obs: Observation) -> Truth:
@@ -151,3 +158,23 @@ def test_sensor_config_validation() -> None:
         SceneObject("anvil", (0.0, 0.0, 0.0))
     with pytest.raises(InputError, match="object distance"):
         TwinConfig(object_distance_m=-0.1)
+
+
+@pytest.mark.parametrize(
+    ("make", "match"),
+    [
+        (lambda: RgbSensorConfig(noise_dn=math.nan), "noise"),
+        (lambda: RgbSensorConfig(blur_sigma_px=math.inf), "blur"),
+        (lambda: RgbSensorConfig(lighting_flicker=math.nan), "flicker"),  # a black frame
+        (lambda: RgbSensorConfig(supersample=2.5), "supersample"),  # type: ignore[arg-type]
+        (lambda: IrSensorConfig(netd_k=math.nan), "NETD"),  # no noise at all
+        (lambda: IrSensorConfig(max_offset_k=math.inf), "offset"),
+        (lambda: IrSensorConfig(psf_sigma_px=math.nan), "blur"),
+        (lambda: ForceSensorConfig(rate_hz=0.0), "rate_hz"),  # ZeroDivisionError at reset
+        (lambda: ForceSensorConfig(noise_n=math.nan), "noise_n"),
+        (lambda: ForceSensorConfig(noise_n=-0.01), "noise_n"),
+    ],
+)
+def test_sensor_configs_refuse_nan_and_impossible_values(make, match) -> None:
+    with pytest.raises(InputError, match=match):
+        make()

@@ -9,7 +9,14 @@ import pytest
 from relaxgrip.backend import Command, Gripper, Observation, Truth, check_backend
 from relaxgrip.clock import VirtualClock, WallClock
 from relaxgrip.errors import InputError
-from relaxgrip.twin import CATALOGUE, GripperTwin, ScatterParams, TwinConfig, get_object
+from relaxgrip.twin import (
+    CATALOGUE,
+    GripperTwin,
+    MotorParams,
+    ScatterParams,
+    TwinConfig,
+    get_object,
+)
 
 
 def truth(obs: Observation) -> Truth:
@@ -269,3 +276,116 @@ def test_nominal_twin_has_no_scatter():
     a, b = GripperTwin(cfg, seed=1).material, GripperTwin(cfg, seed=2).material
     assert a == b
     assert replace(cfg).object is not None
+
+
+@pytest.mark.parametrize("push_n", [-2.0, -20.0])
+def test_a_push_towards_finger_0_never_pulls_on_finger_1(push_n):
+    # Finger 1 presses with F + push: a push towards finger 0 larger than the squeeze
+    # had finger 1 pull the object (F + push < 0, finger 1 bent inwards).
+    twin, clock = _hammer_lifted(5.0, 0.0)
+    twin.set_external_force(push_n)
+    for _ in range(30):
+        clock.advance(1 / 30)
+        t = truth(twin.observe())
+        assert t.contact_force_n >= 0.0
+        assert t.contact_force_n + push_n >= -1e-9 or t.contact_force_n == 0.0
+        assert t.finger_deflection_m[1] >= 0.0
+    if push_n == -2.0:  # the squeeze holds: finger 0 presses harder than finger 1, by the push
+        assert t.contact_force_n > 2.0
+        assert t.finger_deflection_m[0] > t.finger_deflection_m[1]
+
+
+def test_a_push_either_way_is_mirrored_between_the_fingers():
+    # Two identical fingers: a push towards finger 0 is the mirror of one towards finger 1
+    # (the object was compressed by the larger force one way and the smaller the other).
+    def pushed(push_n: float) -> Truth:
+        clock = VirtualClock()
+        cfg = TwinConfig(object_name="hammer", scatter=ScatterParams().scaled(0.0))
+        twin = GripperTwin(cfg.without_sensors(), seed=0, clock=clock)
+        twin.act(Command(5.0))
+        while truth(twin.observe()).contact_force_n < 5.0:
+            clock.advance(1 / 30)
+        twin.act(Command())
+        twin.set_external_force(push_n)
+        clock.advance(1.0)
+        return truth(twin.observe())
+
+    towards_1, towards_0 = pushed(2.0), pushed(-2.0)
+    assert towards_0.contact_force_n == pytest.approx(towards_1.contact_force_n + 2.0, abs=1e-9)
+    assert towards_0.finger_deflection_m == pytest.approx(towards_1.finger_deflection_m[::-1],
+                                                          abs=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("motor", "match"),
+    [
+        ({"lag_s": 0.0}, "lag_s"),  # ZeroDivisionError at the first step
+        ({"encoder_resolution_mm": 0.0}, "encoder_resolution_mm"),  # at the first observe
+        ({"stroke_mm": -1.0}, "stroke_mm"),  # the motor sat at -1 mm
+        ({"max_velocity_mm_s": math.nan}, "max_velocity_mm_s"),  # the motor moved anyway
+        ({"max_velocity_mm_s": -20.0}, "max_velocity_mm_s"),
+    ],
+)
+def test_motor_params_refuse_impossible_values(motor, match):
+    with pytest.raises(InputError, match=match):
+        MotorParams(**motor)
+
+
+@pytest.mark.parametrize("seed", [None, 1.5, "3", True])
+def test_a_seed_that_is_no_integer_is_refused(seed):
+    # None raised AttributeError; 1.5 ran as seed 1 and "3" as seed 3.
+    with pytest.raises(InputError, match="seed"):
+        GripperTwin(TwinConfig().without_sensors(), seed=seed)
+
+
+def test_a_scene_of_anything_but_scene_objects_is_refused():
+    twin = GripperTwin(TwinConfig(rgb=None))
+    with pytest.raises(InputError, match="SceneObject"):
+        twin.set_scene(("glass",))  # type: ignore[arg-type]
+    twin.observe()  # the old scene is kept (it raised AttributeError in the camera)
+
+
+def test_fingers_lowered_onto_an_object_that_slid_out_close_on_it():
+    # The hammer slid out of a 1 N grip; the arm comes back down over it with the fingers
+    # open: they closed through it (2 mm apart around a 32 mm hammer, no force).
+    twin, clock = _hammer_lifted(1.0, 60.0)
+    assert truth(twin.observe()).object_ahead_m == 0.0
+    twin.act(Command(-20.0))
+    clock.advance(1.0)
+    twin.act(Command(0.0, arm_velocity_mm_s=-30.0))
+    clock.advance(2.5)
+    twin.act(Command(5.0))
+    while truth(twin.observe()).contact_force_n < 5.0:
+        clock.advance(1 / 30)
+        assert twin.aperture_m > get_object("hammer").width_m - 0.02
+    twin.act(Command(0.0, arm_velocity_mm_s=30.0))
+    clock.advance(0.5)
+    assert truth(twin.observe()).object_lifted
+
+
+def test_closed_fingers_lowered_onto_an_object_stop_on_its_top():
+    twin, clock = _hammer_lifted(1.0, 60.0)
+    twin.act(Command(0.0, arm_velocity_mm_s=-30.0))  # still closed on nothing: 30 mm apart
+    clock.advance(2.5)
+    obs = twin.observe()
+    assert obs.arm_height_mm == pytest.approx(get_object("hammer").grip_length_m * 1e3)
+    assert truth(obs).contact_force_n == 0.0
+
+
+def test_an_object_gripped_after_the_fingers_slid_down_it_rises_with_the_arm():
+    # Raised 30 mm with the fingers open and lowered again, the fingers held the hammer
+    # 30 mm above the table: squeezed and lifted 15 mm, it stayed on the table, not slipping.
+    clock = VirtualClock()
+    twin = GripperTwin(TwinConfig(object_name="hammer").without_sensors(), seed=0, clock=clock)
+    twin.act(Command(0.0, arm_velocity_mm_s=30.0))
+    clock.advance(1.0)
+    twin.act(Command(0.0, arm_velocity_mm_s=-30.0))
+    clock.advance(1.5)
+    twin.act(Command(20.0))
+    while truth(twin.observe()).contact_force_n < 5.0:
+        clock.advance(1 / 30)
+    twin.act(Command(0.0, arm_velocity_mm_s=30.0))
+    clock.advance(0.5)
+    t = truth(twin.observe())
+    assert t.object_lifted
+    assert not t.object_slipping

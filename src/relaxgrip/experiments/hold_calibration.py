@@ -532,13 +532,19 @@ def _stored(row: Mapping[str, Any]) -> dict[str, Any]:
     return {k: [num(x) for x in v] if k == "bins_n" else num(v) for k, v in row.items()}
 
 
+#: Earlier twins whose calibration holds (a standard hold: no push, the arm still) this
+#: one runs bit for bit, so that holds of theirs and of this one can be added together.
+#: v4 changed only pushes towards finger 0 and an arm lowered onto or along an object.
+SAME_HOLDS_AS = ("relaxgrip-twin-v3",)
+
+
 def _holds_to_add_to(record: Mapping[str, Any], targets: list[float], temps: list[float],
                      seeds: Sequence[int], duration_s: float) -> dict[str, list[dict[str, Any]]]:
     """The earlier calibration's holds, checked against the holds to add."""
     if not math.isclose(float(record["duration_s"]), duration_s):
         raise InputError(f"the earlier calibration held {record['duration_s']:g} s, not "
                          f"{duration_s:g} s: add holds of its length")
-    if record.get("twin_version") != TWIN_VERSION:
+    if record.get("twin_version") not in (TWIN_VERSION, *SAME_HOLDS_AS):
         raise InputError(f"the earlier calibration ran on {record.get('twin_version')}, not "
                          f"{TWIN_VERSION}: calibrate anew")
     holds: dict[str, list[dict[str, Any]]] = {

@@ -17,6 +17,7 @@ conductances W/K, capacities J/K.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -139,8 +140,8 @@ def discrete_heat_system(params: HeatParams, dt_s: float) -> tuple[FloatArray, F
     """
     from scipy.linalg import expm
 
-    if dt_s < 0:
-        raise ValueError(f"dt_s must be >= 0, got {dt_s}")
+    if not 0.0 <= dt_s < math.inf:
+        raise ValueError(f"dt_s must be finite and >= 0, got {dt_s}")
     a, b = heat_matrices(params)
     n = params.n_nodes
     aug = np.zeros((n + 2, n + 2))

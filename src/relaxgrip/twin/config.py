@@ -17,7 +17,7 @@ from relaxgrip.validate import check_positive, check_temp_c
 __all__ = ["TWIN_VERSION", "MotorParams", "ScatterParams", "TwinConfig"]
 
 #: Bumped whenever the twin's behaviour changes; every result records it.
-TWIN_VERSION = "relaxgrip-twin-v3"
+TWIN_VERSION = "relaxgrip-twin-v4"
 
 
 @dataclass(frozen=True)
@@ -40,6 +40,10 @@ class MotorParams:
     lag_s: float = 0.05
     stroke_mm: float = 148.0
     encoder_resolution_mm: float = 0.005
+
+    def __post_init__(self) -> None:
+        for name in ("max_velocity_mm_s", "lag_s", "stroke_mm", "encoder_resolution_mm"):
+            check_positive(getattr(self, name), name)
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ side only: the imperfections a real sensor has and perception must cope with.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from relaxgrip.errors import InputError
@@ -44,10 +45,12 @@ class RgbSensorConfig:
     occlusion: float = 0.0
 
     def __post_init__(self) -> None:
-        if not 1 <= self.supersample <= 8:
-            raise InputError(f"supersample must be 1-8, got {self.supersample}")
-        if self.noise_dn < 0 or self.blur_sigma_px < 0 or self.lighting_flicker < 0:
-            raise InputError("noise, blur and flicker must be >= 0")
+        if (isinstance(self.supersample, bool) or not isinstance(self.supersample, int)
+                or not 1 <= self.supersample <= 8):
+            raise InputError(f"supersample must be an integer 1-8, got {self.supersample!r}")
+        if not all(0 <= v < math.inf
+                   for v in (self.noise_dn, self.blur_sigma_px, self.lighting_flicker)):
+            raise InputError("noise, blur and flicker must be finite and >= 0")
         if not 0.05 <= self.lighting_gain <= 4.0:
             raise InputError(f"lighting_gain must be in [0.05, 4], got {self.lighting_gain}")
         if not 0.0 <= self.occlusion <= 1.0:
@@ -87,8 +90,8 @@ class IrSensorConfig:
     draw_bend: bool = False
 
     def __post_init__(self) -> None:
-        if self.netd_k < 0 or self.max_offset_k < 0 or self.psf_sigma_px < 0:
-            raise InputError("NETD, offset and blur must be >= 0")
+        if not all(0 <= v < math.inf for v in (self.netd_k, self.max_offset_k, self.psf_sigma_px)):
+            raise InputError("NETD, offset and blur must be finite and >= 0")
         for name in ("finger_emissivity", "background_emissivity"):
             if not 0.0 < getattr(self, name) <= 1.0:
                 raise InputError(f"{name} must be in (0, 1], got {getattr(self, name)}")
@@ -108,6 +111,12 @@ class ForceSensorConfig:
 
     rate_hz: float = 100.0
     noise_n: float = 0.01
+
+    def __post_init__(self) -> None:
+        if not 0 < self.rate_hz < math.inf:
+            raise InputError(f"force sensor rate_hz must be finite and > 0, got {self.rate_hz}")
+        if not 0 <= self.noise_n < math.inf:
+            raise InputError(f"force sensor noise_n must be finite and >= 0, got {self.noise_n}")
 
 
 @dataclass(frozen=True)

@@ -121,6 +121,13 @@ class TwinMaterial:
         return out
 
 
+def _check_seed(seed: object) -> int:
+    """The seed as an ``int``; anything but a non-negative integer raises InputError."""
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise InputError(f"seed must be a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
 class _FingerStiffness:
     """A finger's temperature-dependent contact parameters at one temperature field."""
 
@@ -188,7 +195,7 @@ class GripperTwin:
         self.config = config if config is not None else TwinConfig()
         self.clock: Clock = clock if clock is not None else VirtualClock()
         self._nodes_m = node_positions_m(self.config.heat)
-        self.reset(seed)
+        self.reset(_check_seed(seed))
 
     # -- Gripper protocol -------------------------------------------------
     @property
@@ -199,9 +206,7 @@ class GripperTwin:
     def reset(self, seed: int | None = None) -> Observation:
         """Draw a new run (``seed`` or the previous one) and return to the open state."""
         if seed is not None:
-            if int(seed) < 0:
-                raise InputError(f"seed must be a non-negative integer, got {seed}")
-            self.seed = int(seed)
+            self.seed = _check_seed(seed)
         cfg = self.config
         self.material = TwinMaterial.draw(cfg, np.random.default_rng(self.seed))
         self._t = self.clock.now()
@@ -327,9 +332,10 @@ class GripperTwin:
 
         While the grip is closed the push shifts load from finger 0 (which
         carries the marker) to finger 1: finger 0 presses with the squeeze
-        ``F`` (the truth's contact force), finger 1 with ``F + force_n``.  Once
-        the grip opens, the hand carries the object and the fingers are free.
-        0 (the default) is no push.
+        ``F`` (the truth's contact force), finger 1 with ``F + force_n``.  A
+        negative ``force_n`` pushes towards finger 0 instead.  Once the grip
+        opens at either finger, the hand carries the object and the fingers
+        are free.  0 (the default) is no push.
         """
         if not math.isfinite(force_n):
             raise InputError(f"external force must be finite, got {force_n}")
@@ -337,7 +343,11 @@ class GripperTwin:
 
     def set_scene(self, scene: tuple[SceneObject, ...]) -> None:
         """Replace the objects standing in view (the config's ``scene``) from now on."""
-        self._scene_objects = tuple(scene)
+        scene = tuple(scene)
+        for item in scene:
+            if not isinstance(item, SceneObject):
+                raise InputError(f"a scene holds SceneObject items, got {item!r}")
+        self._scene_objects = scene
 
     def truth(self) -> Truth:
         """Ground truth at the integrated time."""
@@ -449,7 +459,8 @@ class GripperTwin:
             pos = min(max(pos, 0.0), mp.stroke_mm)
             self._motor_v = 0.0
         self._motor_mm = pos
-        self._arm_mm = max(0.0, self._arm_mm + cmd.arm_velocity_mm_s * dt)
+        if cmd.arm_velocity_mm_s != 0.0:
+            self._raise_arm(cmd.arm_velocity_mm_s * dt)
         if cmd.approach_velocity_mm_s != 0.0:
             self._approach(cmd.approach_velocity_mm_s * dt)
 
@@ -485,15 +496,24 @@ class GripperTwin:
         obj = self._object
         if obj is not None and self._engaged:
             delta = obj.width_m - self._plastic_m - self.aperture_m
-            # A hand's push: F_1 = F_0 + push, the chain with finger 1's offset lowered by it.
+            # A hand's push: F_1 = F_0 + push.  The chain carries the smaller of the two
+            # forces, so that neither contact pulls: F_0 with finger 1's offset lowered by
+            # the push, or (a push towards finger 0) F_1 with finger 0's offset raised by it.
             push = self._external_n
-            loaded = offset if push == 0.0 else [offset[0], offset[1] - push]
+            if push == 0.0:
+                loaded = offset
+            elif push > 0.0:
+                loaded = [offset[0], offset[1] - push]
+            else:
+                loaded = [offset[0] + push, offset[1]]
             sol = series_contact(delta, k_eff, loaded, obj.stiffness_n_per_m, obj.yield_force_n)
             self._plastic_m += sol.plastic_m
             x_new = sol.finger_deflection_m
             force = sol.force_n
-            if push != 0.0 and force == 0.0:  # off finger 0: the hand has it, both fingers free
+            if push != 0.0 and force == 0.0:  # off a finger: the hand has it, both fingers free
                 x_new = (-offset[0] / k_eff[0], -offset[1] / k_eff[1])
+            elif push < 0.0:
+                force -= push  # the chain's force is finger 1's: F_0 = F_1 - push
         else:
             x_new = (-offset[0] / k_eff[0], -offset[1] / k_eff[1])
             force = 0.0
@@ -528,6 +548,26 @@ class GripperTwin:
         if np.abs(self._temps - self._stiff_temps).max() > _REFRESH_K:
             self._stiff = [self._evaluate(0), self._evaluate(1)]
             self._stiff_temps = self._temps.copy()
+
+    def _raise_arm(self, step_mm: float) -> None:
+        """Move the arm up (or down, to the table at most).
+
+        Coming down onto an object that stands at the grasp position without
+        being held (one that slid out of the fingers), the fingers reach down
+        beside it if they are open wide enough, and stop on its top if not.
+        """
+        arm = max(0.0, self._arm_mm + step_mm)
+        obj = self._object
+        if (obj is not None and not self._engaged
+                and self._forward_mm >= self._object_x_mm - 1e-9):
+            top_mm = self._object_height_mm + obj.grip_length_m * 1e3
+            if self._arm_mm >= top_mm > arm:
+                if self.aperture_m >= obj.width_m - self._plastic_m:
+                    self._engaged = True
+                    self._grip_mm = arm - self._object_height_mm
+                else:
+                    arm = top_mm
+        self._arm_mm = arm
 
     def _approach(self, step_mm: float) -> None:
         """Move the arm along the fingers.
@@ -568,6 +608,8 @@ class GripperTwin:
             if force_n > 0.0 and self._object_height_mm > 0.0:
                 # Lowered while held: it goes down with the fingers, to the table at most.
                 self._object_height_mm = max(base, 0.0)
+            if base < self._object_height_mm:  # lowered along it where it stands
+                self._grip_mm = self._arm_mm - self._object_height_mm
             self._slipping = False
             return
         s0, s1 = self._stiff
