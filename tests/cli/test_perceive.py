@@ -120,6 +120,16 @@ def test_bad_input(
     assert_one_error_line(code, out, err, expected)
 
 
+def _assert_same_pose(plain: str | Path, other: str | Path, monkeypatch: pytest.MonkeyPatch,
+                      capsys: pytest.CaptureFixture[str]) -> None:
+    """``perceive`` finds the one marker of image ``other`` where it finds that of ``plain``."""
+    code, want_out, _ = run_main(["perceive", plain, "--json"], monkeypatch, capsys)
+    code2, got_out, err = run_main(["perceive", other, "--json"], monkeypatch, capsys)
+    assert (code, code2) == (0, 0), err
+    (want,), (got,) = json.loads(want_out)["markers"], json.loads(got_out)["markers"]
+    assert np.allclose(got["tvec_m"], want["tvec_m"], atol=2e-5)
+
+
 @pytest.mark.parametrize("variant", ["rgba-transparent", "16-bit-hot-pixel", "float-nan"])
 def test_images_as_labs_save_them_read_as_the_plain_one(
     marker_png: tuple[Path, np.ndarray], tmp_path: Path, variant: str,
@@ -143,11 +153,7 @@ def test_images_as_labs_save_them_read_as_the_plain_one(
         image[0, 0] = np.nan
         out = tmp_path / "marker.tiff"
     assert cv2.imwrite(str(out), image)
-    code, plain, _ = run_main(["perceive", path, "--json"], monkeypatch, capsys)
-    code2, other, err = run_main(["perceive", out, "--json"], monkeypatch, capsys)
-    assert (code, code2) == (0, 0), err
-    (want,), (got,) = json.loads(plain)["markers"], json.loads(other)["markers"]
-    assert np.allclose(got["tvec_m"], want["tvec_m"], atol=2e-5)
+    _assert_same_pose(path, out, monkeypatch, capsys)
 
 
 @pytest.mark.parametrize("ext", ["jpg", "png", "webp"])
@@ -277,11 +283,7 @@ def test_a_colour_tiff_of_any_depth_reads_as_the_plain_one(
         image = np.dstack([image, np.full(image.shape[:2], opaque, dtype)])
     out = tmp_path / "marker.tiff"
     assert cv2.imwrite(str(out), image)
-    code, plain, _ = run_main(["perceive", path, "--json"], monkeypatch, capsys)
-    code2, other, err = run_main(["perceive", out, "--json"], monkeypatch, capsys)
-    assert (code, code2) == (0, 0), err
-    (want,), (got,) = json.loads(plain)["markers"], json.loads(other)["markers"]
-    assert np.allclose(got["tvec_m"], want["tvec_m"], atol=2e-5)
+    _assert_same_pose(path, out, monkeypatch, capsys)
 
 
 def _png_with_exif(exif: bytes) -> bytes:

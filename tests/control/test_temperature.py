@@ -193,12 +193,14 @@ def test_an_object_covering_the_tip_does_not_make_the_loop_overheat():
     assert latest.fingers[0].mean_c < 50.0
 
 
-def test_adhesive_pads_under_an_object_are_read_as_before_the_grasp():
-    """An object over the tips (in part: not yet 'covered') while grasping: the pads read as
-    before the fingers closed, moved with the proximal beams; the loop does not overheat."""
-    loop = TemperatureLoop(HEAT)
+def _adhesive_grasp(loop: TemperatureLoop, blind_at: int | None = None
+                    ) -> tuple[np.ndarray, ThermalFeatures]:
+    """60 s of the adhesive pads at 58 °C on the heat model, 10 Hz, the loop grasping from
+    15 s with a room-temperature ball half over the tips; the infrared frame at step
+    ``blind_at`` sees no beam.  The node temperatures at the end, and the last frame."""
     loop.set_mode(StiffnessMode.ADHESIVE)
     temps = np.full((2, HEAT.n_nodes), 58.0)
+    blind = FingerThermal((np.nan,) * HEAT.n_nodes, np.nan, np.nan, np.nan, np.nan, np.nan)
     for k in range(6000):
         t = k / 10
         if k == 1500:
@@ -208,8 +210,18 @@ def test_adhesive_pads_under_an_object_are_read_as_before_the_grasp():
             if k >= 1500:  # a room-temperature ball half over the tips
                 seen[:, -2:] = 0.6 * seen[:, -2:] + 0.4 * 26.0
             latest = features(t, seen)
+            if k == blind_at:
+                latest = ThermalFeatures(t, (blind, blind), AMBIENT_C, ())
         duty = loop.update(latest, t)
         temps = np.vstack([heat_step(temps[j], duty[j], 0.1, HEAT, AMBIENT_C) for j in range(2)])
+    return temps, latest
+
+
+def test_adhesive_pads_under_an_object_are_read_as_before_the_grasp():
+    """An object over the tips (in part: not yet 'covered') while grasping: the pads read as
+    before the fingers closed, moved with the proximal beams; the loop does not overheat."""
+    loop = TemperatureLoop(HEAT)
+    temps, latest = _adhesive_grasp(loop)
     assert temps[:, -2:].mean(axis=1) == pytest.approx([58.0, 58.0], abs=0.5)
     assert latest.fingers[0].beam_temps_c[-1] < 50.0  # what the camera sees of the pads
     loop.set_grasping(False)
@@ -284,21 +296,5 @@ def test_a_finger_out_of_view_when_the_setpoint_changes_does_not_keep_the_old_in
 def test_a_frame_out_of_view_before_the_grasp_does_not_lose_the_adhesive_pads():
     """One infrared frame with no beam in view just before the fingers close: the pads were
     then read as the object covers them, and the loop heated them to 66 °C for 58 °C."""
-    loop = TemperatureLoop(HEAT)
-    loop.set_mode(StiffnessMode.ADHESIVE)
-    temps = np.full((2, HEAT.n_nodes), 58.0)
-    blind = FingerThermal((np.nan,) * HEAT.n_nodes, np.nan, np.nan, np.nan, np.nan, np.nan)
-    for k in range(6000):
-        t = k / 10
-        if k == 1500:
-            loop.set_grasping(True)
-        if k % 10 == 0:
-            seen = temps.copy()
-            if k >= 1500:  # a room-temperature ball half over the tips
-                seen[:, -2:] = 0.6 * seen[:, -2:] + 0.4 * 26.0
-            latest = features(t, seen)
-            if k == 1490:
-                latest = ThermalFeatures(t, (blind, blind), AMBIENT_C, ())
-        duty = loop.update(latest, t)
-        temps = np.vstack([heat_step(temps[j], duty[j], 0.1, HEAT, AMBIENT_C) for j in range(2)])
+    temps, _ = _adhesive_grasp(TemperatureLoop(HEAT), blind_at=1490)
     assert temps[:, -2:].mean(axis=1) == pytest.approx([58.0, 58.0], abs=0.5)

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -167,29 +169,39 @@ def test_emulator_makes_and_removes_its_default_folder(
     assert not folder.exists()
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
-def test_emulator_stopped_by_a_signal_removes_its_link_and_socket(
-        tmp_path: Path, sig: signal.Signals) -> None:
+@contextlib.contextmanager
+def _emulator_process(tmp_path: Path, ignored: signal.Signals
+                      ) -> Iterator[tuple[subprocess.Popen[str], Path, Path]]:
+    """``relaxgrip emulator`` in a process started with ``ignored`` ignored (as a shell's
+    ``&`` starts a command with SIGINT, ``nohup`` with SIGHUP), once its link and socket are
+    up; with its link and socket paths.  Killed if still running after."""
     import time
 
     port, sock = tmp_path / "tty", tmp_path / "frames.sock"
-    # SIGINT ignored, as a shell starts a command with ``&``: the emulator still stops on it.
     proc = subprocess.Popen([sys.executable, "-m", "relaxgrip", "emulator", "--rig",
                              str(_emulator_rig(tmp_path, port, sock))],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+                            preexec_fn=lambda: signal.signal(ignored, signal.SIG_IGN))
     try:
         deadline = time.monotonic() + 60.0
         while not (sock.exists() and port.is_symlink()) and time.monotonic() < deadline:
             time.sleep(0.05)
         assert sock.exists()
         time.sleep(0.3)
-        proc.send_signal(sig)
-        _, err = proc.communicate(timeout=30)
+        yield proc, port, sock
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait(10)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_emulator_stopped_by_a_signal_removes_its_link_and_socket(
+        tmp_path: Path, sig: signal.Signals) -> None:
+    # SIGINT ignored, as a shell starts a command with ``&``: the emulator still stops on it.
+    with _emulator_process(tmp_path, signal.SIGINT) as (proc, port, sock):
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=30)
     assert proc.returncode == 0, err
     assert not sock.exists()
     assert not port.is_symlink()
@@ -198,27 +210,13 @@ def test_emulator_stopped_by_a_signal_removes_its_link_and_socket(
 def test_emulator_started_with_nohup_outlives_its_terminal(tmp_path: Path) -> None:
     import time
 
-    port, sock = tmp_path / "tty", tmp_path / "frames.sock"
     # SIGHUP ignored, as ``nohup`` starts a command: a closed terminal must not stop it.
-    proc = subprocess.Popen([sys.executable, "-m", "relaxgrip", "emulator", "--rig",
-                             str(_emulator_rig(tmp_path, port, sock))],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))
-    try:
-        deadline = time.monotonic() + 60.0
-        while not (sock.exists() and port.is_symlink()) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert sock.exists()
-        time.sleep(0.3)
+    with _emulator_process(tmp_path, signal.SIGHUP) as (proc, port, sock):
         proc.send_signal(signal.SIGHUP)
         time.sleep(1.0)
         assert proc.poll() is None, "the hang-up stopped the emulator"
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
     assert proc.returncode == 0, err
     assert not sock.exists()
     assert not port.is_symlink()
