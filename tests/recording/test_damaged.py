@@ -163,3 +163,32 @@ def test_a_damaged_session_copy_costs_nothing_but_itself(
     assert report.messages > total // 2
     with pytest.raises(InputError, match="not a relaxgrip recording"):
         read_session(tmp_path / "recovered.mcap")
+
+
+def test_recover_reads_on_past_a_broken_chunk_header_by_the_chunk_index(
+        relax_hold: tuple[Path, HoldResult], tmp_path: Path) -> None:
+    """A complete file whose middle chunk has a damaged length field: reading in order stops
+    there, and every chunk after it was lost though the summary's chunk index lists them.
+    Now only that chunk is."""
+    good = relax_hold[0]
+    total = sum(1 for _ in iter_messages(good))
+    with open(good, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    assert len(chunks) >= 4
+    middle = chunks[len(chunks) // 2]
+    data = bytearray(good.read_bytes())
+    at = middle.chunk_start_offset + 1  # after the opcode: the record's length
+    data[at:at + 8] = (2**40).to_bytes(8, "little")
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(bytes(data))
+    out = tmp_path / "recovered.mcap"
+    report = recover(damaged, out)
+    assert (report.damaged_chunks, report.stopped_early) == (1, False)
+    assert report.expected_messages == total
+    lost = report.lost_messages
+    assert lost is not None
+    assert 0 < lost < total // len(chunks) * 3
+    assert sum(1 for _ in iter_messages(out)) == report.messages
+    assert read_session(out) == read_session(good)

@@ -20,7 +20,7 @@ import os
 import struct
 import typing
 import zlib
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
@@ -402,7 +402,9 @@ class RecoverReport:
         The message count the source's summary states (a complete file), else None.
     stopped_early : bool
         The file's record structure broke before its end (a killed recorder,
-        or damage outside a chunk's data): nothing after that point is read.
+        or damage outside a chunk's data): nothing after that point is read,
+        but for a complete file's chunks, which its chunk index finds (the
+        chunk the break is in counts as damaged).
     lost_start_s : float or None
         The damage took the first chunk, session message included: the
         session was restored from its copy, and the recording resumes at this
@@ -431,7 +433,9 @@ def recover(src: Path, dst: Path) -> RecoverReport:
     (CRC, decompression) is skipped and counted, and the next one read, so
     one damaged chunk costs its own messages (about 0.2 s), not the rest of
     the file.  Where the record structure itself breaks (the end of a
-    killed file) reading stops.  The summary of a complete file is not
+    killed file) reading stops; in a complete file (damage to a chunk's
+    header, say) it goes on from the next chunk its summary's chunk index
+    lists.  The summary of a complete file is not
     copied (the writer makes a new one) but its message count is reported
     beside what was recovered, and the schemas and channels it lists stand
     in for any the data section lost (a damaged first chunk of a recording
@@ -463,7 +467,8 @@ def recover(src: Path, dst: Path) -> RecoverReport:
     check_writable(dst, InputError)  # a FIFO or a device is not replaced by a file
     # A complete file's summary lists its schemas and channels again: what the data
     # section lost of them (in a damaged first chunk) is taken from there.
-    listed_schemas, listed_channels = _summary_definitions(src) if complete else ({}, {})
+    listed = _summary_definitions(src) if complete else _Listed({}, {}, (), None)
+    listed_schemas, listed_channels = listed.schemas, listed.channels
     schemas: dict[int, int] = {}
     channels: dict[int, int] = {}
     count = damaged = 0
@@ -523,15 +528,23 @@ def recover(src: Path, dst: Path) -> RecoverReport:
             # damaged chunk is skipped, not the end of the reading.
             records = _records(f, emit_chunks=True, validate_crcs=False)
             in_summary = False
+            read_to = f.tell()  # where the records read so far end (a chunk is read whole)
             while True:
                 try:
                     record = next(records)
                 except StopIteration:
                     break
                 except Exception:  # the killed record, or damage to the structure
-                    stopped_early = not in_summary
+                    later = [o for o in listed.chunk_offsets if o >= read_to]
+                    stopped_early = not in_summary and not later
+                    if not in_summary:  # a complete file's index finds the chunks after it
+                        records = _chunks_at(f, later)
+                        continue
                     break
-                if isinstance(record, DataEnd):
+                read_to = f.tell()
+                if record is None:  # a chunk the index lists that does not read
+                    damaged += 1
+                elif isinstance(record, DataEnd):
                     in_summary = True  # its schemas and channels repeat the data's
                 elif isinstance(record, Statistics):
                     expected = int(record.message_count)
@@ -549,6 +562,8 @@ def recover(src: Path, dst: Path) -> RecoverReport:
                     copy(record, writer)
             if count == 0:
                 raise InputError(f"{src}: no complete message to recover")
+            if expected is None:  # the summary was not reached in order
+                expected = listed.message_count
             writer.finish()  # type: ignore[no-untyped-call]
     except OSError as exc:
         raise InputError(f"{dst}: cannot write ({exc.strerror or exc})") from None
@@ -601,35 +616,69 @@ def _session_copy(metadata: dict[str, str]) -> tuple[int, dict[str, Any]] | None
     return (ns, message) if ns >= 0 and isinstance(message, dict) else None
 
 
-def _summary_definitions(path: Path) -> tuple[dict[int, Any], dict[int, Any]]:
-    """The schemas and channels (by id) the summary of a complete MCAP file lists.
+@dataclass(frozen=True)
+class _Listed:
+    """What the summary of a complete MCAP file lists: schemas and channels by id, where
+    its chunks start (from the chunk index), and its message count (None: not stated)."""
 
-    Both are empty if the file has no summary, or one that does not check
-    (its CRC, its records).
+    schemas: dict[int, Any]
+    channels: dict[int, Any]
+    chunk_offsets: tuple[int, ...]
+    message_count: int | None
+
+
+def _summary_definitions(path: Path) -> _Listed:
+    """What the summary of a complete MCAP file lists (:class:`_Listed`).
+
+    Nothing if the file has no summary, or one that does not check (its CRC,
+    its records).
     """
-    from mcap.records import Channel, Footer, Schema
+    from mcap.records import Channel, ChunkIndex, Footer, Schema, Statistics
     from mcap.stream_reader import StreamReader
 
+    none = _Listed({}, {}, (), None)
     schemas: dict[int, Any] = {}
     channels: dict[int, Any] = {}
+    offsets: list[int] = []
+    count: int | None = None
     try:
         with open(path, "rb") as f:
             end = f.seek(-len(_MAGIC), os.SEEK_END)  # the footer's end
             f.seek(end - _FOOTER_RECORD)
             summary_start, _, crc = struct.unpack("<QQI", f.read(_FOOTER_RECORD)[9:])
             if summary_start == 0:
-                return {}, {}
+                return none
             f.seek(summary_start)
             summary = f.read(end - summary_start)
         if crc and zlib.crc32(summary[:-4]) != crc:  # it covers all but itself
-            return {}, {}
+            return none
         for record in StreamReader(io.BytesIO(summary), skip_magic=True).records:
             if isinstance(record, Schema):
                 schemas[record.id] = record
             elif isinstance(record, Channel):
                 channels[record.id] = record
+            elif isinstance(record, ChunkIndex):
+                offsets.append(int(record.chunk_start_offset))
+            elif isinstance(record, Statistics):
+                count = int(record.message_count)
             elif isinstance(record, Footer):
                 break
     except Exception:  # a summary damaged beyond its CRC's notice: none to use
-        return {}, {}
-    return schemas, channels
+        return none
+    return _Listed(schemas, channels, tuple(sorted(offsets)), count)
+
+
+def _chunks_at(f: BinaryIO, offsets: Sequence[int]) -> Iterator[Any]:
+    """The chunk record at each of ``offsets`` in ``f`` (its data unchecked), or None
+    where none reads there."""
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+
+    for offset in offsets:
+        f.seek(offset)
+        try:
+            record = next(StreamReader(f, skip_magic=True, emit_chunks=True,
+                                       validate_crcs=False).records)
+        except Exception:  # its header is the damage
+            record = None
+        yield record if isinstance(record, Chunk) else None
