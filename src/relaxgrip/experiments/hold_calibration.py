@@ -45,7 +45,7 @@ from relaxgrip.learning.store import HOLD_BIAS_KEY, ModelBundle, model_checksums
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.perception.features import finger_temperature_c
 from relaxgrip.serialize import json_safe
-from relaxgrip.twin import TWIN_VERSION
+from relaxgrip.twin import SAME_RUNS_AS, TWIN_VERSION
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TARGETS_N", "DEFAULT_TEMPS_C", "MIN_BIN_S", "MIN_SE_N",
            "RECORDINGS_SOURCE", "TIME_EDGES_S",
@@ -532,19 +532,14 @@ def _stored(row: Mapping[str, Any]) -> dict[str, Any]:
     return {k: [num(x) for x in v] if k == "bins_n" else num(v) for k, v in row.items()}
 
 
-#: Earlier twins whose calibration holds (a standard hold: no push, the arm still) this
-#: one runs bit for bit, so that holds of theirs and of this one can be added together.
-#: v4 changed only pushes towards finger 0 and an arm lowered onto or along an object.
-SAME_HOLDS_AS = ("relaxgrip-twin-v3",)
-
-
 def _holds_to_add_to(record: Mapping[str, Any], targets: list[float], temps: list[float],
                      seeds: Sequence[int], duration_s: float) -> dict[str, list[dict[str, Any]]]:
     """The earlier calibration's holds, checked against the holds to add."""
     if not math.isclose(float(record["duration_s"]), duration_s):
         raise InputError(f"the earlier calibration held {record['duration_s']:g} s, not "
                          f"{duration_s:g} s: add holds of its length")
-    if record.get("twin_version") not in (TWIN_VERSION, *SAME_HOLDS_AS):
+    # A calibration hold (no push, the arm still) runs on these as on this twin.
+    if record.get("twin_version") not in (TWIN_VERSION, *SAME_RUNS_AS):
         raise InputError(f"the earlier calibration ran on {record.get('twin_version')}, not "
                          f"{TWIN_VERSION}: calibrate anew")
     holds: dict[str, list[dict[str, Any]]] = {

@@ -14,10 +14,14 @@ from relaxgrip.twin.objects import ObjectSpec, get_object
 from relaxgrip.twin.sensors import ForceSensorConfig, IrSensorConfig, RgbSensorConfig, SceneObject
 from relaxgrip.validate import check_positive, check_temp_c
 
-__all__ = ["TWIN_VERSION", "MotorParams", "ScatterParams", "TwinConfig"]
+__all__ = ["SAME_RUNS_AS", "TWIN_VERSION", "MotorParams", "ScatterParams", "TwinConfig"]
 
 #: Bumped whenever the twin's behaviour changes; every result records it.
 TWIN_VERSION = "relaxgrip-twin-v4"
+#: Earlier versions whose runs this one repeats bit for bit where no push goes towards
+#: finger 0 and the arm is not lowered onto or along an object (v4's changes): so every run
+#: the shipped models, their dataset and their calibrations were made of.
+SAME_RUNS_AS = ("relaxgrip-twin-v3",)
 
 
 @dataclass(frozen=True)
