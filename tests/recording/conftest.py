@@ -44,6 +44,25 @@ def copy_recording(src: Path, dst: Path,
         writer.finish()  # type: ignore[no-untyped-call]
 
 
+def chunk_indexes(path: Path) -> list[Any]:
+    """The chunk index a complete MCAP file's summary lists, in file order."""
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    return sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+
+
+def damage_first_chunk(src: Path, dst: Path, killed: bool = False) -> None:
+    """``src`` with a byte of its first chunk's records flipped; ``killed``: cut as a kill
+    leaves it too (no summary, no footer)."""
+    first = chunk_indexes(src)[0]
+    data = bytearray(src.read_bytes())
+    data[first.chunk_start_offset + first.chunk_length - 100] ^= 0xFF
+    if killed:
+        del data[len(data) * 2 // 3:]
+    dst.write_bytes(bytes(data))
+
+
 def record_hold(path: Path, estimator: str, target_n: float, duration_s: float,
                 temp_c: float, seed: int, models: ModelBundle, rgb_format: str = "jpeg",
                 **hold: Any) -> tuple[Path, HoldResult]:

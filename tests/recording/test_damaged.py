@@ -13,21 +13,7 @@ from relaxgrip.errors import InputError
 from relaxgrip.experiments.controlled_hold import HoldResult
 from relaxgrip.recording import iter_messages, iter_periods, read_session, recover
 from relaxgrip.recording.reader import read_replayable_session
-from tests.recording.conftest import copy_recording
-
-
-def _damage_first_chunk(src: Path, dst: Path, killed: bool = False) -> None:
-    """``src`` with a byte of its first chunk's records flipped; ``killed``: cut as a kill
-    leaves it too (no summary, no footer)."""
-    with open(src, "rb") as f:
-        summary = make_reader(f).get_summary()
-    assert summary is not None
-    first = min(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
-    data = bytearray(src.read_bytes())
-    data[first.chunk_start_offset + first.chunk_length - 100] ^= 0xFF
-    if killed:
-        del data[len(data) * 2 // 3:]
-    dst.write_bytes(bytes(data))
+from tests.recording.conftest import chunk_indexes, copy_recording, damage_first_chunk
 
 
 def test_recover_keeps_the_rest_of_a_file_whose_first_chunk_is_damaged(
@@ -41,7 +27,7 @@ def test_recover_keeps_the_rest_of_a_file_whose_first_chunk_is_damaged(
     copy_recording(good, old_style, lambda topic, data, t: data)
     for src, cut in ((old_style, False), (good, False), (good, True)):
         damaged = tmp_path / "damaged.mcap"
-        _damage_first_chunk(src, damaged, killed=cut)
+        damage_first_chunk(src, damaged, killed=cut)
         out = tmp_path / "recovered.mcap"
         report = recover(damaged, out)
         assert report.damaged_chunks == 1, src
@@ -97,7 +83,7 @@ def test_recover_restores_the_session_a_damaged_first_chunk_took(
     session = read_session(good)
     for cut in (False, True):
         damaged = tmp_path / "damaged.mcap"
-        _damage_first_chunk(good, damaged, killed=cut)
+        damage_first_chunk(good, damaged, killed=cut)
         out = tmp_path / "recovered.mcap"
         report = recover(damaged, out)
         restored = read_session(out)
@@ -114,7 +100,7 @@ def test_recover_restores_the_session_a_damaged_first_chunk_took(
         assert sum(1 for topic, _, _ in iter_messages(out) if topic == first[0]) == 1
         assert sum(1 for _ in iter_periods(out)) > 0
         again = tmp_path / "again.mcap"  # its copy goes along
-        _damage_first_chunk(out, again)
+        damage_first_chunk(out, again)
         recover(again, tmp_path / "again-recovered.mcap")
         again_restored = read_session(tmp_path / "again-recovered.mcap")
         assert "lost_start_s" in again_restored
@@ -131,7 +117,7 @@ def _damage_session_copy(src: Path, dst: Path, utf8: bool = False,
     then, or (``utf8``) a control character, not JSON; ``first_chunk_too``: a byte of the
     first chunk's records as well."""
     if first_chunk_too:
-        _damage_first_chunk(src, dst)
+        damage_first_chunk(src, dst)
         src = dst
     with open(src, "rb") as f:
         summary = make_reader(f).get_summary()
@@ -172,10 +158,7 @@ def test_recover_reads_on_past_a_broken_chunk_header_by_the_chunk_index(
     Now only that chunk is."""
     good = relax_hold[0]
     total = sum(1 for _ in iter_messages(good))
-    with open(good, "rb") as f:
-        summary = make_reader(f).get_summary()
-    assert summary is not None
-    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    chunks = chunk_indexes(good)
     assert len(chunks) >= 4
     middle = chunks[len(chunks) // 2]
     data = bytearray(good.read_bytes())

@@ -24,7 +24,7 @@ from relaxgrip.recording import read_session
 from relaxgrip.recording.provenance import model_differences, recorded_models
 from relaxgrip.twin import TWIN_VERSION
 from tests.clitools import assert_one_error_line, run_main
-from tests.recording.conftest import record_hold
+from tests.recording.conftest import damage_first_chunk, record_hold
 
 HOLD_S = 3.0
 
@@ -173,8 +173,6 @@ def test_replay_says_what_became_of_the_recorded_models(
     """Their directory there but a file of it damaged in a copy, or trained anew, replay said
     the models were "not there now" (of a directory the user sees there); and a recording it
     cannot replay (recovered without its start) it sent for models first, to refuse after."""
-    from mcap.reader import make_reader
-
     from relaxgrip.recording import recover
 
     directory = tmp_path / "models"
@@ -193,14 +191,8 @@ def test_replay_says_what_became_of_the_recorded_models(
     code, out, err = run_main(["replay", path], monkeypatch, capsys)
     assert_one_error_line(code, out, err, "which are not there now (it holds others now)")
 
-    with open(path, "rb") as f:
-        summary = make_reader(f).get_summary()
-    assert summary is not None
-    first = min(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
-    data = bytearray(path.read_bytes())
-    data[first.chunk_start_offset + first.chunk_length - 100] ^= 0xFF
     damaged = tmp_path / "damaged.mcap"
-    damaged.write_bytes(bytes(data))
+    damage_first_chunk(path, damaged)
     recovered = tmp_path / "recovered.mcap"
     assert recover(damaged, recovered).lost_start_s is not None
     code, out, err = run_main(["replay", recovered], monkeypatch, capsys)
