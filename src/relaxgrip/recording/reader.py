@@ -535,12 +535,13 @@ def recover(src: Path, dst: Path) -> RecoverReport:
                 except StopIteration:
                     break
                 except Exception:  # the killed record, or damage to the structure
+                    if in_summary:
+                        break
+                    # A complete file's chunk index finds the chunks after the break.
                     later = [o for o in listed.chunk_offsets if o >= read_to]
-                    stopped_early = not in_summary and not later
-                    if not in_summary:  # a complete file's index finds the chunks after it
-                        records = _chunks_at(f, later)
-                        continue
-                    break
+                    stopped_early = not later
+                    records = _chunks_at(f, later)
+                    continue
                 read_to = f.tell()
                 if record is None:  # a chunk the index lists that does not read
                     damaged += 1
