@@ -6,13 +6,15 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
 
 from relaxgrip.errors import InputError
 
 ABSOLUTE_ZERO_C = -273.15
 
-__all__ = ["check_duty", "check_finite", "check_jobs", "check_positive", "check_temp_c",
-           "parse_floats", "parse_integer", "parse_names", "parse_number", "parse_seeds"]
+__all__ = ["check_duty", "check_finite", "check_jobs", "check_positive", "check_seeds",
+           "check_temp_c", "parse_floats", "parse_integer", "parse_names", "parse_number",
+           "parse_seeds"]
 
 #: A number as people and instruments write one: ASCII digits, an optional sign, point and
 #: exponent, or inf / nan (which the range checks then name).  Python's float() and int()
@@ -119,6 +121,21 @@ def parse_seeds(text: str) -> list[int]:
     if len(set(seeds)) != len(seeds):
         raise InputError(f"seeds repeat in {text!r}")
     return seeds
+
+
+def check_seeds(seeds: Sequence[int]) -> None:
+    """Refuse a negative seed, or one given twice: each seed is one run, and a run counted
+    twice passes for two that agree (no spread, or its own bias taken for the others').
+
+    Raises
+    ------
+    InputError
+        A negative or repeated seed (not an empty list: each caller says what needs one).
+    """
+    if seeds and min(seeds) < 0:
+        raise InputError(f"seeds must be >= 0, got {min(seeds)}")
+    if len(set(seeds)) != len(seeds):
+        raise InputError(f"seeds repeat in {list(seeds)}: give each seed once")
 
 
 def parse_floats(text: str, name: str) -> list[float]:

@@ -57,6 +57,7 @@ from relaxgrip.experiments.controlled_hold import (
     steady_window_s,
 )
 from relaxgrip.learning.store import ModelBundle
+from relaxgrip.validate import check_seeds
 
 __all__ = ["BUDGET_PARTS", "PERCEPTS", "SCATTER_GROUPS", "BudgetSurvey", "hold_percepts",
            "percept_at_s", "survey_budget"]
@@ -340,10 +341,7 @@ def survey_budget(seeds: Sequence[int], target_n: float = 5.0, temp_c: float = 4
     """
     if not seeds:
         raise InputError("an error-budget survey needs at least one seed")
-    if min(seeds) < 0:
-        raise InputError(f"seeds must be >= 0, got {min(seeds)}")
-    if len(set(seeds)) != len(seeds):  # a run twice: its bias "from the others" is its own
-        raise InputError(f"seeds repeat in {list(seeds)}: give each seed once")
+    check_seeds(seeds)  # a run twice: its bias "from the others" would be its own
     check_target_n(target_n)
     check_hold_temp_c(temp_c)
     check_hold_duration_s(duration_s)

@@ -46,6 +46,7 @@ from relaxgrip.learning.training import load_default_models
 from relaxgrip.perception.features import finger_temperature_c
 from relaxgrip.serialize import json_safe
 from relaxgrip.twin import SAME_RUNS_AS, TWIN_VERSION
+from relaxgrip.validate import check_seeds
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TARGETS_N", "DEFAULT_TEMPS_C", "MIN_BIN_S", "MIN_SE_N",
            "RECORDINGS_SOURCE", "TIME_EDGES_S",
@@ -444,10 +445,7 @@ def calibrate_hold(targets_n: Sequence[float] = DEFAULT_TARGETS_N,
                          "condition's mean is comes from their spread")
     if not seeds:
         raise InputError("adding to the calibration needs at least one seed")
-    if min(seeds) < 0:
-        raise InputError(f"seeds must be >= 0, got {min(seeds)}")
-    if len(set(seeds)) != len(seeds):  # one hold counted as two: no spread, a mean taken as sure
-        raise InputError(f"seeds repeat in {list(seeds)}: give each seed once")
+    check_seeds(seeds)  # one hold counted as two: no spread, a mean taken as sure
     for target in new_targets:
         check_target_n(target)
     for temp in new_temps:
