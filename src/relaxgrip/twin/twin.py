@@ -558,16 +558,13 @@ class GripperTwin:
         """
         arm = max(0.0, self._arm_mm + step_mm)
         obj = self._object
-        if (obj is not None and not self._engaged
-                and self._forward_mm >= self._object_x_mm - 1e-9):
-            top_mm = self._object_height_mm + obj.grip_length_m * 1e3
-            if self._arm_mm >= top_mm > arm:
-                if self.aperture_m >= obj.width_m - self._plastic_m:
-                    self._engaged = True
-                    self._grip_mm = arm - self._object_height_mm
-                else:
-                    arm = top_mm
+        top_mm = math.inf if obj is None else self._object_height_mm + obj.grip_length_m * 1e3
+        passing = self._arm_mm >= top_mm > arm  # down past the object's top
         self._arm_mm = arm
+        if obj is None or self._engaged or not (passing and self._at_grasp()):
+            return
+        if not self._engage(obj):  # too narrow to reach down beside it
+            self._arm_mm = top_mm
 
     def _approach(self, step_mm: float) -> None:
         """Move the arm along the fingers.
@@ -585,14 +582,25 @@ class GripperTwin:
             self._object_x_mm += step_mm
             return
         self._forward_mm = min(self._forward_mm + step_mm, self._object_x_mm)
-        at_grasp = self._forward_mm >= self._object_x_mm - 1e-9
         if self._engaged:
-            self._engaged = at_grasp
+            self._engaged = self._at_grasp()
             return
         level = abs(self._arm_mm - self._object_height_mm) * 1e-3 < obj.grip_length_m
-        if at_grasp and level and self.aperture_m >= obj.width_m - self._plastic_m:
-            self._engaged = True
-            self._grip_mm = self._arm_mm - self._object_height_mm
+        if self._at_grasp() and level:
+            self._engage(obj)
+
+    def _at_grasp(self) -> bool:
+        """Whether the arm has come forward to the object's grasp position."""
+        return self._forward_mm >= self._object_x_mm - 1e-9
+
+    def _engage(self, obj: ObjectSpec) -> bool:
+        """Take ``obj`` between the fingers, held at the arm's height, if they are open wide
+        enough for it; whether they are."""
+        if self.aperture_m < obj.width_m - self._plastic_m:
+            return False
+        self._engaged = True
+        self._grip_mm = self._arm_mm - self._object_height_mm
+        return True
 
     def _lift(self, obj: ObjectSpec, force_n: float) -> None:
         """Carry the object with the arm if friction and adhesion hold its weight.
