@@ -457,9 +457,9 @@ class RigGeometry:
         where the unloaded fingers are.  A real finger moves its distal beams
         5 mm at 5 N and 40 °C, 12 mm at 8 N and 55 °C: more than the
         windows' room on the 12 mm face, so a rig reads them beside the
-        finger without it.  Off on the twin, which draws the fingers unbent
-        unless its ``IrSensorConfig.draw_bend`` is set (the shipped models
-        are trained on those frames); on for a rig file (``[ir] follow_bend``).
+        finger without it.  On by default, as the twin draws the bend
+        (``IrSensorConfig.draw_bend``) and a rig file reads it (``[ir]
+        follow_bend``); off only for frames of fingers drawn unbent.
     """
 
     finger: FingerGeometry = field(default_factory=FingerGeometry)
@@ -468,7 +468,7 @@ class RigGeometry:
     ir: IrCameraMount = field(default_factory=IrCameraMount)
     open_aperture_m: float = 0.150
     marker_finger: int = 0
-    ir_follow_bend: bool = False
+    ir_follow_bend: bool = True
 
     def __post_init__(self) -> None:
         if self.marker_finger not in (0, 1):

@@ -234,8 +234,8 @@ class IrCameraSpec:
         Intrinsics and pose.
     follow_bend : bool
         Read the fingers where their load bends them
-        (:attr:`RigGeometry.ir_follow_bend`): on by default, off for the
-        emulator, whose frames are the twin's, drawn unbent.
+        (:attr:`RigGeometry.ir_follow_bend`): on by default, for a camera
+        and for the emulator, whose twin draws the bend.
     """
 
     source: str
@@ -391,7 +391,7 @@ def _ir(t: _Table) -> IrCameraSpec:
     pos = t.numbers("position_mm", (-70.0, 0.0, 60.0), length=3)
     pitch = t.number("pitch_down_deg", 25.0, min_value=-90.0, max_value=90.0)
     stall = _stall_s(t, fps, 2500.0)
-    follow = t.raw("follow_bend", source != "emulator", required=False)
+    follow = t.raw("follow_bend", True, required=False)
     if not isinstance(follow, bool):
         raise t.fail("follow_bend", f"must be true or false, got {follow!r}")
     mount = IrCameraMount(intr, fps, (pos[0] * 1e-3, pos[1] * 1e-3, pos[2] * 1e-3), pitch)

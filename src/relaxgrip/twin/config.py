@@ -17,11 +17,11 @@ from relaxgrip.validate import check_positive, check_temp_c
 __all__ = ["SAME_RUNS_AS", "TWIN_VERSION", "MotorParams", "ScatterParams", "TwinConfig"]
 
 #: Bumped whenever the twin's behaviour changes; every result records it.
-TWIN_VERSION = "relaxgrip-twin-v4"
-#: Earlier versions whose runs this one repeats bit for bit where no push goes towards
-#: finger 0 and the arm is not lowered onto or along an object (v4's changes): so every run
-#: the shipped models, their dataset and their calibrations were made of.
-SAME_RUNS_AS = ("relaxgrip-twin-v3",)
+TWIN_VERSION = "relaxgrip-twin-v5"
+#: Earlier versions whose runs this one repeats bit for bit (for a calibration made on them
+#: to be added to).  None for v5, whose infrared camera draws the fingers bent by their load
+#: (``IrSensorConfig.draw_bend``): every infrared frame of a held object changed.
+SAME_RUNS_AS: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
