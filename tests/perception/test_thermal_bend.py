@@ -2,9 +2,9 @@
 
 A real finger moves its distal beams 5 mm at 5 N and 40 °C, 12 mm at 8 N and
 55 °C, across a 12 mm face: read where the unloaded finger is, those windows
-see the gap or the room.  The twin draws the bend when asked
-(``IrSensorConfig.draw_bend``), and perception reads the windows on the bent
-fingers from the marker's deflection and slope (``RigGeometry.ir_follow_bend``).
+see the gap or the room.  The twin draws the bend (``IrSensorConfig.draw_bend``,
+on by default), and perception reads the windows on the bent fingers from the
+marker's deflection and slope (``RigGeometry.ir_follow_bend``, on by default).
 """
 
 from __future__ import annotations
@@ -49,8 +49,8 @@ def test_windows_on_bent_fingers_read_the_fingers(force_n: float, hot_c: float) 
     frame = Frame(0.0, 0, renderer.render(0, np.stack([temps, temps]), NODES, APERTURE_M, [],
                                           22.0, (x, np.stack([bend, bend]))))
     truth = np.interp(RIG.finger.beam_positions_m, NODES, temps)
-    following = ThermalPerception(replace(RIG, ir_follow_bend=True))
-    unbent = ThermalPerception(RIG)
+    following = ThermalPerception(RIG)
+    unbent = ThermalPerception(replace(RIG, ir_follow_bend=False))
     for j in (0, 1):
         read = np.array(following.extract(frame, MOTOR_MM, at_tab).fingers[j].beam_temps_c)
         assert np.all(np.isfinite(read)), read
@@ -82,13 +82,13 @@ def test_the_bend_read_from_the_marker_is_the_finger_s() -> None:
 
 
 def test_a_rig_that_does_not_follow_ignores_the_bend() -> None:
-    """The shipped models are trained on the twin's unbent frames, read unbent: a bend
-    given to a perception that does not follow changes nothing."""
+    """Frames of fingers drawn unbent (the twin before v5) are read unbent: a bend given
+    to a perception that does not follow changes nothing."""
     temps = np.full(NODES.size, 40.0)
     renderer = IrRenderer(RIG, IrSensorConfig(), seed=0)
     frame = Frame(0.0, 0, renderer.render(0, np.stack([temps, temps]), NODES, APERTURE_M, [],
                                           22.0))
-    perception = ThermalPerception(RigGeometry())
+    perception = ThermalPerception(RigGeometry(ir_follow_bend=False))
     a = perception.extract(frame, MOTOR_MM)
     b = perception.extract(frame, MOTOR_MM, (0.005, 0.1))
     assert np.array_equal(a.fingers[0].beam_temps_c, b.fingers[0].beam_temps_c)
