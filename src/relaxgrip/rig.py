@@ -244,12 +244,18 @@ class FingerGeometry:
     beam_positions_m : tuple of float
         Where the SMP beams' temperatures are read along the finger (m from
         the root): the centres of the infrared regions of interest.
+    contact_m : float
+        Where an object is usually held along the finger (m from the root; the
+        paper's sphere at 80 mm): the finger's temperature is read with each
+        beam weighted by how much the finger bends there under a load at this
+        point (:attr:`bending_weights`).
     """
 
     length_m: float = 0.110
     thickness_m: float = 0.012
     height_m: float = 0.020
     beam_positions_m: tuple[float, ...] = (0.011, 0.033, 0.055, 0.077, 0.099)
+    contact_m: float = 0.080
 
     def __post_init__(self) -> None:
         if min(self.length_m, self.thickness_m, self.height_m) <= 0:
@@ -258,6 +264,28 @@ class FingerGeometry:
             0.0 <= x <= self.length_m for x in self.beam_positions_m
         ):
             raise InputError("beam positions must lie on the finger, within [0, length]")
+        if not 0.0 < self.contact_m <= self.length_m:
+            raise InputError(f"contact position {self.contact_m} m is outside the finger "
+                             f"(0, {self.length_m}]")
+
+    @property
+    def bending_weights(self) -> tuple[float, ...]:
+        """Each beam's weight in the finger's temperature (they sum to 1).
+
+        A load at :attr:`contact_m` bends a section at ``x`` by a moment
+        ``F (contact_m - x)`` and that section's share of the contact's
+        deflection goes as ``(contact_m - x)^2`` (over its bending stiffness):
+        the sections near the root set how the finger relaxes, those beyond
+        the contact none.  A mean of all the beams lags the root when heaters
+        warm the finger (its tip trails by 5 K in a 40 -> 55 °C ramp), and the
+        relaxation models read it as a cooler finger.  Beams beyond the
+        contact weigh nothing; if every beam is, they weigh alike.
+        """
+        moments = [max(0.0, self.contact_m - x) ** 2 for x in self.beam_positions_m]
+        total = sum(moments)
+        if total <= 0.0:
+            return (1.0 / len(moments),) * len(moments)
+        return tuple(m / total for m in moments)
 
 
 @dataclass(frozen=True)

@@ -67,6 +67,8 @@ def test_examples_load_and_match_the_twin_geometry() -> None:
     ("marker", "max_travel_mm", 0, r"\[marker\] max_travel_mm must be > 0"),
     ("finger", "beam_positions_mm", [200.0], r"\[finger\] beam_positions_mm must lie on"),
     ("finger", "length_mm", 1e308, r"\[finger\] length_mm must be <= 1000, got 1e\+308"),
+    ("finger", "contact_mm", 120.0, r"\[finger\] contact_mm must be <= 110, got 120"),
+    ("finger", "contact_mm", 0, r"\[finger\] contact_mm must be > 0"),
     ("limits", "heater_duty_limit", 1.5, r"\[limits\] heater_duty_limit must be <= 1"),
     ("limits", "max_temp_c", "hot", r"\[limits\] max_temp_c must be a number"),
     ("rgb", "fsp", 30, r"\[rgb\] has unknown key 'fsp'"),

@@ -1,11 +1,13 @@
 """Thermal perception: round trips through the twin's infrared camera."""
 
+import itertools
 import math
 
 import numpy as np
 import pytest
 
 from relaxgrip.backend import Frame
+from relaxgrip.errors import InputError
 from relaxgrip.perception.features import finger_temperature_c
 from relaxgrip.perception.frames import (
     DEAD_FILL_PASSES,
@@ -20,7 +22,7 @@ from relaxgrip.perception.thermal import (
     uncovered_mean_c,
 )
 from relaxgrip.physics.thermal import HeatParams, node_positions_m
-from relaxgrip.rig import RigGeometry
+from relaxgrip.rig import FingerGeometry, RigGeometry
 from relaxgrip.twin.objects import get_object
 from relaxgrip.twin.render_ir import IrObject, IrRenderer
 from relaxgrip.twin.sensors import IrSensorConfig
@@ -261,6 +263,46 @@ def _beam_pixel(j: int, i: int, aperture_m: float = 0.075) -> tuple[int, int]:
     unbent = np.zeros_like(perception._along_m)
     u, v = perception._beam_pixels(j, aperture_m, unbent)[i]
     return math.floor(v), math.floor(u)
+
+
+def test_finger_temperature_weighs_the_beams_as_the_finger_bends() -> None:
+    """A load at the contact bends the sections near the root most: their beams weigh most,
+    those beyond the contact nothing, and a finger warming from the root reads warmer than
+    the plain mean of its beams."""
+    finger = FingerGeometry()
+    weights = finger.bending_weights
+    assert sum(weights) == pytest.approx(1.0)
+    assert all(a > b for a, b in itertools.pairwise(weights))
+    assert weights[-1] == 0.0  # the 99 mm beam lies beyond the 80 mm contact
+    assert weights[0] == pytest.approx(69.0**2 / (69.0**2 + 47.0**2 + 25.0**2 + 3.0**2))
+    # 50 s into a 40 -> 55 °C ramp (the twin, seed 3001): the tip trails the heaters.
+    ramp = _finger([52.91, 55.0, 54.83, 52.31, 49.27], mean_c=52.9)
+    weighted = uncovered_mean_c(ramp, 25.8, weights)
+    assert weighted == pytest.approx(sum(w * b for w, b in zip(weights, ramp.beam_temps_c,
+                                                                  strict=True)))
+    assert weighted > uncovered_mean_c(ramp, 25.8) + 0.7
+    # A covered beam leaves the mean, and the others' weights make it up.
+    held = _finger([54.3, 56.3, 29.6, 29.1, 26.4], mean_c=45.0)
+    assert uncovered_mean_c(held, 25.8, weights) == pytest.approx(
+        (weights[0] * 54.3 + weights[1] * 56.3) / (weights[0] + weights[1]))
+    # No beam of weight in view: the face's mean.
+    tip_only = _finger([math.nan, math.nan, math.nan, math.nan, 50.0], mean_c=48.0)
+    assert uncovered_mean_c(tip_only, 25.8, weights) == 48.0
+    thermal = ThermalFeatures(0.0, (ramp, ramp), 25.8, (), weights)
+    assert finger_temperature_c(thermal) == pytest.approx(weighted)
+    # Perception gives its features the rig's weights.
+    renderer = IrRenderer(RigGeometry(), IrSensorConfig(), seed=0)
+    nodes = node_positions_m(HeatParams())
+    frame = Frame(0.0, 0, renderer.render(0, np.full((2, nodes.size), 40.0), nodes, 0.07, [],
+                                          22.0))
+    motor_mm = (RigGeometry().open_aperture_m - 0.07) * 1e3
+    assert ThermalPerception(RigGeometry()).extract(frame, motor_mm).beam_weights == weights
+
+
+def test_a_contact_off_the_finger_is_refused_and_one_before_every_beam_weighs_them_alike() -> None:
+    with pytest.raises(InputError, match=r"contact position 0\.2 m is outside the finger"):
+        FingerGeometry(contact_m=0.2)
+    assert FingerGeometry(contact_m=0.005).bending_weights == (0.2,) * 5
 
 
 def test_dead_pixels_are_read_from_their_neighbours() -> None:

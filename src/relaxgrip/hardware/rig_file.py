@@ -428,8 +428,9 @@ def _finger(t: _Table) -> FingerGeometry:
         if not 0.0 <= x <= length:
             raise t.fail("beam_positions_mm", f"must lie on the finger (0..{length:g} mm), "
                                               f"got {x:g}")
+    contact = t.number("contact_mm", min(80.0, length), positive=True, max_value=length)
     return FingerGeometry(length * 1e-3, thickness * 1e-3, height * 1e-3,
-                          tuple(x * 1e-3 for x in beams))
+                          tuple(x * 1e-3 for x in beams), contact * 1e-3)
 
 
 def _limits(t: _Table) -> LimitsSpec:

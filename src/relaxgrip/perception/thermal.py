@@ -144,12 +144,17 @@ class ThermalFeatures:
         Background estimate: median of the pixels away from the fingers (°C).
     objects : tuple of ThermalObject
         Warm and cool regions, largest first.
+    beam_weights : tuple of float, optional
+        Each beam's weight in the finger's temperature
+        (:attr:`relaxgrip.rig.FingerGeometry.bending_weights`); None weighs
+        them alike.
     """
 
     t_s: float
     fingers: tuple[FingerThermal, FingerThermal]
     background_c: float
     objects: tuple[ThermalObject, ...]
+    beam_weights: tuple[float, ...] | None = None
 
 
 #: Below this spread between the warmest beam and the background nothing is told covered (K).
@@ -175,7 +180,8 @@ def covered_beams(beams_c: Sequence[float], background_c: float,
     return tuple(math.isfinite(b) and b < line for b in beams_c)
 
 
-def uncovered_mean_c(finger: FingerThermal, background_c: float) -> float:
+def uncovered_mean_c(finger: FingerThermal, background_c: float,
+                     weights: Sequence[float] | None = None) -> float:
     """The finger's temperature: the mean of its beams no object covers, even in part (°C).
 
     A grasped object hides part of the face from the infrared camera and shows
@@ -184,13 +190,17 @@ def uncovered_mean_c(finger: FingerThermal, background_c: float) -> float:
     contact position and the finger's bending, so the face's mean is not the
     finger's temperature.  A beam counts as covered a quarter of the contrast
     below the warmest (a half-covered beam of a 40 °C finger reads 35 °C; the
-    heated profile spans under a tenth of the contrast).  The face's mean
-    stands in when no beam is in view.
+    heated profile spans under a tenth of the contrast).  With ``weights`` (one
+    per beam) it is their weighted mean; the face's mean stands in when no
+    beam of weight is in view.
     """
     covered = covered_beams(finger.beam_temps_c, background_c, within=0.25)
-    seen = [b for b, c in zip(finger.beam_temps_c, covered, strict=True)
-            if math.isfinite(b) and not c]
-    return sum(seen) / len(seen) if seen else finger.mean_c
+    if weights is None:
+        weights = (1.0,) * len(finger.beam_temps_c)
+    seen = [(w, b) for w, b, c in zip(weights, finger.beam_temps_c, covered, strict=True)
+            if math.isfinite(b) and not c and w > 0.0]
+    total = sum(w for w, _ in seen)
+    return sum(w * b for w, b in seen) / total if total > 0.0 else finger.mean_c
 
 
 @dataclass(frozen=True)
@@ -330,6 +340,7 @@ class ThermalPerception:
             fingers=(fingers[0], fingers[1]),
             background_c=background_c,
             objects=self._objects(img, regions.search, background_c),
+            beam_weights=self.rig.finger.bending_weights,
         )
 
     def _correct(self, apparent_c: NDArray[np.float32], background_c: float) -> FloatArray:
