@@ -159,7 +159,8 @@ def _rcfn_schema() -> FeatureSchema:
             units.append(f"{unit}/s" if suffix else unit)
     names += ["closure_ratio", "hold_time_s"]
     units += ["", "s"]
-    return FeatureSchema("relaxgrip-rcfn-features-v3", tuple(names), tuple(units))
+    # v4: temp_c weighs the beams by the finger's bending (FingerGeometry.bending_weights).
+    return FeatureSchema("relaxgrip-rcfn-features-v4", tuple(names), tuple(units))
 
 
 #: The RCFN input: the paper's (§IV-B) current finger temperature, marker pose at
