@@ -757,11 +757,15 @@ def fit_observer(data_dir: Path, out_dir: Path, icfn: ICFN | None = None,
     ObserverModel
     """
     from relaxgrip.learning.datastore import load_dataset
-    from relaxgrip.learning.training import load_default_models
+    from relaxgrip.learning.store import load_models
+    from relaxgrip.learning.training import default_models_dir
+    from relaxgrip.perception.features import ICFN_SCHEMA
 
     check_observer_out(out_dir)
     data = load_dataset(Path(data_dir))
-    net = icfn if icfn is not None else load_default_models().icfn
+    # Only the ICFN is read: an RCFN of other features (a rebuild's) does not stop the fit.
+    net = icfn if icfn is not None else load_models(
+        default_models_dir(), icfn_feature_schema=ICFN_SCHEMA).icfn
     model = ObserverModel(n_terms=n_terms).fit(data, net)
     spec = data.manifest.get("spec", {})
     save_observer(Path(out_dir), model, {
