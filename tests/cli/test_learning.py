@@ -10,6 +10,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from relaxgrip.learning.observer import load_observer
 from tests.clitools import assert_one_error_line, run_cli, run_main
 
 
@@ -32,6 +33,21 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     assert 0.5 < summary["icfn_unrelaxed"]["retained_share_percentiles"]["p50"] <= 1.0
     assert (models / "icfn_unrelaxed.npz").is_file()
     return data, models
+
+
+def test_fit_observer_reads_the_onset_with_the_given_models_icfn(
+        trained: tuple[Path, Path], tmp_path: Path) -> None:
+    # A lab's observer: its band's onset error is its own ICFN's, not the twin's.
+    data, models = trained
+    bands = {}
+    for name, extra in (("shipped", []), ("own", ["--models", models])):
+        proc = run_cli("fit-observer", "--data", data, "--out", tmp_path / name, *extra)
+        assert proc.returncode == 0, proc.stderr
+        record = json.loads((tmp_path / name / "manifest.json").read_text())["training"]
+        assert record["onset_icfn"] == ("shipped" if name == "shipped" else str(models))
+        bands[name] = load_observer(tmp_path / name).band_rel(0.0)
+    # The tiny models' ICFN misses the onset by more than the shipped one does.
+    assert bands["own"] != bands["shipped"]
 
 
 def test_train_without_the_unrelaxed_icfn(trained: tuple[Path, Path], tmp_path: Path) -> None:
@@ -90,6 +106,8 @@ def test_evaluate_table(
          "--seed must be in 0 .. 2**31 - 1"),
         (["fit-observer", "--data", "{data}", "--out", "{data}"],
          "holds no relaxgrip-observer output"),
+        (["fit-observer", "--data", "{data}", "--out", "{tmp}/o", "--models", "{tmp}"],
+         "not a relaxgrip model directory"),
         (["reproduce", "--out", "{tmp}/manifest.json"], "exists and is not a directory"),
         (["reproduce", "--out", "/proc/rep"], "cannot write in /proc"),
         (["train", "--data", "{tmp}/none", "--out", "{tmp}/m"], "no such dataset directory"),

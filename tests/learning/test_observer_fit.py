@@ -23,7 +23,7 @@ def holds(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_fit_on_twin_holds_gives_physical_parameters_and_a_share_spread(holds: Path,
                                                                         tmp_path: Path) -> None:
-    model = fit_observer(holds, tmp_path / "obs", icfn=None)
+    model = fit_observer(holds, tmp_path / "obs")
     assert model.identified_on_ == "train"
     temps = model.temps_c_
     assert np.all(np.diff(temps) > 0)

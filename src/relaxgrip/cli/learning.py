@@ -202,6 +202,10 @@ def fit_observer_command(
     terms: Annotated[int, int_option(
         "--terms", help="Prony branches, 1-5 (fewer for holds too short to separate three "
                         "relaxation times).")] = 3,
+    models: Annotated[Path | None, typer.Option(
+        "--models", help="Model directory whose ICFN reads the contact onset for the band's "
+                         "onset error: the gripper's own (default: the shipped models).",
+        show_default=False)] = None,
 ) -> None:
     """Identify the viscoelastic observer (``--estimator observer``) on a dataset's RCFN holds."""
     from relaxgrip.learning.observer import fit_observer
@@ -209,7 +213,7 @@ def fit_observer_command(
     if not 1 <= terms <= 5:  # before the dataset loads (the fit checks it too, by its name)
         raise InputError(f"--terms must be 1-5, got {terms}")
     start = time.perf_counter()
-    model = fit_observer(data, out, n_terms=terms)
+    model = fit_observer(data, out, models_dir=models, n_terms=terms)
     if model.identified_on_ != "train":
         err_console.print(f"warning: {data} has no RCFN train sequences: the observer was "
                           f"identified on all {model.n_sequences_}, and its band has no held-out "

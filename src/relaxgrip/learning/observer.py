@@ -731,7 +731,7 @@ def load_default_observer() -> ObserverModel:
     return load_observer(default_observer_dir())
 
 
-def fit_observer(data_dir: Path, out_dir: Path, icfn: ICFN | None = None,
+def fit_observer(data_dir: Path, out_dir: Path, models_dir: Path | None = None,
                  n_terms: int = 3) -> ObserverModel:
     """Identify the observer on a dataset directory and save it to ``out_dir``.
 
@@ -746,8 +746,9 @@ def fit_observer(data_dir: Path, out_dir: Path, icfn: ICFN | None = None,
         A relaxgrip dataset with RCFN sequences.
     out_dir : Path
         Observer directory to write.
-    icfn : ICFN, optional
-        The ICFN for the band's onset error (default: the shipped one).
+    models_dir : Path, optional
+        The model directory whose ICFN reads the contact onset for the band's
+        onset error: the gripper's own (default: the shipped models).
     n_terms : int
         Prony branches, 1-5: holds too short to separate three relaxation
         times identify fewer.
@@ -762,15 +763,16 @@ def fit_observer(data_dir: Path, out_dir: Path, icfn: ICFN | None = None,
     from relaxgrip.perception.features import ICFN_SCHEMA
 
     check_observer_out(out_dir)
-    data = load_dataset(Path(data_dir))
     # Only the ICFN is read: an RCFN of other features (a rebuild's) does not stop the fit.
-    net = icfn if icfn is not None else load_models(
-        default_models_dir(), icfn_feature_schema=ICFN_SCHEMA).icfn
+    net = load_models(default_models_dir() if models_dir is None else Path(models_dir),
+                      icfn_feature_schema=ICFN_SCHEMA).icfn
+    data = load_dataset(Path(data_dir))
     model = ObserverModel(n_terms=n_terms).fit(data, net)
     spec = data.manifest.get("spec", {})
     save_observer(Path(out_dir), model, {
         "dataset": {"path": str(data_dir), "spec": spec,
                     "twin_version": data.manifest.get("twin_version")},
+        "onset_icfn": "shipped" if models_dir is None else str(models_dir),
         "n_sequences": model.n_sequences_,
         "identified_on": model.identified_on_,
     })
