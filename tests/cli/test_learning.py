@@ -40,7 +40,8 @@ def test_fit_observer_reads_the_onset_with_the_given_models_icfn(
     # A lab's observer: its band's onset error is its own ICFN's, not the twin's.
     data, models = trained
     bands = {}
-    for name, extra in (("shipped", []), ("own", ["--models", models])):
+    options: dict[str, list[str | Path]] = {"shipped": [], "own": ["--models", models]}
+    for name, extra in options.items():
         proc = run_cli("fit-observer", "--data", data, "--out", tmp_path / name, *extra)
         assert proc.returncode == 0, proc.stderr
         record = json.loads((tmp_path / name / "manifest.json").read_text())["training"]
