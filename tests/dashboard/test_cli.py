@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import sys
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from typer.testing import CliRunner
@@ -154,3 +156,92 @@ def test_a_second_ctrl_c_still_stops_the_session_without_a_traceback(tmp_path) -
     from relaxgrip.recording import read_session
 
     assert read_session(Path(reply["path"]))["backend"]["name"] == "twin"  # closed, readable
+
+
+def _server_frames(stream: Any) -> Iterator[tuple[int, bytes]]:
+    """Opcode and payload of each frame a server sends (unmasked, whole), until it closes."""
+    while head := stream.read(2):
+        length = head[1] & 0x7F
+        if length >= 126:
+            length = int.from_bytes(stream.read(2 if length == 126 else 8), "big")
+        yield head[0] & 0x0F, stream.read(length)
+
+
+def test_invalid_utf8_from_a_client_is_one_line_and_the_others_are_served(tmp_path) -> None:
+    # uvicorn decodes a text frame before the app sees it: on invalid UTF-8 it closed the
+    # connection with 1007 and logged the decoding's traceback, for a client's bad byte.
+    import base64
+    import json
+    import signal
+    import socket
+    import subprocess
+    import time
+
+    sync_client = pytest.importorskip("websockets.sync.client")
+    probe = socket.socket()
+    probe.bind(("127.0.0.1", 0))
+    port = probe.getsockname()[1]
+    probe.close()
+    proc = subprocess.Popen([sys.executable, "-m", "relaxgrip", "dashboard", "--port", str(port),
+                             "--record-dir", str(tmp_path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def viewer() -> Any:
+        deadline = time.monotonic() + 60.0
+        while True:
+            try:
+                return sync_client.connect(f"ws://127.0.0.1:{port}/ws", max_size=None)
+            except OSError:
+                assert time.monotonic() < deadline
+                assert proc.poll() is None
+                time.sleep(0.1)
+
+    def reply(ws: Any, ident: int) -> Any:
+        ws.send(json.dumps({"id": ident, "op": "target", "value": 3.0}))
+        while (msg := json.loads(ws.recv(timeout=10)))["type"] != "reply":
+            pass
+        return msg
+
+    try:
+        with viewer() as ws, socket.create_connection(("127.0.0.1", port), timeout=10) as raw:
+            stream = raw.makefile("rb")
+            key = base64.b64encode(b"sixteen byte key").decode()
+            raw.sendall(f"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+                        f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+                        "Sec-WebSocket-Version: 13\r\n\r\n".encode())
+            assert stream.readline().startswith(b"HTTP/1.1 101")
+            while stream.readline() not in (b"\r\n", b""):
+                pass
+            raw.sendall(bytes([0x81, 0x82, 0, 0, 0, 0]) + b"\xff\xfe")  # text, zero mask
+            close = next(data for opcode, data in _server_frames(stream) if opcode == 0x8)
+            assert int.from_bytes(close[:2], "big") == 1007
+            assert reply(ws, 1) == {"type": "reply", "id": 1, "ok": True, "error": None}
+            with viewer() as again:  # the server runs on
+                assert reply(again, 2)["ok"]
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
+    assert "Traceback" not in err, err
+    told = [line for line in err.splitlines() if "UTF-8" in line]
+    assert len(told) == 1, err
+    assert "WebSocket client sent a text frame that is not UTF-8" in told[0]
+    assert "1007" in told[0]
+
+
+def test_a_decoding_error_of_the_application_keeps_its_traceback() -> None:
+    import logging
+
+    from relaxgrip.cli.dashboard import _InvalidTextFilter
+
+    try:
+        b"\xff".decode()
+    except UnicodeDecodeError:
+        record = logging.LogRecord("uvicorn.error", logging.ERROR, __file__, 1,
+                                   "Exception in ASGI application\n", None, sys.exc_info())
+    assert _InvalidTextFilter().filter(record)
+    assert record.exc_info is not None
+    assert record.levelno == logging.ERROR
+    assert record.getMessage() == "Exception in ASGI application\n"
