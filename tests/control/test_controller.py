@@ -204,14 +204,19 @@ def test_relax_reports_its_relaxation_parameters(models):
     assert np.mean(res["icfn_n"][late]) > np.mean(res["estimate_n"][late])
 
 
-def test_lost_marker_stops_the_motor_until_it_is_back(models):
-    def blind(obs: Observation) -> Observation:
-        if obs.rgb is not None and 25.0 <= obs.t_s < 27.0:
+def blinded(start_s: float, end_s: float) -> Callable[[Observation], Observation]:
+    """Black RGB frames from ``start_s`` until ``end_s``: the marker out of view."""
+    def change(obs: Observation) -> Observation:
+        if obs.rgb is not None and start_s <= obs.t_s < end_s:
             black = Frame(obs.rgb.t_s, obs.rgb.seq, np.zeros_like(obs.rgb.image))
             return replace(obs, rgb=black)
         return obs
 
-    res, _ = grasp(models, "icfn", change=blind, seed=5,
+    return change
+
+
+def test_lost_marker_stops_the_motor_until_it_is_back(models):
+    res, _ = grasp(models, "icfn", change=blinded(25.0, 27.0), seed=5,
                    plan=GraspPlan(target_n=3.0, temp_c=40.0, hold_s=20.0))
     lost, back, gone = held_while_lost(res, EventKind.MARKER_LOST, EventKind.MARKER_BACK)
     assert 25.0 <= lost.t_s < 25.2
@@ -291,13 +296,7 @@ def test_a_stalled_rgb_camera_holds_the_motor_until_frames_come_again(models):
 
 def test_a_lost_marker_stops_the_release_until_it_is_back(models):
     # Seed 5 releases from 27.3 s, opening 98 mm at 10 mm/s: blind from 29 s to 31 s of it.
-    def blind(obs: Observation) -> Observation:
-        if obs.rgb is not None and 29.0 <= obs.t_s < 31.0:
-            black = Frame(obs.rgb.t_s, obs.rgb.seq, np.zeros_like(obs.rgb.image))
-            return replace(obs, rgb=black)
-        return obs
-
-    res, _ = grasp(models, "icfn", change=blind, seed=5,
+    res, _ = grasp(models, "icfn", change=blinded(29.0, 31.0), seed=5,
                    plan=GraspPlan(target_n=3.0, temp_c=40.0, hold_s=10.0))
     lost, back, gone = held_while_lost(res, EventKind.MARKER_LOST, EventKind.MARKER_BACK)
     released = res.log.entered(GraspPhase.RELEASE)

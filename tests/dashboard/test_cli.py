@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import json
+import signal
+import socket
+import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -14,6 +19,36 @@ from relaxgrip.cli import app
 from relaxgrip.cli.dashboard import check_host, is_loopback
 from relaxgrip.dashboard import require_web_stack
 from relaxgrip.errors import InputError
+
+
+def _free_port() -> int:
+    """A loopback port no one listens on now."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port: int = probe.getsockname()[1]
+    return port
+
+
+def _dashboard(record_dir: Path) -> tuple[subprocess.Popen[str], int]:
+    """``relaxgrip dashboard`` started on a free loopback port, and that port."""
+    port = _free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "relaxgrip", "dashboard", "--port", str(port),
+                             "--record-dir", str(record_dir)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return proc, port
+
+
+def _viewer(proc: subprocess.Popen[str], port: int) -> Any:
+    """A WebSocket client of the dashboard, once it listens (within a minute)."""
+    sync_client = pytest.importorskip("websockets.sync.client")
+    deadline = time.monotonic() + 60.0
+    while True:
+        try:
+            return sync_client.connect(f"ws://127.0.0.1:{port}/ws", max_size=None)
+        except OSError:
+            assert time.monotonic() < deadline
+            assert proc.poll() is None
+            time.sleep(0.1)
 
 
 def test_public_host_needs_allow_remote() -> None:
@@ -34,8 +69,6 @@ def test_missing_web_stack_is_a_helpful_error(monkeypatch) -> None:
 
 
 def test_a_port_in_use_is_refused_before_the_session_opens(monkeypatch) -> None:
-    import socket
-
     import relaxgrip.dashboard.session as session_module
 
     def never(*args: object, **kwargs: object) -> None:
@@ -77,12 +110,7 @@ def test_addresses_and_host_names_are_valid_hosts(host: str) -> None:
                                                 ("--models", "no such model directory")])
 def test_a_missing_model_directory_is_named_and_the_port_freed(flag: str, expected: str,
                                                                tmp_path) -> None:
-    import socket
-
-    probe = socket.socket()
-    probe.bind(("127.0.0.1", 0))
-    port = probe.getsockname()[1]
-    probe.close()
+    port = _free_port()
     result = CliRunner().invoke(app, ["dashboard", "--port", str(port), "--record-dir",
                                       str(tmp_path), flag, str(tmp_path / "none")])
     assert isinstance(result.exception, InputError)
@@ -96,12 +124,8 @@ def test_a_recording_directory_is_checked_before_the_dashboard_serves(tmp_path) 
     # Recording starts at a click long after start-up: a folder it cannot write is named now.
     a_file = tmp_path / "notes.txt"
     a_file.write_text("not a folder\n")
-    import socket
 
-    probe = socket.socket()
-    probe.bind(("127.0.0.1", 0))
-    port = probe.getsockname()[1]
-    probe.close()
+    port = _free_port()
     for record_dir, expected in ((a_file, f"recording directory {a_file} is not a directory"),
                                  (tmp_path / "none", "does not exist"),
                                  (Path("/sys"), "cannot write in /sys")):
@@ -114,31 +138,10 @@ def test_a_recording_directory_is_checked_before_the_dashboard_serves(tmp_path) 
 def test_a_second_ctrl_c_still_stops_the_session_without_a_traceback(tmp_path) -> None:
     # uvicorn's force quit skipped the app's shutdown; its lifespan was cancelled, with a
     # traceback. The shutdown (motor stopped, heaters off, recording closed) still runs.
-    import json
-    import signal
-    import socket
-    import subprocess
-    import time
-
-    sync_client = pytest.importorskip("websockets.sync.client")
-    probe = socket.socket()
-    probe.bind(("127.0.0.1", 0))
-    port = probe.getsockname()[1]
-    probe.close()
-    proc = subprocess.Popen([sys.executable, "-m", "relaxgrip", "dashboard", "--port", str(port),
-                             "--record-dir", str(tmp_path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    pytest.importorskip("websockets.sync.client")
+    proc, port = _dashboard(tmp_path)
     try:
-        deadline = time.monotonic() + 60.0
-        while True:
-            try:
-                ws = sync_client.connect(f"ws://127.0.0.1:{port}/ws", max_size=None)
-                break
-            except OSError:
-                assert time.monotonic() < deadline
-                assert proc.poll() is None
-                time.sleep(0.1)
-        with ws:
+        with _viewer(proc, port) as ws:
             ws.send(json.dumps({"id": 1, "op": "record", "value": True}))
             while (reply := json.loads(ws.recv()))["type"] != "reply":
                 pass
@@ -171,30 +174,9 @@ def test_invalid_utf8_from_a_client_is_one_line_and_the_others_are_served(tmp_pa
     # uvicorn decodes a text frame before the app sees it: on invalid UTF-8 it closed the
     # connection with 1007 and logged the decoding's traceback, for a client's bad byte.
     import base64
-    import json
-    import signal
-    import socket
-    import subprocess
-    import time
 
-    sync_client = pytest.importorskip("websockets.sync.client")
-    probe = socket.socket()
-    probe.bind(("127.0.0.1", 0))
-    port = probe.getsockname()[1]
-    probe.close()
-    proc = subprocess.Popen([sys.executable, "-m", "relaxgrip", "dashboard", "--port", str(port),
-                             "--record-dir", str(tmp_path)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-    def viewer() -> Any:
-        deadline = time.monotonic() + 60.0
-        while True:
-            try:
-                return sync_client.connect(f"ws://127.0.0.1:{port}/ws", max_size=None)
-            except OSError:
-                assert time.monotonic() < deadline
-                assert proc.poll() is None
-                time.sleep(0.1)
+    pytest.importorskip("websockets.sync.client")
+    proc, port = _dashboard(tmp_path)
 
     def reply(ws: Any, ident: int) -> Any:
         ws.send(json.dumps({"id": ident, "op": "target", "value": 3.0}))
@@ -203,7 +185,8 @@ def test_invalid_utf8_from_a_client_is_one_line_and_the_others_are_served(tmp_pa
         return msg
 
     try:
-        with viewer() as ws, socket.create_connection(("127.0.0.1", port), timeout=10) as raw:
+        with (_viewer(proc, port) as ws,
+              socket.create_connection(("127.0.0.1", port), timeout=10) as raw):
             stream = raw.makefile("rb")
             key = base64.b64encode(b"sixteen byte key").decode()
             raw.sendall(f"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
@@ -216,7 +199,7 @@ def test_invalid_utf8_from_a_client_is_one_line_and_the_others_are_served(tmp_pa
             close = next(data for opcode, data in _server_frames(stream) if opcode == 0x8)
             assert int.from_bytes(close[:2], "big") == 1007
             assert reply(ws, 1) == {"type": "reply", "id": 1, "ok": True, "error": None}
-            with viewer() as again:  # the server runs on
+            with _viewer(proc, port) as again:  # the server runs on
                 assert reply(again, 2)["ok"]
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)
