@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import signal
 import socket
@@ -29,13 +30,20 @@ def _free_port() -> int:
     return port
 
 
-def _dashboard(record_dir: Path) -> tuple[subprocess.Popen[str], int]:
-    """``relaxgrip dashboard`` started on a free loopback port, and that port."""
+@contextlib.contextmanager
+def _dashboard(record_dir: Path) -> Iterator[tuple[subprocess.Popen[str], int]]:
+    """``relaxgrip dashboard`` started on a free loopback port, and that port; killed on the
+    way out if it is still running."""
     port = _free_port()
     proc = subprocess.Popen([sys.executable, "-m", "relaxgrip", "dashboard", "--port", str(port),
                              "--record-dir", str(record_dir)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    return proc, port
+    try:
+        yield proc, port
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(10)
 
 
 def _viewer(proc: subprocess.Popen[str], port: int) -> Any:
@@ -49,6 +57,14 @@ def _viewer(proc: subprocess.Popen[str], port: int) -> Any:
             assert time.monotonic() < deadline
             assert proc.poll() is None
             time.sleep(0.1)
+
+
+def _reply(ws: Any, message: dict[str, Any]) -> Any:
+    """Send a control to the dashboard and wait for its reply (state pushes are skipped)."""
+    ws.send(json.dumps(message))
+    while (msg := json.loads(ws.recv(timeout=10)))["type"] != "reply":
+        pass
+    return msg
 
 
 def test_public_host_needs_allow_remote() -> None:
@@ -139,22 +155,14 @@ def test_a_second_ctrl_c_still_stops_the_session_without_a_traceback(tmp_path) -
     # uvicorn's force quit skipped the app's shutdown; its lifespan was cancelled, with a
     # traceback. The shutdown (motor stopped, heaters off, recording closed) still runs.
     pytest.importorskip("websockets.sync.client")
-    proc, port = _dashboard(tmp_path)
-    try:
-        with _viewer(proc, port) as ws:
-            ws.send(json.dumps({"id": 1, "op": "record", "value": True}))
-            while (reply := json.loads(ws.recv()))["type"] != "reply":
-                pass
-            assert reply["ok"], reply
-            time.sleep(0.5)
-            proc.send_signal(signal.SIGINT)
-            time.sleep(0.05)
-            proc.send_signal(signal.SIGINT)  # while uvicorn closes the connections
-            _, err = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
+    with _dashboard(tmp_path) as (proc, port), _viewer(proc, port) as ws:
+        reply = _reply(ws, {"id": 1, "op": "record", "value": True})
+        assert reply["ok"], reply
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)  # while uvicorn closes the connections
+        _, err = proc.communicate(timeout=30)
     assert "Traceback" not in err, err
     from relaxgrip.recording import read_session
 
@@ -176,15 +184,8 @@ def test_invalid_utf8_from_a_client_is_one_line_and_the_others_are_served(tmp_pa
     import base64
 
     pytest.importorskip("websockets.sync.client")
-    proc, port = _dashboard(tmp_path)
-
-    def reply(ws: Any, ident: int) -> Any:
-        ws.send(json.dumps({"id": ident, "op": "target", "value": 3.0}))
-        while (msg := json.loads(ws.recv(timeout=10)))["type"] != "reply":
-            pass
-        return msg
-
-    try:
+    target = {"op": "target", "value": 3.0}
+    with _dashboard(tmp_path) as (proc, port):
         with (_viewer(proc, port) as ws,
               socket.create_connection(("127.0.0.1", port), timeout=10) as raw):
             stream = raw.makefile("rb")
@@ -198,15 +199,12 @@ def test_invalid_utf8_from_a_client_is_one_line_and_the_others_are_served(tmp_pa
             raw.sendall(bytes([0x81, 0x82, 0, 0, 0, 0]) + b"\xff\xfe")  # text, zero mask
             close = next(data for opcode, data in _server_frames(stream) if opcode == 0x8)
             assert int.from_bytes(close[:2], "big") == 1007
-            assert reply(ws, 1) == {"type": "reply", "id": 1, "ok": True, "error": None}
+            assert _reply(ws, {"id": 1, **target}) == {"type": "reply", "id": 1, "ok": True,
+                                                        "error": None}
             with _viewer(proc, port) as again:  # the server runs on
-                assert reply(again, 2)["ok"]
+                assert _reply(again, {"id": 2, **target})["ok"]
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
     assert "Traceback" not in err, err
     told = [line for line in err.splitlines() if "UTF-8" in line]
     assert len(told) == 1, err
