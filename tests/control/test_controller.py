@@ -204,14 +204,19 @@ def test_relax_reports_its_relaxation_parameters(models):
     assert np.mean(res["icfn_n"][late]) > np.mean(res["estimate_n"][late])
 
 
-def test_lost_marker_stops_the_motor_until_it_is_back(models):
-    def blind(obs: Observation) -> Observation:
-        if obs.rgb is not None and 25.0 <= obs.t_s < 27.0:
+def blinded(start_s: float, end_s: float) -> Callable[[Observation], Observation]:
+    """Black RGB frames from ``start_s`` until ``end_s``: the marker out of view."""
+    def change(obs: Observation) -> Observation:
+        if obs.rgb is not None and start_s <= obs.t_s < end_s:
             black = Frame(obs.rgb.t_s, obs.rgb.seq, np.zeros_like(obs.rgb.image))
             return replace(obs, rgb=black)
         return obs
 
-    res, _ = grasp(models, "icfn", change=blind, seed=5,
+    return change
+
+
+def test_lost_marker_stops_the_motor_until_it_is_back(models):
+    res, _ = grasp(models, "icfn", change=blinded(25.0, 27.0), seed=5,
                    plan=GraspPlan(target_n=3.0, temp_c=40.0, hold_s=20.0))
     lost, back, gone = held_while_lost(res, EventKind.MARKER_LOST, EventKind.MARKER_BACK)
     assert 25.0 <= lost.t_s < 25.2
@@ -287,6 +292,23 @@ def test_a_stalled_rgb_camera_holds_the_motor_until_frames_come_again(models):
     assert np.ptp(res["motor_mm"][gone]) < 0.1  # the motor coasts to a stop
     assert np.nanmax(res["truth_force_n"]) < 3.5
     assert res.log.first(EventKind.HOLD_ONSET) is not None  # the grasp goes on
+
+
+def test_a_lost_marker_stops_the_release_until_it_is_back(models):
+    # Seed 5 releases from 27.3 s, opening 98 mm at 10 mm/s: blind from 29 s to 31 s of it.
+    res, _ = grasp(models, "icfn", change=blinded(29.0, 31.0), seed=5,
+                   plan=GraspPlan(target_n=3.0, temp_c=40.0, hold_s=10.0))
+    lost, back, gone = held_while_lost(res, EventKind.MARKER_LOST, EventKind.MARKER_BACK)
+    released = res.log.entered(GraspPhase.RELEASE)
+    assert released is not None
+    assert released < 29.0 <= lost.t_s < 29.2
+    assert 31.0 <= back.t_s < 32.0
+    assert np.all(during(res, GraspPhase.RELEASE)[gone])
+    assert np.ptp(res["motor_mm"][gone]) < 0.5  # coasts to a stop (opening, 20 mm in 2 s)
+    after = (res["t_s"] > back.t_s) & during(res, GraspPhase.RELEASE)
+    assert np.all(res["velocity_cmd_mm_s"][after] < 0.0)  # opening again
+    assert res.log.transitions[-1][1] is GraspPhase.DONE
+    assert res["truth_force_n"][-1] < 0.05
 
 
 def test_an_infrared_frame_stamped_ahead_of_the_clock_is_no_reading(models):

@@ -506,7 +506,7 @@ def test_drift_scale_is_its_own_and_old_files_keep_one_scale(tmp_path: Path) -> 
     assert legacy.drift_scale == 0.3
     assert legacy.band_drift_rel(45.0) == pytest.approx(0.3 * one.band_drift_rel(45.0))
     for bad in ({"drift_scale": -1.0}, {"band_scale": 0.0}, {"drift_scale": math.nan},
-                {"band_scale": "wide"}):
+                {"band_scale": "wide"}, {"band_scale": math.inf}):
         with pytest.raises(ValueError, match="band_scale must be > 0 and drift_scale >= 0"):
             ObserverModel.from_arrays(arrays, {**params, **bad})
 

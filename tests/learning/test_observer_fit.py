@@ -50,6 +50,8 @@ def test_fit_refuses_hyperparameters_out_of_range(holds: Path) -> None:
         ObserverModel(n_terms=0).fit(data)
     with pytest.raises(InputError, match="band_level"):
         ObserverModel(band_level=1.0).fit(data)
+    with pytest.raises(InputError, match=r"band_scale must be > 0 .* got inf"):
+        ObserverModel(band_scale=float("inf")).fit(data)  # a band that covers everything
 
 
 def test_fitting_without_train_holds_says_so(holds: Path, tmp_path: Path,

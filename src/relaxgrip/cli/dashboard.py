@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import ipaddress
+import logging
 import re
 import secrets
 import signal
@@ -115,12 +116,44 @@ def dashboard(
                   "(motor stopped, heaters off)", markup=False, highlight=False, soft_wrap=True)
     if token:
         console.print(f"access token: {token}", markup=False, highlight=False)
+    server_log = logging.getLogger("uvicorn.error")
+    invalid_text = _InvalidTextFilter()
     try:
         server = _hangup_server(uvicorn.Config(application, log_level="warning"))
+        server_log.addFilter(invalid_text)  # after the Config, which sets up uvicorn's logging
         server.run(sockets=[listener])
     finally:
+        server_log.removeFilter(invalid_text)
         session.close()
         listener.close()
+
+
+class _InvalidTextFilter(logging.Filter):
+    """uvicorn's traceback for a client's text frame that is not UTF-8, as one line.
+
+    uvicorn decodes a WebSocket text frame before the application sees it; on
+    invalid UTF-8 it closes the connection with 1007 and logged the decoding's
+    traceback as an error of the server's, for a client's bad byte.  That
+    record becomes a warning naming the problem, without the traceback.  Only
+    a ``UnicodeDecodeError`` raised in uvicorn's WebSocket protocol itself is
+    changed: one raised in the application keeps its traceback.
+    """
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        """Rewrite uvicorn's record of invalid UTF-8 from a client; keep every record."""
+        exc = record.exc_info[1] if record.exc_info else None
+        if isinstance(exc, UnicodeDecodeError) and exc.__traceback__ is not None:
+            tb = exc.__traceback__
+            while tb.tb_next is not None:
+                tb = tb.tb_next
+            if str(tb.tb_frame.f_globals.get("__name__", "")).startswith(
+                    "uvicorn.protocols.websockets."):
+                record.msg = ("a WebSocket client sent a text frame that is not UTF-8 (%s): "
+                              "connection closed (1007)")
+                record.args = (exc,)
+                record.exc_info, record.exc_text = None, None
+                record.levelno, record.levelname = logging.WARNING, "WARNING"
+        return True
 
 
 def _hangup_server(config: Any) -> Any:

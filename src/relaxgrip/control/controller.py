@@ -441,11 +441,9 @@ class GraspController:
         thermal camera would leave them on a temperature the fingers left
         (cooling fingers stiffen, and the force held would climb unseen).
         """
-        rgb_limit = self.config.rgb_stale_after_s
-        if not fresh(percept.t_s, t, rgb_limit):
-            return EventKind.MARKER_LOST, _stale("RGB", percept.t_s, t, rgb_limit)
-        if percept.marker.status is not TrackStatus.TRACKING:
-            return EventKind.MARKER_LOST, percept.marker.message or percept.marker.status.value
+        lost = self._marker_lost(t, percept)
+        if lost is not None:
+            return lost
         limit = self.temperature.limits.stale_after_s
         thermal = percept.thermal
         if thermal is None or not fresh(thermal.t_s, t, limit):
@@ -454,6 +452,39 @@ class GraspController:
         if not est.valid:
             return EventKind.ESTIMATE_LOST, "no valid estimate"
         return None
+
+    def _marker_lost(self, t: float, percept: Percept) -> tuple[EventKind, str] | None:
+        """Why the marker cannot be read at ``t`` (a ``MARKER_LOST`` to log), or None if it can.
+
+        It must be tracked on a current RGB frame.
+        """
+        rgb_limit = self.config.rgb_stale_after_s
+        if not fresh(percept.t_s, t, rgb_limit):
+            return EventKind.MARKER_LOST, _stale("RGB", percept.t_s, t, rgb_limit)
+        if percept.marker.status is not TrackStatus.TRACKING:
+            return EventKind.MARKER_LOST, percept.marker.message or percept.marker.status.value
+        return None
+
+    def _held_while_lost(self, t: float, lost: tuple[EventKind, str] | None) -> bool:
+        """Log where a loss starts or ends; whether the motor must hold position now.
+
+        ``lost`` is the loss at ``t`` (its event and detail), or None: the
+        first period of a loss logs its event, the first period without one
+        the matching back event (and resets the PID).
+        """
+        if lost is not None:
+            kind, detail = lost
+            if self._lost is None:
+                self._lost = kind
+                self.log.event(t, kind, detail)
+            return True
+        if self._lost is not None:
+            back = (EventKind.MARKER_BACK if self._lost is EventKind.MARKER_LOST
+                    else EventKind.ESTIMATE_BACK)
+            self._lost = None
+            self.pid.reset(0.0)
+            self.log.event(t, back)
+        return False
 
     def _look_for_grasped(self, percept: Percept) -> None:
         """While the motor settles into the hold, perception looks for the plan's object."""
@@ -513,6 +544,12 @@ class GraspController:
         if phase is GraspPhase.OPEN:
             return self._open(t, percept)
         if phase is GraspPhase.RELEASE:
+            # Opening reads no force, only the marker: a stale infrared does not stop it,
+            # and an estimate lost before the release is not watched for (nor said to be back).
+            if self._lost is EventKind.ESTIMATE_LOST:
+                self._lost = None
+            if self._held_while_lost(t, self._marker_lost(t, percept)):
+                return 0.0, 0.0
             pose = marker_pose(percept.marker)
             free = pose is not None and pose[0] < cfg.contact_deflection_m
             if (free and t - self._phase_t > 0.5) or motor <= 0.0:
@@ -520,19 +557,8 @@ class GraspController:
                 return 0.0, 0.0
             return -cfg.release_mm_s, 0.0
         est = self.estimate
-        lost = self._sensing_lost(t, percept, est)
-        if lost is not None:
-            kind, detail = lost
-            if self._lost is None:
-                self._lost = kind
-                self.log.event(t, kind, detail)
+        if self._held_while_lost(t, self._sensing_lost(t, percept, est)):
             return 0.0, 0.0  # hold position until the force can be read again
-        if self._lost is not None:
-            back = (EventKind.MARKER_BACK if self._lost is EventKind.MARKER_LOST
-                    else EventKind.ESTIMATE_BACK)
-            self._lost = None
-            self.pid.reset(0.0)
-            self.log.event(t, back)
         over = [f"{name} {f:.2f} N" for name, f, limit in (
             ("estimate", est.force_n, cfg.max_force_n),
             ("per-frame ICFN", est.f_icfn_n, cfg.max_force_n + cfg.icfn_margin_n)) if f > limit]

@@ -510,10 +510,12 @@ class ObserverModel:
         """Refuse parameters no fit or band can use (:class:`InputError`)."""
         if isinstance(self.n_terms, bool) or self.n_terms not in range(1, 6):
             raise InputError(f"n_terms must be 1-5, got {self.n_terms!r}")
-        if not (self.loading_speed_mm_s > 0 and 0.5 <= self.band_level < 1.0
-                and self.band_scale > 0 and self.drift_scale >= 0):
-            raise InputError("need loading_speed_mm_s > 0, 0.5 <= band_level < 1, band_scale > 0,"
-                             " drift_scale >= 0")
+        if not (_finite_at_least(self.band_scale, 0.0, strict=True)
+                and _finite_at_least(self.drift_scale, 0.0, strict=False)):
+            raise InputError(f"band_scale must be > 0 and drift_scale >= 0 (finite), got "
+                             f"{self.band_scale!r} and {self.drift_scale!r}")
+        if not (self.loading_speed_mm_s > 0 and 0.5 <= self.band_level < 1.0):
+            raise InputError("need loading_speed_mm_s > 0, 0.5 <= band_level < 1")
 
     @classmethod
     def from_arrays(cls, arrays: Mapping[str, Any], params: Mapping[str, Any]) -> ObserverModel:
@@ -531,12 +533,8 @@ class ObserverModel:
             model = cls(**params)
         except TypeError as exc:
             raise ValueError(f"bad observer parameters: {exc}") from exc
-        if not (_finite_at_least(model.band_scale, 0.0, strict=True)
-                and _finite_at_least(model.drift_scale, 0.0, strict=False)):
-            raise ValueError(f"band_scale must be > 0 and drift_scale >= 0, got "
-                             f"{model.band_scale!r} and {model.drift_scale!r}")
         try:
-            model._check_params()
+            model._check_params()  # an InputError, a ValueError, names a bad band scale
         except TypeError:  # a parameter of another type than a number
             raise ValueError(f"bad observer parameters: {dict(params)}") from None
         onset = np.asarray(arrays.get("onset_rel_", [np.nan]), dtype=np.float64).ravel()
