@@ -174,6 +174,25 @@ def test_holds_without_set_points_are_grouped_by_measured_temperature(tiny: Path
     assert np.isfinite(model.band_rel_).all()
 
 
+NAN = float("nan")
+
+
+@pytest.mark.parametrize(("set_temps", "temps", "expected"), [
+    # One setting whose holds straddle a whole degree is one group (rounding split it).
+    ([NAN, NAN, NAN, NAN], [40.59, 40.48, 50.48, 60.46], [40.5, 40.5, 50.5, 60.5]),
+    # Holds within a kelvin of the one before run into one setting.
+    ([NAN, NAN, NAN], [39.6, 40.4, 41.2], [40.4, 40.4, 40.4]),
+    ([NAN, NAN], [40.0, 41.5], [40.0, 41.5]),
+    # Near a set temperature, a setting joins its group; far from every one, its own.
+    ([40.0, NAN, NAN, 55.0], [40.3, 40.6, 47.2, 55.1], [40.0, 40.0, 47.2, 55.0]),
+])
+def test_holds_without_set_points_join_the_setting_their_temperatures_share(
+        set_temps: list[float], temps: list[float], expected: list[float]) -> None:
+    from relaxgrip.learning.observer import _group_keys
+
+    assert _group_keys(set_temps, temps) == pytest.approx(expected)
+
+
 def test_one_hold_without_a_set_point_fits(tiny: Path, tmp_path: Path) -> None:
     mixed = _damaged(tiny, tmp_path, edit_table("rcfn_sequences",
                                                  set_cell("temp_set_c", np.nan, row=3)))

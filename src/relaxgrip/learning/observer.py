@@ -22,7 +22,7 @@ aperture after a loading at a known closing speed):
    normalised force curve of the sequences nearest the reference temperature.
 2. Per temperature group (sequences of one set temperature; a sequence
    without one, as recordings whose plan set no heater temperature give,
-   joins the group of its measured temperature, :func:`_group_key`): for each
+   joins the group of its measured temperature, :func:`_group_keys`): for each
    candidate shift ``ln a_T`` the branch responses ``h_i(t)`` to the
    sequence's deflection history (a ramp from contact to the onset
    deflection over the loading time, then the marker's measured deflection
@@ -49,7 +49,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from statistics import NormalDist
@@ -151,7 +151,7 @@ class _Hold:
     """One RCFN sequence prepared for identification."""
 
     sequence: int
-    group: float  # the temperature group's key (:func:`_group_key`)
+    group: float  # the temperature group's key (:func:`_group_keys`)
     temp_c: float
     setup: str
     split: str
@@ -336,6 +336,7 @@ class ObserverModel:
         ratios = data.rcfn_features["closure_ratio"].to_numpy(np.float64)
         fallback_ratio = float(np.nanmedian(ratios)) if np.isfinite(ratios).any() else 1.0
         holds = []
+        set_temps: list[float] = []
         for _, row in seqs.iterrows():
             seq = int(row["sequence"])
             if seq not in feats or seq not in curves:
@@ -369,8 +370,9 @@ class ObserverModel:
             ramp_t = np.linspace(-load_s, 0.0, _RAMP_STEPS + 1)[:-1]
             ramp_d = np.linspace(0.0, d0, _RAMP_STEPS + 1)[:-1]
             temp_c = float(np.nanmedian(fe["temp_c"].to_numpy(np.float64)))
+            set_temps.append(float(row["temp_set_c"]))
             holds.append(_Hold(
-                sequence=seq, group=_group_key(float(row["temp_set_c"]), temp_c),
+                sequence=seq, group=math.nan,  # set below, from every hold's temperature
                 temp_c=temp_c,
                 setup=f"{row['object']}@{float(row['contact_set_m']):.3f}",
                 split=str(row["split"]), f0_n=f0,
@@ -379,7 +381,8 @@ class ObserverModel:
             ))
         if len(holds) < 3:
             raise InputError(f"only {len(holds)} usable RCFN sequences; the observer needs >= 3")
-        return holds
+        keys = _group_keys(set_temps, [h.temp_c for h in holds])
+        return [replace(h, group=key) for h, key in zip(holds, keys, strict=True)]
 
     def _reference_times(self, group: list[_Hold]) -> FloatArray:
         n = min(h.f_n.size for h in group)
@@ -688,20 +691,40 @@ def _finite_at_least(value: Any, low: float, strict: bool) -> bool:
     return value > low if strict else value >= low
 
 
-def _group_key(temp_set_c: float, temp_c: float) -> float:
-    """The temperature group of a hold: its set temperature to 0.1 °C, or without one its
-    measured temperature to 1 °C.
+#: Holds without a set temperature whose measured ones lie within this of each other (K)
+#: are one heater setting: a setting's holds read within about a kelvin, and settings
+#: differ by several.
+_GROUP_GAP_K = 1.0
 
-    Recordings whose plan set no heater temperature give NaN set points, and NaN keys would
-    never compare equal.  ``temp_c`` is the median of the hold's ``temp_c`` feature (°C).
-    Holds of one heater setting read within about a kelvin of each other: rounded to whole
-    degrees they share a group, or two neighbouring ones, each then identified on its own
-    (a knot of the temperature tables).  A whole degree equal to a set temperature joins
-    that set temperature's group.
+
+def _group_keys(set_temps_c: list[float], temps_c: list[float]) -> list[float]:
+    """Each hold's temperature group: its set temperature to 0.1 °C, or without one the
+    setting its measured temperature belongs to.
+
+    Recordings whose plan set no heater temperature give NaN set points, and NaN keys
+    would never compare equal.  ``temps_c`` are the medians of the holds' ``temp_c``
+    feature (°C).  Sorted, holds without a set point run into one setting while each is
+    within :data:`_GROUP_GAP_K` of the one before (rounding to whole degrees split one
+    setting whose holds read 40.48 and 40.59 °C); a setting whose median lies within that
+    of a set temperature joins its group, and any other is keyed by its median to 0.1 °C.
     """
-    if math.isfinite(temp_set_c):
-        return round(temp_set_c, 1)
-    return float(round(temp_c))
+    keys = [round(t, 1) if math.isfinite(t) else math.nan for t in set_temps_c]
+    set_keys = sorted({k for k in keys if math.isfinite(k)})
+    unset = sorted((i for i, k in enumerate(keys) if not math.isfinite(k)),
+                   key=lambda i: temps_c[i])
+    runs: list[list[int]] = []
+    for i in unset:
+        if runs and temps_c[i] - temps_c[runs[-1][-1]] <= _GROUP_GAP_K:
+            runs[-1].append(i)
+        else:
+            runs.append([i])
+    for members in runs:
+        median = float(np.median([temps_c[i] for i in members]))
+        near = min(set_keys, key=lambda k: abs(k - median), default=math.nan)
+        key = near if abs(near - median) <= _GROUP_GAP_K else round(median, 1)
+        for i in members:
+            keys[i] = key
+    return keys
 
 
 def _share_spread(totals: list[FloatArray]) -> FloatArray:
