@@ -121,3 +121,33 @@ def test_perception_reads_the_infrared_frame_on_the_bend_the_marker_shows() -> N
         errors[follow] = np.array(percept.thermal.fingers[0].beam_temps_c) - truth
     assert np.abs(errors[True]).max() < 0.3, errors[True]
     assert not np.abs(errors[False][-1]) < 5.0, errors[False]
+
+
+def test_only_the_loaded_fingers_are_read_bent() -> None:
+    """An object pressed against the marker finger alone (the other is a rigid jaw):
+    with ``loaded_fingers=(marker finger,)`` the jaw's windows stay where it is, unbent.
+    Read bent as in a grasp, its distal windows leave it."""
+    temps = np.linspace(55.0, 43.0, NODES.size)
+    x, bend, at_tab = _bent(8.0, temps)
+    j = RIG.marker_finger
+    bends = np.zeros((2, x.size))
+    bends[j] = bend
+    renderer = IrRenderer(RIG, IrSensorConfig(netd_k=0.0, max_offset_k=0.0), seed=0)
+    frame = Frame(0.0, 0, renderer.render(0, np.stack([temps, temps]), NODES, APERTURE_M, [],
+                                          22.0, (x, bends)))
+    truth = np.interp(RIG.finger.beam_positions_m, NODES, temps)
+    one = ThermalPerception(RIG, loaded_fingers=(j,)).extract(frame, MOTOR_MM, at_tab)
+    for finger in one.fingers:
+        read = np.array(finger.beam_temps_c)
+        assert np.abs(read - truth).max() < 0.2, (read, truth)
+    both = ThermalPerception(RIG).extract(frame, MOTOR_MM, at_tab)
+    jaw = np.array(both.fingers[1 - j].beam_temps_c)
+    assert not np.abs(jaw[-1] - truth[-1]) < 1.0, (jaw, truth)
+
+
+@pytest.mark.parametrize("loaded", [(0, 0), (2,), (-1, 1)])
+def test_loaded_fingers_must_be_fingers(loaded: tuple[int, ...]) -> None:
+    from relaxgrip.errors import InputError
+
+    with pytest.raises(InputError, match="loaded_fingers"):
+        ThermalPerception(RIG, loaded_fingers=loaded)

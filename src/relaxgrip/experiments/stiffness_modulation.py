@@ -80,6 +80,7 @@ from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.perception.features import marker_pose
 from relaxgrip.perception.pipeline import Perception
+from relaxgrip.perception.thermal import ThermalPerception
 from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig, get_object
 from relaxgrip.validate import check_positive
@@ -371,7 +372,9 @@ def run_contact(
     cfg = replace(base, rigid_finger=1 - base.rig.marker_finger)
     clock = VirtualClock()
     twin = GripperTwin(cfg, seed=seed, clock=clock)
-    perception = Perception(cfg.rig)
+    # The jaw does not bend: only the marker finger is read bent.
+    thermal = ThermalPerception(cfg.rig, loaded_fingers=(cfg.rig.marker_finger,))
+    perception = Perception(cfg.rig, thermal=thermal)
     temperature = TemperatureLoop(cfg.heat)
     temperature.set_mode(kind)
     estimator = IcfnEstimator(bundle.icfn)

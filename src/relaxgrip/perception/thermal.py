@@ -244,6 +244,14 @@ class ThermalPerception:
         (pixels): about three standard deviations of the optics' blur, so that
         no background is averaged in.  The face statistics also leave out a
         band this wide along the outline.
+    loaded_fingers : sequence of int
+        The fingers the grasp's load bends, read bent with
+        ``rig.ir_follow_bend``: both (the default), which carry equal and
+        opposite forces in a grasp; the marker finger alone when an object is
+        pressed against it and the other finger does not bend (a rigid jaw,
+        the single-finger contacts of
+        :mod:`relaxgrip.experiments.stiffness_modulation`).  Read bent, an
+        unbent finger's windows would fall on the object.
     """
 
     def __init__(
@@ -254,6 +262,7 @@ class ThermalPerception:
         object_threshold_k: float = 1.0,
         min_object_px: int = 12,
         edge_clearance_px: float = 2.0,
+        loaded_fingers: Sequence[int] = (0, 1),
     ) -> None:
         if not (math.isfinite(emissivity) and 0.0 < emissivity <= 1.0):
             raise InputError(f"emissivity must be in (0, 1], got {emissivity}")
@@ -265,7 +274,11 @@ class ThermalPerception:
             raise InputError(f"min_object_px must be >= 1, got {min_object_px}")
         if not (math.isfinite(edge_clearance_px) and edge_clearance_px >= 0):
             raise InputError(f"edge_clearance_px must be >= 0, got {edge_clearance_px}")
+        loaded = tuple(loaded_fingers)
+        if len(set(loaded)) != len(loaded) or not set(loaded) <= {0, 1}:
+            raise InputError(f"loaded_fingers must be distinct fingers 0 or 1, got {loaded!r}")
         self.rig = rig
+        self.loaded_fingers = loaded
         self.emissivity = float(emissivity)
         self.roi_half_px = int(roi_half_px)
         self.object_threshold_k = float(object_threshold_k)
@@ -293,10 +306,10 @@ class ThermalPerception:
             Encoder position of the closing motor when the frame was taken (mm).
         bend : (deflection_m, slope_rad), optional
             The marker finger's bend at the marker's tab, as the marker reads
-            it: with ``rig.ir_follow_bend`` both fingers are read bent so
-            (:func:`~relaxgrip.rig.bend_profile_m`; the fingers carry equal
-            and opposite forces), to 0.1 mm and 1 mrad.  Ignored otherwise,
-            and None reads them unbent.
+            it: with ``rig.ir_follow_bend`` the :attr:`loaded_fingers` are
+            read bent so (:func:`~relaxgrip.rig.bend_profile_m`; in a grasp
+            the fingers carry equal and opposite forces), to 0.1 mm and
+            1 mrad.  Ignored otherwise, and None reads them unbent.
 
         Returns
         -------
@@ -433,10 +446,12 @@ class ThermalPerception:
         slots: list[tuple[int, ...]] = []
         faces: list[IndexArray] = []
         near_fingers = np.zeros((h, w), dtype=np.uint8)
+        unbent = np.zeros_like(bend_m)
         for j in (0, 1):
-            outline, inner_outline = self._outlines(j, aperture_m, bend_m)
+            bent = bend_m if j in self.loaded_fingers else unbent
+            outline, inner_outline = self._outlines(j, aperture_m, bent)
             valid: list[int] = []
-            for i, centre in enumerate(self._beam_pixels(j, aperture_m, bend_m)):
+            for i, centre in enumerate(self._beam_pixels(j, aperture_m, bent)):
                 window = self._window(centre, outline)
                 if window is not None:
                     valid.append(i)
