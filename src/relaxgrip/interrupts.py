@@ -8,17 +8,22 @@ file: MCAP's writer takes a chunk's messages out of its builder, compresses
 them and only then writes them, and an interrupt in between loses the chunk
 while the summary still counts its messages.  A block that must not be cut
 runs under :func:`deferred`; a signal that comes during it stops the command
-as the block ends.
+as the block ends.  :func:`stop_signals` sets the handlers for a block.
 """
 
 from __future__ import annotations
 
+import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from contextlib import contextmanager
 from types import FrameType
 
-__all__ = ["deferred", "interrupt"]
+__all__ = ["STOP_SIGNALS", "deferred", "interrupt", "stop_signals"]
+
+#: Signals that stop a command as Ctrl-C does: Ctrl-C, ``kill`` and a closed terminal.
+#: SIGINT too: Python's own handler raises at once, inside a record half written.
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 _depth = 0
 _pending = False
@@ -55,3 +60,29 @@ def deferred() -> Iterator[None]:
     if _depth == 0 and _pending:
         _pending = False
         raise KeyboardInterrupt
+
+
+@contextmanager
+def stop_signals(even_if_ignored: Collection[int] = ()) -> Iterator[tuple[int, ...]]:
+    """A block in which :data:`STOP_SIGNALS` stop the command through :func:`interrupt`.
+
+    A signal the process ignores stays ignored (``nohup`` ignores SIGHUP, and
+    that stays), unless it is in ``even_if_ignored`` (a shell's ``&`` starts a
+    command with SIGINT ignored).  The block gets the signals it set: a
+    clean-up may ignore them so that a second one does not cut it short.  The
+    handlers before it are back as it ends.  Only the main thread can set
+    handlers: in another thread none are set, and the block gets none.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield ()
+        return
+    previous = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    caught = tuple(sig for sig, handler in previous.items()
+                   if handler is not signal.SIG_IGN or sig in even_if_ignored)
+    for sig in caught:
+        signal.signal(sig, interrupt)
+    try:
+        yield caught
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

@@ -12,11 +12,7 @@ recording gets its footer, temporary files go, the loop's heaters go off.
 
 from __future__ import annotations
 
-import signal
 import sys
-import threading
-from collections.abc import Iterator
-from contextlib import contextmanager
 from typing import NoReturn
 
 from typer import Abort
@@ -41,39 +37,15 @@ from relaxgrip.cli import (  # noqa: F401  (registers commands)
 from relaxgrip.cli._app import app, err_console
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import one_line
-from relaxgrip.interrupts import interrupt
+from relaxgrip.interrupts import stop_signals
 
 __all__ = ["app", "main"]
-
-
-#: Signals that stop a command as Ctrl-C does.  SIGINT too: Python's own handler
-#: raises at once, inside a record half written (:mod:`relaxgrip.interrupts`).
-_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-
-
-@contextmanager
-def _signals_interrupt() -> Iterator[None]:
-    """SIGINT, SIGTERM and SIGHUP raise ``KeyboardInterrupt`` in the block, between writes,
-    where they are not ignored (``nohup`` ignores SIGHUP: that stays); only the main
-    thread can set them."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {sig: signal.getsignal(sig) for sig in _STOP_SIGNALS}
-    for sig, handler in previous.items():
-        if handler is not signal.SIG_IGN:
-            signal.signal(sig, interrupt)
-    try:
-        yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
 
 
 def main() -> None:
     """Entry point of the ``relaxgrip`` command."""
     try:
-        with _signals_interrupt():
+        with stop_signals():
             code = app(standalone_mode=False)
     except NoArgsIsHelpError:  # bare ``relaxgrip`` (or a group): typer has shown its help
         sys.exit(2)

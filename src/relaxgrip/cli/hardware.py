@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
-import threading
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -15,7 +14,7 @@ from rich.table import Table
 
 from relaxgrip.cli._app import app, console, emit_json, float_option, int_option
 from relaxgrip.errors import InputError
-from relaxgrip.interrupts import interrupt
+from relaxgrip.interrupts import stop_signals
 
 if TYPE_CHECKING:
     from relaxgrip.perception.rig_check import RigCheck
@@ -23,12 +22,6 @@ if TYPE_CHECKING:
 #: The longest ``--duration-s``: a day. The emulator is a bench tool; a longer run is a typo
 #: (1e308, inf), and leaving ``--duration-s`` out runs it until it is stopped.
 MAX_DURATION_S = 86_400.0
-
-#: Signals that stop the emulator as Ctrl-C does, its link and socket removed: ``kill``,
-#: a closed terminal (unless ``nohup`` ignores it: that stays), and SIGINT also where the
-#: shell started it with SIGINT ignored (``&``).
-_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-
 
 @app.command("emulator")
 def emulator(
@@ -74,44 +67,40 @@ def emulator(
         spec.emulator.seed if spec is not None and spec.emulator is not None else 0)
     emu = McuEmulator(config, run_seed, WallClock())
     link: Path | None = None
-    # Handlers can only be set from the main thread (not, say, from a test runner's thread).
-    stop_signals = tuple(
-        sig for sig in _STOP_SIGNALS
-        if sig != signal.SIGHUP or signal.getsignal(sig) is not signal.SIG_IGN
-    ) if threading.current_thread() is threading.main_thread() else ()
-    previous = {sig: signal.signal(sig, interrupt) for sig in stop_signals}
-    try:
-        if make_dir:
-            EMULATOR_DIR.mkdir()
-        emu.listen(socket_path)
-        if port is not None:
-            link = _link_port(port, emu.port)
-        emu.start()
-        # One line each, however long the paths: scripts read the port from here.
-        console.print(f"port: {emu.port}" + (f" (linked from {link})" if link else ""),
-                      highlight=False, soft_wrap=True)
-        console.print(f"frames: {socket_path}", highlight=False, soft_wrap=True)
-        console.print(f"seed {run_seed}; watchdog {emu.mcu_config.watchdog_default_ms} ms; "
-                      "Ctrl-C stops", highlight=False)
-        deadline = None if duration_s is None else time.monotonic() + duration_s
-        with contextlib.suppress(KeyboardInterrupt):
-            while deadline is None or time.monotonic() < deadline:
-                time.sleep(0.1)
-                if emu.error is not None:
-                    raise InputError(f"emulator stopped: {emu.error}")
-    except KeyboardInterrupt:  # stopped while starting: cleaned up below, like a timed stop
-        pass
-    finally:
-        for sig in stop_signals:  # a second signal must not cut the clean-up short
-            signal.signal(sig, signal.SIG_IGN)
-        emu.stop()
-        if link is not None and link.is_symlink():
-            link.unlink()
-        if make_dir:
-            with contextlib.suppress(OSError):  # not empty: someone else's files are there
-                EMULATOR_DIR.rmdir()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    # Stopped as Ctrl-C does, its link and socket removed: by ``kill``, a closed terminal
+    # (unless ``nohup`` ignores it: that stays), and Ctrl-C also where the shell started
+    # it with SIGINT ignored (``&``).
+    with stop_signals(even_if_ignored=(signal.SIGINT, signal.SIGTERM)) as caught:
+        try:
+            if make_dir:
+                EMULATOR_DIR.mkdir()
+            emu.listen(socket_path)
+            if port is not None:
+                link = _link_port(port, emu.port)
+            emu.start()
+            # One line each, however long the paths: scripts read the port from here.
+            console.print(f"port: {emu.port}" + (f" (linked from {link})" if link else ""),
+                          highlight=False, soft_wrap=True)
+            console.print(f"frames: {socket_path}", highlight=False, soft_wrap=True)
+            console.print(f"seed {run_seed}; watchdog {emu.mcu_config.watchdog_default_ms} ms; "
+                          "Ctrl-C stops", highlight=False)
+            deadline = None if duration_s is None else time.monotonic() + duration_s
+            with contextlib.suppress(KeyboardInterrupt):
+                while deadline is None or time.monotonic() < deadline:
+                    time.sleep(0.1)
+                    if emu.error is not None:
+                        raise InputError(f"emulator stopped: {emu.error}")
+        except KeyboardInterrupt:  # stopped while starting: cleaned up below, like a timed stop
+            pass
+        finally:
+            for sig in caught:  # a second signal must not cut the clean-up short
+                signal.signal(sig, signal.SIG_IGN)
+            emu.stop()
+            if link is not None and link.is_symlink():
+                link.unlink()
+            if make_dir:
+                with contextlib.suppress(OSError):  # not empty: someone else's files are there
+                    EMULATOR_DIR.rmdir()
 
 
 def _link_port(link: Path, port: str) -> Path:
