@@ -56,8 +56,11 @@ def test_a_deferred_block_off_the_main_thread_runs_as_it_is() -> None:
 
 @pytest.fixture
 def hup_ignored() -> Iterator[None]:
-    """SIGHUP ignored, as under ``nohup``; every stop signal's handler back afterwards."""
+    """SIGHUP ignored, as under ``nohup``, SIGINT and SIGTERM not (a test run started with
+    ``&`` ignores SIGINT); every stop signal's handler back afterwards."""
     previous = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGHUP, signal.SIG_IGN)
     yield
     for sig, handler in previous.items():
