@@ -53,6 +53,19 @@ def test_geometric_stiffening_solves_the_cubic():
     assert np.all(np.abs(z) <= np.abs(f) * c + 1e-15)
 
 
+def test_geometric_stiffening_keeps_precision_from_tiny_to_huge_loads():
+    finger = FingerParams()
+    c = 1e-3
+    f = np.array([1e-12, 1e-9, 1e-6, 1e-3, 1.0, 1e3, 1e6])
+    z = contact_deflection_m(f, c, finger)
+    p = finger.length_m**2 / finger.stiffening
+    # The cubic's residual, relative to its constant term, at rounding level throughout.
+    np.testing.assert_allclose((z**3 + p * z) / (p * c * f), 1.0, rtol=1e-14)
+    # Tiny loads: linear to full precision (Cardano's form was 8e-4 off at 1e-12 N).
+    np.testing.assert_allclose(z[:3] / (c * f[:3]), 1.0, rtol=1e-14)
+    np.testing.assert_array_equal(contact_deflection_m(-f, c, finger), -z)
+
+
 def test_temperature_field_and_monotonic_softening():
     finger = FingerParams()
     t = np.linspace(20, 70, 26)

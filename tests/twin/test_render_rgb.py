@@ -3,7 +3,7 @@
 import numpy as np
 
 from relaxgrip.rig import RigGeometry
-from relaxgrip.twin.render_rgb import RgbObject, RgbRenderer
+from relaxgrip.twin.render_rgb import _TAB_TINT, RgbObject, RgbRenderer, _composite
 from relaxgrip.twin.sensors import RgbSensorConfig
 
 RIG = RigGeometry()
@@ -30,3 +30,18 @@ def test_frames_are_new_arrays_the_caller_may_write():
     renderer.render(0, pose, objects)
     first[:] = 0
     assert renderer.render(0, pose, objects).any()
+
+
+def test_the_tab_is_composited_as_the_float32_formula_says():
+    """Table lookups stand in for the products: the pixels are the plain formula's."""
+    rng = np.random.default_rng(0)
+    tint = np.array(_TAB_TINT, dtype=np.float32)
+    for _ in range(20):
+        scene = rng.integers(0, 256, (31, 17, 3), dtype=np.uint8)
+        tab = rng.integers(0, 256, (31, 17), dtype=np.uint8)
+        coverage = rng.choice(np.array([0, 1, 128, 254, 255], np.uint8), (31, 17))
+        transmit = 1.0 - coverage.astype(np.float32) * np.float32(1.0 / 255.0)
+        expected = scene * transmit[..., None] + tab.astype(np.float32)[..., None] * tint
+        roi = scene.copy()
+        _composite(roi, tab, coverage)
+        np.testing.assert_array_equal(roi, np.clip(expected, 0.0, 255.0).astype(np.uint8))

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relaxgrip.perception.marker import MarkerState
-from relaxgrip.perception.thermal import ThermalFeatures, uncovered_mean_c
+from relaxgrip.perception.thermal import ThermalFeatures
 
 FloatArray = NDArray[np.float64]
 
@@ -194,10 +194,7 @@ def finger_temperature_c(thermal: ThermalFeatures) -> float:
     against 0.1 K above it at rest, and the observer missed 0.14 N of the
     softening (docs/hold-experiments.md, session 45).
     """
-    temps = [uncovered_mean_c(f, thermal.background_c, thermal.beam_weights)
-             for f in thermal.fingers]
-    seen = [t for t in temps if math.isfinite(t)]
-    return sum(seen) / len(seen) if seen else math.nan
+    return thermal.finger_temperature_c
 
 
 class RcfnFeatures:

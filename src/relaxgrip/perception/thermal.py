@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Literal
 
 import cv2
@@ -155,6 +156,17 @@ class ThermalFeatures:
     background_c: float
     objects: tuple[ThermalObject, ...]
     beam_weights: tuple[float, ...] | None = None
+
+    @cached_property
+    def finger_temperature_c(self) -> float:
+        """Mean of both fingers' :func:`uncovered_mean_c` (°C); nan if neither is in view.
+
+        Worked out once per frame: perception holds a frame's features through
+        the thirty camera frames that follow it.
+        """
+        temps = [uncovered_mean_c(f, self.background_c, self.beam_weights) for f in self.fingers]
+        seen = [t for t in temps if math.isfinite(t)]
+        return sum(seen) / len(seen) if seen else math.nan
 
 
 #: Below this spread between the warmest beam and the background nothing is told covered (K).

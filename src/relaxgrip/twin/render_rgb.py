@@ -92,7 +92,7 @@ class RgbRenderer:
                 "distortion coefficients"
             )
         self._texture, self._texture_to_marker = _tab_texture(rig)
-        self._tint = tuple(np.float32(c) for c in _TAB_TINT)
+        self._matrix = self.intrinsics.matrix
         self._background = _background(self.intrinsics.shape)
         self._noise_pos, self._noise_neg = _noise_banks(self.intrinsics.shape, config.noise_dn)
         self._scene_cache: tuple[tuple[_Circle, ...], Image] | None = None
@@ -189,8 +189,7 @@ class RgbRenderer:
         scene with the tab outline's antialiased coverage.
         """
         ss = self.config.supersample
-        k = self.intrinsics.matrix
-        tex_to_img = k @ marker2cam[:3, [0, 1, 3]] @ self._texture_to_marker
+        tex_to_img = self._matrix @ marker2cam[:3, [0, 1, 3]] @ self._texture_to_marker
         th, tw = self._texture.shape[:2]
         outline = np.array(
             [[[-0.5, -0.5], [tw - 0.5, -0.5], [tw - 0.5, th - 0.5], [-0.5, th - 0.5]]]
@@ -198,11 +197,12 @@ class RgbRenderer:
         if marker2cam[2, 3] <= 0.0:
             return  # behind the camera
         corners = cv2.perspectiveTransform(outline, tex_to_img)[0]
+        xs, ys = corners[:, 0].tolist(), corners[:, 1].tolist()
         h, w = self.intrinsics.shape
-        x0 = max(math.floor(corners[:, 0].min()) - 2, 0)
-        y0 = max(math.floor(corners[:, 1].min()) - 2, 0)
-        x1 = min(math.ceil(corners[:, 0].max()) + 3, w)
-        y1 = min(math.ceil(corners[:, 1].max()) + 3, h)
+        x0 = max(math.floor(min(xs)) - 2, 0)
+        y0 = max(math.floor(min(ys)) - 2, 0)
+        x1 = min(math.ceil(max(xs)) + 3, w)
+        y1 = min(math.ceil(max(ys)) + 3, h)
         if x1 <= x0 or y1 <= y0:
             return
         size = (x1 - x0, y1 - y0)
@@ -214,18 +214,11 @@ class RgbRenderer:
             self._texture, to_up @ tex_to_img, (ss * size[0], ss * size[1]),
             flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0,
         )
-        tab = cv2.resize(up, size, interpolation=cv2.INTER_AREA).astype(np.float32)
+        tab: Image = np.asarray(cv2.resize(up, size, interpolation=cv2.INTER_AREA))
         coverage = np.zeros((size[1], size[0]), np.uint8)
         _fill(coverage, corners - (x0, y0), 255)
-        transmit = 1.0 - coverage.astype(np.float32) * (1.0 / 255.0)
         roi = img[y0:y1, x0:x1]
-        # OpenCV's per-channel arithmetic: numpy's broadcast over a last axis
-        # of 3 costs five times as much here.
-        blended = np.asarray(cv2.multiply(roi, cv2.merge((transmit,) * 3), dtype=cv2.CV_32F),
-                             dtype=np.float32)
-        blended += np.asarray(cv2.merge(tuple(tab * c for c in self._tint)), dtype=np.float32)
-        np.clip(blended, 0.0, 255.0, out=blended)
-        roi[...] = blended
+        _composite(roi, tab, coverage)
         if self.config.occlusion > 0:
             self._occlude(roi, marker2cam, (x0, y0))
 
@@ -242,6 +235,35 @@ class RgbRenderer:
     @property
     def _modules(self) -> int:
         return int(self.rig.marker.aruco_dictionary.markerSize) + 2
+
+
+def _luts() -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    levels = np.arange(256, dtype=np.float32)
+    tab = levels[:, None] * np.array(_TAB_TINT, dtype=np.float32)
+    transmit = np.repeat((1.0 - levels * np.float32(1.0 / 255.0))[:, None], 3, axis=1)
+    return tab.reshape(1, 256, 3), transmit.reshape(1, 256, 3)
+
+
+#: The compositing's float32 terms as tables of their uint8 inputs, per channel: the
+#: tab's grey times its tint, and the scene's transmission ``1 - coverage / 255``.
+_TAB_LUT, _TRANSMIT_LUT = _luts()
+
+
+def _composite(roi: Image, tab: Image, coverage: Image) -> None:
+    """``roi = scene (1 - coverage / 255) + tab * tint`` in float32, clipped and truncated.
+
+    ``roi`` (H, W, 3) is the scene, written in place; ``tab`` and ``coverage`` are
+    (H, W) grey levels.  The products are looked up (the same float32 values, one
+    pass each), and OpenCV does the per-channel arithmetic: numpy's broadcast over
+    a last axis of 3 costs five times as much here.
+    """
+    transmit = cv2.LUT(cv2.merge((coverage,) * 3), _TRANSMIT_LUT)
+    blended = np.asarray(cv2.multiply(roi, transmit, dtype=cv2.CV_32F), dtype=np.float32)
+    cv2.add(blended, cv2.LUT(cv2.merge((tab,) * 3), _TAB_LUT), dst=blended)
+    # Below 0 only by rounding (a fully covered pixel transmits -6e-8), which the
+    # truncation to uint8 takes to 0 as well.
+    np.minimum(blended, 255.0, out=blended)
+    roi[...] = blended
 
 
 def _fill(image: Image, polygon_px: FloatArray, colour: float | tuple[float, ...]) -> None:
