@@ -42,6 +42,8 @@ _INK = 24
 _TAB_TINT = (1.0, 0.99, 0.965)
 _NOISE_PAD = 48
 _NOISE_BANKS = 3
+#: Frames whose random draws are made together (:meth:`RgbRenderer._draws`).
+_DRAW_BLOCK = 64
 #: Sub-pixel bits for OpenCV's drawing functions.
 _SHIFT = 4
 #: A filled circle as OpenCV draws it: centre and radius on the sub-pixel grid, colour.
@@ -96,6 +98,7 @@ class RgbRenderer:
         self._background = _background(self.intrinsics.shape)
         self._noise_pos, self._noise_neg = _noise_banks(self.intrinsics.shape, config.noise_dn)
         self._scene_cache: tuple[tuple[_Circle, ...], Image] | None = None
+        self._draw_cache: dict[tuple[int, int], list[tuple[float, int, int, int]]] = {}
         self._last_circles: tuple[_Circle, ...] | None = None
 
     def marker_corners_px(self, marker2cam: FloatArray) -> FloatArray:
@@ -123,21 +126,39 @@ class RgbRenderer:
             The RGB frame.
         """
         cfg = self.config
-        rng = np.random.default_rng([self.seed, 12, seq])
+        jitter, bank, oy, ox = self._draws(seq)
         img = self._scene(tuple(objects))
         self._draw_tab(img, marker2cam)
         if cfg.blur_sigma_px > 0:
             cv2.GaussianBlur(img, (0, 0), cfg.blur_sigma_px, dst=img)
-        gain = cfg.lighting_gain * (1.0 + cfg.lighting_flicker * float(rng.standard_normal()))
+        gain = cfg.lighting_gain * (1.0 + cfg.lighting_flicker * jitter)
         if gain != 1.0:
             cv2.convertScaleAbs(img, dst=img, alpha=max(gain, 0.0))
         if cfg.noise_dn > 0:
-            bank = int(rng.integers(_NOISE_BANKS))
-            oy, ox = (int(v) for v in rng.integers(0, _NOISE_PAD, size=2))
             h, w = self.intrinsics.shape
             cv2.add(img, self._noise_pos[bank, oy : oy + h, ox : ox + w], dst=img)
             cv2.subtract(img, self._noise_neg[bank, oy : oy + h, ox : ox + w], dst=img)
         return img
+
+    def _draws(self, seq: int) -> tuple[float, int, int, int]:
+        """Frame ``seq``'s random draws: lighting jitter, noise bank, noise offset (y, x).
+
+        Each frame draws from its own generator, seeded with the renderer's seed
+        and ``seq``.  They are made for a block of frames at a time: a generator
+        made between two frames' worth of image arithmetic, its code and data
+        gone from the caches, took 0.15 ms of a 2 ms step; made one after the
+        other, 0.02 ms.
+        """
+        block = seq // _DRAW_BLOCK
+        key = (self.seed, block)
+        draws = self._draw_cache.get(key)
+        if draws is None:
+            draws = [_frame_draws(self.seed, s)
+                     for s in range(block * _DRAW_BLOCK, (block + 1) * _DRAW_BLOCK)]
+            if len(self._draw_cache) >= 2:
+                self._draw_cache.pop(next(iter(self._draw_cache)))
+            self._draw_cache[key] = draws
+        return draws[seq - block * _DRAW_BLOCK]
 
     def _scene(self, objects: tuple[RgbObject, ...]) -> Image:
         """A new image of the background with ``objects`` drawn, far ones first.
@@ -235,6 +256,15 @@ class RgbRenderer:
     @property
     def _modules(self) -> int:
         return int(self.rig.marker.aruco_dictionary.markerSize) + 2
+
+
+def _frame_draws(seed: int, seq: int) -> tuple[float, int, int, int]:
+    """Frame ``seq``'s lighting jitter (a standard normal), noise bank and offset."""
+    rng = np.random.default_rng([seed, 12, seq])
+    jitter = float(rng.standard_normal())
+    bank = int(rng.integers(_NOISE_BANKS))
+    oy, ox = (int(v) for v in rng.integers(0, _NOISE_PAD, size=2))
+    return jitter, bank, oy, ox
 
 
 def _luts() -> tuple[NDArray[np.float32], NDArray[np.float32]]:
