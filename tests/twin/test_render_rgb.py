@@ -1,8 +1,10 @@
 """The twin's RGB camera: frames depend only on their inputs."""
 
 import numpy as np
+import pytest
 
 from relaxgrip.rig import RigGeometry
+from relaxgrip.twin import render_rgb
 from relaxgrip.twin.render_rgb import _TAB_TINT, RgbObject, RgbRenderer, _composite
 from relaxgrip.twin.sensors import RgbSensorConfig
 
@@ -55,3 +57,21 @@ def test_a_frame_is_the_same_in_any_order_across_blocks_of_draws():
     for seq in (63, 64, 0, 200, 64, 1000, 63):
         assert np.array_equal(used.render(seq, pose), RgbRenderer(RIG, config, 3).render(seq, pose))
     assert not np.array_equal(used.render(64, pose), used.render(65, pose))
+
+
+@pytest.mark.parametrize("config", [RgbSensorConfig(), RgbSensorConfig(occlusion=0.3),
+                                    RgbSensorConfig(noise_dn=6.0)])
+def test_noise_added_apart_to_the_scene_and_the_tab_draws_the_same_pixels(
+        config: RgbSensorConfig, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The frame as one pass fewer makes it is the frame drawn in order: scene, tab, noise."""
+    ball = (RgbObject((0.0, 0.01, 0.12), 0.03, (200, 100, 50)),)
+    poses = [RIG.marker2cam(d, s) for d, s in ((0.0, 0.0), (0.004, 0.05), (-0.002, -0.03))]
+    fused = RgbRenderer(RIG, config, 2)
+    frames = [fused.render(k, pose, objects) for k, pose in enumerate(poses)
+              for objects in ((), ball, ball)]
+    monkeypatch.setattr(render_rgb, "_FUSED", False)
+    ordered = RgbRenderer(RIG, config, 2)
+    for frame, expected in zip(frames, [ordered.render(k, pose, objects)
+                                        for k, pose in enumerate(poses)
+                                        for objects in ((), ball, ball)], strict=True):
+        np.testing.assert_array_equal(frame, expected)
