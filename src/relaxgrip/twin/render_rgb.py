@@ -156,11 +156,11 @@ class RgbRenderer:
         h, w = self.intrinsics.shape
         noise = (self._noise_pos[bank, oy : oy + h, ox : ox + w],
                  self._noise_neg[bank, oy : oy + h, ox : ox + w])
+        box = self._tab_box(marker2cam)
         if _FUSED and cfg.noise_dn > 0 and cfg.blur_sigma_px == 0 and gain == 1.0:
             # The frame is the scene plus noise but where the tab is: one pass over it
             # fewer than copying the scene first, with the same pixels.
             img: Image = np.asarray(cv2.add(scene, noise[0]))
-            box = self._tab_box(marker2cam)
             if box is not None:
                 rows, cols = box.rows, box.cols
                 roi = scene[rows, cols].copy()
@@ -169,7 +169,6 @@ class RgbRenderer:
             cv2.subtract(img, noise[1], dst=img)
             return img
         img = scene.copy()
-        box = self._tab_box(marker2cam)
         if box is not None:
             self._paint_tab(img[box.rows, box.cols], box, marker2cam)
         if cfg.blur_sigma_px > 0:
