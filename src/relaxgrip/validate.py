@@ -32,10 +32,7 @@ def parse_number(text: str) -> float:
     ValueError
         As ``float`` does, also for ``1_000`` and non-ASCII digits.
     """
-    stripped = text.strip()
-    if not _NUMBER.fullmatch(stripped):
-        raise ValueError(f"{text!r} is not a number")
-    return float(stripped)
+    return float(_matched(text, _NUMBER, "a number"))
 
 
 def parse_integer(text: str) -> int:
@@ -46,10 +43,15 @@ def parse_integer(text: str) -> int:
     ValueError
         As ``int`` does, also for ``1_0`` and non-ASCII digits.
     """
+    return int(_matched(text, _INTEGER, "an integer"))
+
+
+def _matched(text: str, pattern: re.Pattern[str], what: str) -> str:
+    """``text`` stripped, if ``pattern`` matches all of it; else ValueError naming ``what``."""
     stripped = text.strip()
-    if not _INTEGER.fullmatch(stripped):
-        raise ValueError(f"{text!r} is not an integer")
-    return int(stripped)
+    if not pattern.fullmatch(stripped):
+        raise ValueError(f"{text!r} is not {what}")
+    return stripped
 
 
 def check_finite(value: float, name: str) -> float:

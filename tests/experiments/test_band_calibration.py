@@ -216,6 +216,8 @@ def test_set_band_scale_keeps_the_parameters_and_records_how(tmp_path: Path) -> 
     assert load_observer(directory).drift_scale == 1.5
     with pytest.raises(ObserverFileError):
         set_band_scale(tmp_path / "missing", 0.5, {})
+    with pytest.raises(InputError, match="band scale"):  # checked before the directory is read
+        set_band_scale(tmp_path / "missing", 0.0, {})
 
 
 def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,

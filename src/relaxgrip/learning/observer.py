@@ -667,11 +667,11 @@ def set_band_scale(directory: Path, band_scale: float, record: Mapping[str, Any]
         A band scale that is not a positive number, or a drift scale that is
         not a number >= 0.
     """
-    directory = Path(directory)
-    model = load_observer(directory)
     check_positive(band_scale, "band scale")
     if drift_scale is not None and check_finite(drift_scale, "drift scale") < 0:
         raise InputError(f"drift scale must be >= 0, got {drift_scale}")
+    directory = Path(directory)
+    model = load_observer(directory)
     manifest = read_manifest(directory / MANIFEST_NAME, OBSERVER_FORMAT, OBSERVER_VERSION,
                              ObserverFileError, "an observer model directory")
     training = manifest.get("training")
