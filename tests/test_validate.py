@@ -6,6 +6,8 @@ import pytest
 
 from relaxgrip.errors import InputError
 from relaxgrip.validate import (
+    MAX_JOBS,
+    check_jobs,
     parse_floats,
     parse_integer,
     parse_names,
@@ -83,3 +85,12 @@ def test_integers_are_ascii_digits() -> None:
     for text in ("1_0", "\u0663", "1.0", "", "+"):
         with pytest.raises(ValueError, match="not an integer"):
             parse_integer(text)
+
+
+def test_a_worker_count_is_from_one_to_the_most_processes() -> None:
+    assert check_jobs(1) == 1
+    assert check_jobs(MAX_JOBS) == MAX_JOBS
+    for bad, message in ((0, ">= 1"), (-3, ">= 1"), (MAX_JOBS + 1, "at most"),
+                         (10**20, "at most")):
+        with pytest.raises(InputError, match=message):
+            check_jobs(bad)

@@ -12,7 +12,7 @@ from relaxgrip.errors import InputError
 
 ABSOLUTE_ZERO_C = -273.15
 
-__all__ = ["check_duty", "check_finite", "check_jobs", "check_positive", "check_seeds",
+__all__ = ["MAX_JOBS", "check_duty", "check_finite", "check_jobs", "check_positive", "check_seeds",
            "check_temp_c", "parse_floats", "parse_integer", "parse_names", "parse_number",
            "parse_seeds"]
 
@@ -88,10 +88,18 @@ def check_duty(value: float, name: str = "heater duty") -> float:
     return v
 
 
+#: The most worker processes a command starts: each is a Python process of a few hundred
+#: MB doing CPU-bound work, and joblib's pool cannot count past a C int (a larger
+#: ``--jobs`` had ended ``dataset build`` in a traceback).
+MAX_JOBS = 256
+
+
 def check_jobs(value: int, name: str = "--jobs") -> int:
-    """Return a count of parallel workers if it is at least 1."""
+    """Return a count of parallel workers if it is from 1 to :data:`MAX_JOBS`."""
     if value < 1:
         raise InputError(f"{name} must be >= 1, got {value}")
+    if value > MAX_JOBS:
+        raise InputError(f"{name} must be at most {MAX_JOBS} worker processes, got {value}")
     return value
 
 

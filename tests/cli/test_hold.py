@@ -133,6 +133,7 @@ def test_seeds_report_each_seed_and_the_mean_over_them(monkeypatch, capsys):
     (["--budget", "--compare"], "--budget"),
     (["--budget", "--backend", "emulator"], "--budget"),
     (["--compare", "--jobs", "0"], "--jobs must be >= 1, got 0"),
+    (["--compare", "--jobs", "257"], "--jobs must be at most 256"),
 ])
 def test_bad_input_is_refused_before_anything_starts(monkeypatch, capsys, args, message):
     code, out, err = run_main(["hold", *args], monkeypatch, capsys)

@@ -96,6 +96,9 @@ def test_evaluate_table(
     ("args", "expected"),
     [
         (["dataset", "build", "--out", "{tmp}/d", "--jobs", "0"], "--jobs must be >= 1"),
+        # joblib's pool had ended in a traceback on a count past a C int.
+        (["dataset", "build", "--out", "{tmp}/d", "--jobs", "99999999999999999999"],
+         "--jobs must be at most 256 worker processes"),
         (["dataset", "build", "--out", "{tmp}/d", "--backend", "spark"],
          "--backend must be one of"),
         (["dataset", "build", "--out", "{tmp}/d", "--seed", "-2"], "seed must be >= 0"),

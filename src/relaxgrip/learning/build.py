@@ -197,7 +197,8 @@ def build_dataset(
     units = list(iter_units(spec))
     start = time.perf_counter()
     results: list[UnitResult] = []
-    with parallel_backend(backend, jobs) as n_jobs:
+    # No more workers than units: each is a process that imports the package.
+    with parallel_backend(backend, min(jobs, len(units))) as n_jobs:
         parallel = Parallel(n_jobs=n_jobs, return_as="generator_unordered")
         for result in parallel(delayed(_run)(unit) for unit in units):
             results.append(result)
