@@ -32,9 +32,13 @@ Image = NDArray[np.uint8]
 
 __all__ = ["RgbObject", "RgbRenderer"]
 
-#: Pixels per marker module in the texture; the texture is then finer than the
-#: supersampled image at any useful marker distance.
-_TEXTURE_PX_PER_MODULE = 48
+#: Texture pixels per marker module per unit of supersampling (48 at the default 4x): a
+#: texel is then about a supersampled pixel where the twin's camera sees the marker (13 px
+#: a module), as a mipmap level would be chosen.  A texture much finer than the grid that
+#: samples it aliases: along a 3 mm bend drawn without noise at 2x, a 48 px texture put
+#: the marker's position off by 7.2 / 7.3 um SD (x / z), a 24 px one by 1.1 / 2.4 um
+#: (4x from 48 px: 0.6 / 1.0 um).
+_TEXELS_PER_MODULE_PER_SUPERSAMPLE = 12
 #: White margin around the black square, in modules (ArUco's quiet zone).
 _QUIET_MODULES = 1
 #: Grey levels of the tab's white and of the printed ink; the tab's colour cast.
@@ -117,7 +121,8 @@ class RgbRenderer:
                 "the twin renders an undistorted pinhole camera; give its intrinsics without "
                 "distortion coefficients"
             )
-        self._texture, self._texture_to_marker = _tab_texture(rig)
+        self._texture, self._texture_to_marker = _tab_texture(
+            rig, _TEXELS_PER_MODULE_PER_SUPERSAMPLE * config.supersample)
         self._matrix = self.intrinsics.matrix
         self._background = _background(self.intrinsics.shape)
         self._noise_pos, self._noise_neg = _noise_banks(self.intrinsics.shape, config.noise_dn)
@@ -350,14 +355,15 @@ def _fill(image: Image, polygon_px: FloatArray, colour: float | tuple[float, ...
     cv2.fillConvexPoly(image, vertices, colour, cv2.LINE_AA, _SHIFT)
 
 
-def _tab_texture(rig: RigGeometry) -> tuple[Image, FloatArray]:
-    """The marker with its white quiet zone, and the map from texture pixels to the marker plane."""
+def _tab_texture(rig: RigGeometry, px_per_module: int) -> tuple[Image, FloatArray]:
+    """The marker with its white quiet zone at ``px_per_module``, and the map from texture
+    pixels to the marker plane."""
     marker = rig.marker
     dictionary = marker.aruco_dictionary
     modules = int(dictionary.markerSize) + 2
-    side = modules * _TEXTURE_PX_PER_MODULE
+    side = modules * px_per_module
     gray = cv2.aruco.generateImageMarker(dictionary, marker.marker_id, side, borderBits=1)
-    pad = _QUIET_MODULES * _TEXTURE_PX_PER_MODULE
+    pad = _QUIET_MODULES * px_per_module
     gray = cv2.copyMakeBorder(gray, pad, pad, pad, pad, cv2.BORDER_CONSTANT, value=255)
     texture = (_INK + (_TAB_WHITE - _INK) * (gray / 255.0)).round().astype(np.uint8)
     # Texture pixel centres are integers; the black square spans [pad - 1/2, pad + side - 1/2].
