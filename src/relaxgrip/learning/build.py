@@ -198,7 +198,7 @@ def build_dataset(
     start = time.perf_counter()
     results: list[UnitResult] = []
     # No more workers than units: each is a process that imports the package.
-    with parallel_backend(backend, min(jobs, len(units))) as n_jobs:
+    with parallel_backend(backend, max(1, min(jobs, len(units)))) as n_jobs:
         parallel = Parallel(n_jobs=n_jobs, return_as="generator_unordered")
         for result in parallel(delayed(_run)(unit) for unit in units):
             results.append(result)
