@@ -89,8 +89,9 @@ def _position_error_um(renderer: RgbRenderer) -> np.ndarray:
         found = locate_marker(renderer.render(0, pose), detector, solver)
         assert found is not None
         errors.append(found.tvec_m - pose[:3, 3])
-    error = 1e6 * np.array(errors)
-    return error - error.mean(axis=0)
+    error: np.ndarray = 1e6 * np.array(errors)
+    centred: np.ndarray = error - error.mean(axis=0)
+    return centred
 
 
 def test_the_texture_follows_the_supersampling_so_edges_do_not_alias(
