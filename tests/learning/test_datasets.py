@@ -276,8 +276,8 @@ def test_a_hold_without_rcfn_features_gives_no_sequence(monkeypatch: pytest.Monk
     assert out.curve == {}
 
 
-def test_a_build_of_no_units_starts_no_workers_and_writes_an_empty_dataset(tmp_path: Path) -> None:
-    """Workers are no more than the units, and at least one (joblib refuses none)."""
+def test_a_build_of_no_units_writes_an_empty_dataset(tmp_path: Path) -> None:
+    """Workers are no more than the units, but at least one: joblib refuses none."""
     build_dataset(tmp_path / "empty", replace(SMALL, icfn_samples=0, rcfn_sequences=0), jobs=2)
     manifest = json.loads((tmp_path / "empty" / "manifest.json").read_text())
     assert manifest["counts"]["icfn_samples"] == manifest["counts"]["rcfn_sequences"] == 0

@@ -127,7 +127,7 @@ class RgbRenderer:
         self._background = _background(self.intrinsics.shape)
         self._noise_pos, self._noise_neg = _noise_banks(self.intrinsics.shape, config.noise_dn)
         self._scene_cache: tuple[tuple[_Circle, ...], Image] | None = None
-        self._draw_cache: dict[tuple[int, int], list[tuple[float, int, int, int]]] = {}
+        self._draw_cache: dict[int, list[tuple[float, int, int, int]]] = {}
         self._last_circles: tuple[_Circle, ...] | None = None
 
     def marker_corners_px(self, marker2cam: FloatArray) -> FloatArray:
@@ -195,14 +195,13 @@ class RgbRenderer:
         other, 0.02 ms.
         """
         block = seq // _DRAW_BLOCK
-        key = (self.seed, block)
-        draws = self._draw_cache.get(key)
+        draws = self._draw_cache.get(block)
         if draws is None:
             draws = [_frame_draws(self.seed, s)
                      for s in range(block * _DRAW_BLOCK, (block + 1) * _DRAW_BLOCK)]
             if len(self._draw_cache) >= 2:
                 self._draw_cache.pop(next(iter(self._draw_cache)))
-            self._draw_cache[key] = draws
+            self._draw_cache[block] = draws
         return draws[seq - block * _DRAW_BLOCK]
 
     def _scene(self, objects: tuple[RgbObject, ...]) -> Image:
