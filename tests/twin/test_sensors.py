@@ -167,6 +167,7 @@ def test_sensor_config_validation() -> None:
         (lambda: RgbSensorConfig(blur_sigma_px=math.inf), "blur"),
         (lambda: RgbSensorConfig(lighting_flicker=math.nan), "flicker"),  # a black frame
         (lambda: RgbSensorConfig(supersample=2.5), "supersample"),  # type: ignore[arg-type]
+        (lambda: RgbSensorConfig(drawing="antialiased"), "drawing"),
         (lambda: IrSensorConfig(netd_k=math.nan), "NETD"),  # no noise at all
         (lambda: IrSensorConfig(max_offset_k=math.inf), "offset"),
         (lambda: IrSensorConfig(psf_sigma_px=math.nan), "blur"),

@@ -1,11 +1,15 @@
 """The twin's RGB camera: the ArUco marker on its tab, objects ahead, sensor noise.
 
-The marker image comes from OpenCV (``generateImageMarker``) and is projected
-through the camera intrinsics with the homography of its pose.  It is warped
-at ``supersample`` times the resolution onto an upsampled copy of the
-region it covers and area-averaged back down, so its edges carry sub-pixel
-information the way a real optical image does (a plain warp gives jagged,
-biased edges).  Objects are shaded discs, drawn with sub-pixel centres.
+The marker's modules come from OpenCV (``generateImageMarker``) and are
+projected through the camera intrinsics with the homography of its pose.
+Its edges must carry sub-pixel information the way a real optical image
+does (a plain warp gives jagged, biased edges), and the tab is drawn one of
+two ways (``RgbSensorConfig.drawing``): ``"exact"`` gives each pixel the
+exact area of the tab's white and of each black run it covers, as a camera
+pixel integrates the light on its area (:mod:`relaxgrip.twin.raster`);
+``"supersampled"`` warps a texture at ``supersample`` times the resolution
+onto an upsampled copy of the region it covers and area-averages it back
+down.  Objects are shaded discs, drawn with sub-pixel centres.
 Pixel noise comes from a bank of pre-drawn noise, sliced at a random offset
 per frame: a full frame of fresh Gaussian noise would cost more than the
 rest of the rendering together.
@@ -25,6 +29,7 @@ from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
 from relaxgrip.rig import RigGeometry
+from relaxgrip.twin.raster import area_coverage
 from relaxgrip.twin.sensors import RgbSensorConfig
 
 FloatArray = NDArray[np.float64]
@@ -77,11 +82,25 @@ class RgbObject:
     color_rgb: tuple[int, int, int]
 
 
+class _TabShape(NamedTuple):
+    """The tab as polygons on the marker plane (metres): the white outline, then one
+    rectangle per run of black modules along a row, four vertices each, all running
+    the same way round.  Each polygon's edges carry a weight and an output plane:
+    plane 0 is the grey premultiplied by coverage (the white's level, then the ink's
+    difference from it), plane 1 the outline's coverage."""
+
+    vertices: FloatArray  # (4 P, 1, 2), as cv2.perspectiveTransform takes them
+    ends: NDArray[np.intp]  # (2, 4 P): each edge's first and last vertex
+    weights: FloatArray  # (4 P,)
+    planes: NDArray[np.intp]  # (4 P,)
+
+
 class _TabBox(NamedTuple):
-    """Where the tab lands: its texture-to-image homography, outline corners (px) and
-    the image's box ``[x0, x1) x [y0, y1)`` drawn into."""
+    """Where the tab lands: its texture-to-image homography, the marker-plane-to-image
+    one, outline corners (px) and the image's box ``[x0, x1) x [y0, y1)`` drawn into."""
 
     tex_to_img: FloatArray
+    plane_to_img: FloatArray
     corners: FloatArray
     x0: int
     y0: int
@@ -122,7 +141,9 @@ class RgbRenderer:
                 "distortion coefficients"
             )
         self._texture, self._texture_to_marker = _tab_texture(
-            rig, _TEXELS_PER_MODULE_PER_SUPERSAMPLE * config.supersample)
+            rig, _TEXELS_PER_MODULE_PER_SUPERSAMPLE
+            * (config.supersample if config.drawing == "supersampled" else 1))
+        self._shape = _tab_shape(rig)
         self._matrix = self.intrinsics.matrix
         self._background = _background(self.intrinsics.shape)
         self._noise_pos, self._noise_neg = _noise_banks(self.intrinsics.shape, config.noise_dn)
@@ -250,7 +271,8 @@ class RgbRenderer:
 
     def _tab_box(self, marker2cam: FloatArray) -> _TabBox | None:
         """Where the tab lands in the image, with a margin; None if nowhere."""
-        tex_to_img = self._matrix @ marker2cam[:3, [0, 1, 3]] @ self._texture_to_marker
+        plane_to_img = self._matrix @ marker2cam[:3, [0, 1, 3]]
+        tex_to_img = plane_to_img @ self._texture_to_marker
         th, tw = self._texture.shape[:2]
         outline = np.array(
             [[[-0.5, -0.5], [tw - 0.5, -0.5], [tw - 0.5, th - 0.5], [-0.5, th - 0.5]]]
@@ -266,16 +288,44 @@ class RgbRenderer:
         y1 = min(math.ceil(max(ys)) + 3, h)
         if x1 <= x0 or y1 <= y0:
             return None
-        return _TabBox(tex_to_img, corners, x0, y0, x1, y1)
+        return _TabBox(tex_to_img, plane_to_img, corners, x0, y0, x1, y1)
 
     def _paint_tab(self, roi: Image, box: _TabBox, marker2cam: FloatArray) -> None:
-        """Warp the marker tab onto ``roi``, the image's pixels in ``box``, at
+        """Draw the marker tab onto ``roi``, the image's pixels in ``box``: the tab
+        premultiplied by its coverage of each pixel, composited over the scene
+        with the outline's coverage."""
+        if self.config.drawing == "exact":
+            tab, coverage = self._exact_tab(box)
+        else:
+            tab, coverage = self._supersampled_tab(box)
+        _composite(roi, tab, coverage)
+        if self.config.occlusion > 0:
+            self._occlude(roi, marker2cam, (box.x0, box.y0))
+
+    def _exact_tab(self, box: _TabBox) -> tuple[Image, Image]:
+        """The tab's premultiplied grey and coverage in ``box``, each pixel the exact
+        area of the white and of the black runs it covers."""
+        shape = self._shape
+        px = cv2.perspectiveTransform(shape.vertices, box.plane_to_img)[:, 0]
+        px -= (box.x0, box.y0)
+        # Projected with the marker facing the camera the polygons run clockwise on the
+        # screen; seen from behind, the other way, and every weight changes sign.
+        (ax, ay), (bx, by), (cx, cy) = px[:3].tolist()
+        sign = 1.0 if (bx - ax) * (cy - by) - (by - ay) * (cx - bx) >= 0 else -1.0
+        planes = area_coverage(px[shape.ends], sign * shape.weights,
+                               (box.y1 - box.y0, box.x1 - box.x0), plane=shape.planes, planes=2)
+        tab: Image = np.asarray(cv2.convertScaleAbs(planes[0]))
+        coverage: Image = np.asarray(cv2.convertScaleAbs(planes[1], alpha=255.0))
+        return tab, coverage
+
+    def _supersampled_tab(self, box: _TabBox) -> tuple[Image, Image]:
+        """The tab's premultiplied grey and coverage in ``box``, warped at
         ``supersample`` times the resolution.
 
         The tab is achromatic, so it is warped as one grey channel (a third of
         the cost of colour) onto black: area-averaged back down, that is the
-        tab premultiplied by its coverage of each pixel, composited over the
-        scene with the tab outline's antialiased coverage.
+        tab premultiplied by its coverage of each pixel; the coverage is the
+        tab outline's antialiased fill.
         """
         ss = self.config.supersample
         x0, y0 = box.x0, box.y0
@@ -291,9 +341,7 @@ class RgbRenderer:
         tab: Image = np.asarray(cv2.resize(up, size, interpolation=cv2.INTER_AREA))
         coverage = np.zeros((size[1], size[0]), np.uint8)
         _fill(coverage, box.corners - (x0, y0), 255)
-        _composite(roi, tab, coverage)
-        if self.config.occlusion > 0:
-            self._occlude(roi, marker2cam, (x0, y0))
+        return tab, coverage
 
     def _occlude(self, roi: Image, marker2cam: FloatArray, origin: tuple[int, int]) -> None:
         """Cover the left ``occlusion`` fraction of the marker (a cable, a finger beam)."""
@@ -352,6 +400,39 @@ def _fill(image: Image, polygon_px: FloatArray, colour: float | tuple[float, ...
     """Antialiased convex polygon with sub-pixel vertices (pixel centres at integers)."""
     vertices = np.round(np.asarray(polygon_px) * (1 << _SHIFT)).astype(np.int32)
     cv2.fillConvexPoly(image, vertices, colour, cv2.LINE_AA, _SHIFT)
+
+
+def _tab_shape(rig: RigGeometry) -> _TabShape:
+    """The tab's white outline (the black square and its quiet zone) and its runs of
+    black modules, as polygons on the marker plane (x right, y up, metres)."""
+    marker = rig.marker
+    dictionary = marker.aruco_dictionary
+    modules = int(dictionary.markerSize) + 2
+    bits = cv2.aruco.generateImageMarker(dictionary, marker.marker_id, modules, borderBits=1)
+    module_m = marker.size_m / modules
+    half = 0.5 * marker.size_m
+    quiet = half + _QUIET_MODULES * module_m
+
+    def rect(left: float, top: float, right: float, bottom: float) -> list[list[float]]:
+        # Top-left, top-right, bottom-right, bottom-left: clockwise on the screen.
+        return [[left, top], [right, top], [right, bottom], [left, bottom]]
+
+    polygons = [rect(-quiet, quiet, quiet, -quiet)]
+    for r, row in enumerate(bits < 128):
+        padded = np.concatenate([[False], row, [False]])
+        changes = np.flatnonzero(padded[1:] != padded[:-1])
+        top, bottom = half - r * module_m, half - (r + 1) * module_m
+        for start, stop in zip(changes[::2], changes[1::2], strict=True):
+            polygons.append(rect(-half + start * module_m, top, -half + stop * module_m, bottom))
+    runs = len(polygons) - 1
+    weights = np.repeat(np.r_[_TAB_WHITE, np.full(runs, _INK - _TAB_WHITE)], 4).astype(np.float64)
+    # The outline twice: its grey in plane 0, its coverage in plane 1.
+    vertices = np.array([polygons[0], *polygons], dtype=np.float64).reshape(-1, 1, 2)
+    first = np.arange(len(vertices))
+    ends = np.stack([first, first - first % 4 + (first + 1) % 4])
+    weights = np.r_[np.ones(4), weights]
+    planes = np.r_[np.ones(4, np.intp), np.zeros(4 * (runs + 1), np.intp)]
+    return _TabShape(vertices, ends, weights, planes)
 
 
 def _tab_texture(rig: RigGeometry, px_per_module: int) -> tuple[Image, FloatArray]:

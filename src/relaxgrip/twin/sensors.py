@@ -22,13 +22,21 @@ class RgbSensorConfig:
 
     Attributes
     ----------
+    drawing : {"supersampled", "exact"}
+        How the marker tab is drawn.  ``"supersampled"``: warped from a
+        texture at ``supersample`` times the resolution, then area-averaged
+        down.  ``"exact"``: each pixel gets the exact area of the tab's white
+        and of each black run it covers (:mod:`relaxgrip.twin.raster`), as a
+        camera pixel integrates the light on its area; faster, and the
+        marker's bend reads as a supersampling finer than 8 would give it
+        (docs/hold-experiments.md, session 51).
     supersample : int
-        Supersampling factor: the marker is warped at this multiple of the
-        resolution, then area-averaged down (antialiased, sub-pixel edges),
-        from a texture of 12 pixels a module per unit.  Fewer are faster
-        but read the marker's bend less exactly: the rotation's error
-        along a bend is 15 mdeg SD at 2, 8.8 at 4 (docs/hold-experiments.md,
-        session 49).
+        Supersampling factor of the ``"supersampled"`` drawing: the marker is
+        warped at this multiple of the resolution, then area-averaged down
+        (antialiased, sub-pixel edges), from a texture of 12 pixels a module
+        per unit.  Fewer are faster but read the marker's bend less exactly:
+        the rotation's error along a bend is 15 mdeg SD at 2, 8.8 at 4
+        (docs/hold-experiments.md, session 49).
     noise_dn : float
         Standard deviation of the pixel noise (8-bit levels).
     blur_sigma_px : float
@@ -41,6 +49,7 @@ class RgbSensorConfig:
         Fraction of the marker width covered from its left side (0 for none).
     """
 
+    drawing: str = "supersampled"
     supersample: int = 4
     noise_dn: float = 2.0
     blur_sigma_px: float = 0.0
@@ -49,6 +58,8 @@ class RgbSensorConfig:
     occlusion: float = 0.0
 
     def __post_init__(self) -> None:
+        if self.drawing not in ("supersampled", "exact"):
+            raise InputError(f"drawing must be 'supersampled' or 'exact', got {self.drawing!r}")
         if (isinstance(self.supersample, bool) or not isinstance(self.supersample, int)
                 or not 1 <= self.supersample <= 8):
             raise InputError(f"supersample must be an integer 1-8, got {self.supersample!r}")
