@@ -144,7 +144,8 @@ def _noise_levels() -> dict[str, Any]:
         "unit": cfg.unit,
         "unit_scatter": "stiffness, Tg and the infrared camera offset are drawn once per unit",
         "rgb_pixel_noise_dn": cfg.rgb.noise_dn,
-        "rgb_supersample": cfg.rgb.supersample,
+        "rgb_marker_drawing": ("exact area of each pixel" if cfg.rgb.drawing == "exact"
+                               else f"supersampled {cfg.rgb.supersample}x"),
         "ir_netd_k": cfg.ir.netd_k,
         "ir_camera_offset_max_k": cfg.ir.max_offset_k,
         "ir_finger_emissivity": cfg.ir.finger_emissivity,
