@@ -99,9 +99,9 @@ def test_the_texture_follows_the_supersampling_so_edges_do_not_alias(
     """At 2x the marker is read along a bend to a few micrometres; v5's texture of 48 px a
     module, twice as fine as that sampling grid, aliased."""
     modules = RIG.marker.aruco_dictionary.markerSize + 2 + 2 * render_rgb._QUIET_MODULES
-    default = RgbRenderer(RIG, RgbSensorConfig(noise_dn=0.0), 0)
-    assert default._texture.shape == (48 * modules, 48 * modules)  # the twin's frames as before
-    coarse = RgbSensorConfig(noise_dn=0.0, supersample=2)
+    default = RgbRenderer(RIG, RgbSensorConfig(drawing="supersampled", noise_dn=0.0), 0)
+    assert default._texture.shape == (48 * modules, 48 * modules)  # v5's frames as before
+    coarse = RgbSensorConfig(drawing="supersampled", noise_dn=0.0, supersample=2)
     sampled = RgbRenderer(RIG, coarse, 0)
     assert sampled._texture.shape == (24 * modules, 24 * modules)
     assert (_position_error_um(default).std(axis=0) < 1.5).all()  # measured 0.61, 0.01, 1.05 um
@@ -140,7 +140,8 @@ def test_the_exact_drawing_reads_the_bend_better_than_four_times_supersampling()
     axis, which follows the sub-pixel phase of the marker's edges, reads closer than at
     the 4x supersampling."""
     exact = _bend_errors(RgbRenderer(RIG, RgbSensorConfig(drawing="exact", noise_dn=0.0), 0))
-    supersampled = _bend_errors(RgbRenderer(RIG, RgbSensorConfig(noise_dn=0.0), 0))
+    supersampled = _bend_errors(
+        RgbRenderer(RIG, RgbSensorConfig(drawing="supersampled", noise_dn=0.0), 0))
     assert exact[1][:, 1].std() < 6.0  # mdeg; measured 4.6 (4x: 8.5-8.8, 8x: 5.8)
     assert exact[1][:, 1].std() < 0.8 * supersampled[1][:, 1].std()
     assert (exact[0].std(axis=0) < 1.0).all()  # um
