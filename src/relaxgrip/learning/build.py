@@ -156,7 +156,10 @@ def _noise_levels() -> dict[str, Any]:
         "tau_scatter_rel": sc.tau_rel,
         "tg_scatter_k": sc.tg_k,
         "ambient_scatter_k": sc.ambient_k,
-        "temperature_field": "steady heated profile of each finger (non-uniform along it)",
+        "temperature_field": ("steady heated profile of each finger (non-uniform along it); "
+                              "about a fifth of the ICFN episodes close as the fingers cool "
+                              "with the heaters off, and a twentieth after heating at full "
+                              "duty (a change of stiffness mode)"),
     }
 
 
