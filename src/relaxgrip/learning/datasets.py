@@ -127,7 +127,7 @@ _SPLITS = ("train", "val", "test")
 #: ICFN episodes that close during a change of stiffness mode: shares cooling (from a
 #: steady temperature above, heaters off) and heating (from below, at full duty), the
 #: change in temperature (K), the temperatures it spans (°C), and the time step while
-#: the fingers get there (s; the twin's thermal step).
+#: the fingers get there (s; two of the twin's thermal steps).
 _COOLING_SHARE = 0.2
 _HEATING_SHARE = 0.1
 _MODE_CHANGE_K = (5.0, 20.0)
