@@ -79,19 +79,7 @@ def test_noise_added_apart_to_the_scene_and_the_tab_draws_the_same_pixels(
 
 def _position_error_um(renderer: RgbRenderer) -> np.ndarray:
     """The marker's position read from noise-free frames of a 3 mm bend, less its mean (um)."""
-    from relaxgrip.perception.marker import PoseSolver, locate_marker, make_detector
-
-    detector = make_detector(RIG.marker.aruco_dictionary)
-    solver = PoseSolver(RIG.marker.size_m, RIG.rgb.intrinsics)
-    errors = []
-    for deflection_m in np.linspace(0.0, 0.003, 121):
-        pose = RIG.marker2cam(deflection_m, 0.3 * deflection_m)
-        found = locate_marker(renderer.render(0, pose), detector, solver)
-        assert found is not None
-        errors.append(found.tvec_m - pose[:3, 3])
-    error: np.ndarray = 1e6 * np.array(errors)
-    centred: np.ndarray = error - error.mean(axis=0)
-    return centred
+    return _bend_errors(renderer)[0]
 
 
 def test_the_texture_follows_the_supersampling_so_edges_do_not_alias(

@@ -346,16 +346,12 @@ class RgbRenderer:
     def _occlude(self, roi: Image, marker2cam: FloatArray, origin: tuple[int, int]) -> None:
         """Cover the left ``occlusion`` fraction of the marker (a cable, a finger beam)."""
         half = 0.5 * self.rig.marker.size_m
-        quiet = half * (1.0 + 2.0 * _QUIET_MODULES / self._modules)
+        quiet = half * (1.0 + 2.0 * _QUIET_MODULES / _module_count(self.rig))
         edge = -half + 2.0 * half * self.config.occlusion
         patch = np.array([[-quiet - 1e-3, quiet + 1e-3, 0.0], [edge, quiet + 1e-3, 0.0],
                           [edge, -quiet - 1e-3, 0.0], [-quiet - 1e-3, -quiet - 1e-3, 0.0]])
         cam = patch @ marker2cam[:3, :3].T + marker2cam[:3, 3]
         _fill(roi, self.intrinsics.project(cam) - origin, (55, 52, 50))
-
-    @property
-    def _modules(self) -> int:
-        return int(self.rig.marker.aruco_dictionary.markerSize) + 2
 
 
 def _frame_draws(seed: int, seq: int) -> tuple[float, int, int, int]:
@@ -402,12 +398,17 @@ def _fill(image: Image, polygon_px: FloatArray, colour: float | tuple[float, ...
     cv2.fillConvexPoly(image, vertices, colour, cv2.LINE_AA, _SHIFT)
 
 
+def _module_count(rig: RigGeometry) -> int:
+    """Modules along the marker's black square: its bits and the one-module border."""
+    return int(rig.marker.aruco_dictionary.markerSize) + 2
+
+
 def _tab_shape(rig: RigGeometry) -> _TabShape:
     """The tab's white outline (the black square and its quiet zone) and its runs of
     black modules, as polygons on the marker plane (x right, y up, metres)."""
     marker = rig.marker
     dictionary = marker.aruco_dictionary
-    modules = int(dictionary.markerSize) + 2
+    modules = _module_count(rig)
     bits = cv2.aruco.generateImageMarker(dictionary, marker.marker_id, modules, borderBits=1)
     module_m = marker.size_m / modules
     half = 0.5 * marker.size_m
@@ -440,7 +441,7 @@ def _tab_texture(rig: RigGeometry, px_per_module: int) -> tuple[Image, FloatArra
     pixels to the marker plane."""
     marker = rig.marker
     dictionary = marker.aruco_dictionary
-    modules = int(dictionary.markerSize) + 2
+    modules = _module_count(rig)
     side = modules * px_per_module
     gray = cv2.aruco.generateImageMarker(dictionary, marker.marker_id, side, borderBits=1)
     pad = _QUIET_MODULES * px_per_module
