@@ -281,3 +281,39 @@ def test_a_build_of_no_units_writes_an_empty_dataset(tmp_path: Path) -> None:
     build_dataset(tmp_path / "empty", replace(SMALL, icfn_samples=0, rcfn_sequences=0), jobs=2)
     manifest = json.loads((tmp_path / "empty" / "manifest.json").read_text())
     assert manifest["counts"]["icfn_samples"] == manifest["counts"]["rcfn_sequences"] == 0
+
+
+def test_some_episodes_close_during_a_change_of_stiffness_mode() -> None:
+    """A fifth cool with the heaters off (from 30 °C up), a tenth heat up (where they
+    start above 27 °C); the rest of the plan is the steady one's."""
+    episodes = plan_icfn(DatasetSpec())
+    cooling = [e for e in episodes if e.start_temp_c is not None and e.start_temp_c > e.temp_c]
+    heating = [e for e in episodes if e.start_temp_c is not None and e.start_temp_c < e.temp_c]
+    assert len(cooling) / len(episodes) == pytest.approx(0.2 * 0.86, abs=0.04)  # from 30 °C up
+    assert len(heating) / len(episodes) == pytest.approx(0.1 * 0.59, abs=0.03)
+    assert all(5.0 <= e.start_temp_c - e.temp_c <= 20.0 and e.start_temp_c <= 65.0
+               for e in cooling if e.start_temp_c is not None)
+    assert all(e.start_temp_c is not None and 5.0 <= e.temp_c - e.start_temp_c <= 20.0
+               for e in heating)
+    assert {e.object_name for e in cooling} >= {"glass", "force_ball"}
+    steady = [replace(e, start_temp_c=None) for e in episodes]
+    for a, b in zip(steady, plan_icfn(DatasetSpec()), strict=True):
+        assert a == replace(b, start_temp_c=None)
+
+
+def test_a_cooling_finger_closes_warmest_towards_its_tip() -> None:
+    """Heaters off from 52 °C: the fingers reach the episode's temperature and go on
+    cooling while it closes; the infrared reads the tip warmer than the root, which a
+    heated finger never is."""
+    from relaxgrip.learning.datasets import IcfnEpisode, run_icfn_episode
+
+    episode = IcfnEpisode(index=0, seed=5, object_name="glass", temp_c=38.0, contact_m=0.08,
+                          speed_mm_s=2.5, max_force_n=6.0, n_samples=8, split="train",
+                          start_temp_c=52.0)
+    cooling = pd.DataFrame(run_icfn_episode(episode).rows)
+    steady = pd.DataFrame(run_icfn_episode(replace(episode, start_temp_c=None)).rows)
+    assert len(cooling) == len(steady) == 8
+    assert 36.0 < cooling["truth_temp_c"].iloc[-1] < cooling["truth_temp_c"].iloc[0] <= 38.0
+    assert (cooling["f0_grad_k_per_m"] > 5.0).all()  # measured +14 to +21 K/m
+    assert (steady["f0_grad_k_per_m"] < 0.0).all()  # measured -4 K/m
+    assert cooling["t_s"].iloc[0] > steady["t_s"].iloc[0] + 60.0  # about 90 s of cooling

@@ -144,7 +144,8 @@ def _noise_levels() -> dict[str, Any]:
         "unit": cfg.unit,
         "unit_scatter": "stiffness, Tg and the infrared camera offset are drawn once per unit",
         "rgb_pixel_noise_dn": cfg.rgb.noise_dn,
-        "rgb_supersample": cfg.rgb.supersample,
+        "rgb_marker_drawing": ("exact area of each pixel" if cfg.rgb.drawing == "exact"
+                               else f"supersampled {cfg.rgb.supersample}x"),
         "ir_netd_k": cfg.ir.netd_k,
         "ir_camera_offset_max_k": cfg.ir.max_offset_k,
         "ir_finger_emissivity": cfg.ir.finger_emissivity,
@@ -155,7 +156,10 @@ def _noise_levels() -> dict[str, Any]:
         "tau_scatter_rel": sc.tau_rel,
         "tg_scatter_k": sc.tg_k,
         "ambient_scatter_k": sc.ambient_k,
-        "temperature_field": "steady heated profile of each finger (non-uniform along it)",
+        "temperature_field": ("steady heated profile of each finger (non-uniform along it); "
+                              "about a fifth of the ICFN episodes close as the fingers cool "
+                              "with the heaters off, and a twentieth after heating at full "
+                              "duty (a change of stiffness mode)"),
     }
 
 

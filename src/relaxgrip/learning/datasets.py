@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -124,6 +124,18 @@ _LOADING_FRAME_EVERY = 3
 _SPLITS = ("train", "val", "test")
 
 
+#: ICFN episodes that close during a change of stiffness mode: shares cooling (from a
+#: steady temperature above, heaters off) and heating (from below, at full duty), the
+#: change in temperature (K), the temperatures it spans (°C), and the time step while
+#: the fingers get there (s; two of the twin's thermal steps).
+_COOLING_SHARE = 0.2
+_HEATING_SHARE = 0.1
+_MODE_CHANGE_K = (5.0, 20.0)
+_COOLING_MIN_C = 30.0
+_MODE_CHANGE_MIN_C = 27.0
+_MODE_CHANGE_MAX_C = 65.0
+_MODE_CHANGE_STEP_S = 0.2
+
 #: Samples an ICFN episode takes before contact, at zero force (the last millimetres
 #: of the approach).
 _FREE_SAMPLES = 2
@@ -204,6 +216,11 @@ class IcfnEpisode:
     max_force_n: float
     n_samples: int
     split: str
+    #: The fingers' steady temperature before the heaters changed (°C): above
+    #: ``temp_c``, they close while cooling with the heaters off (a switch to the stiff
+    #: mode); below it, after heating at full duty to ``temp_c`` (a switch to a softer
+    #: one).  None: steady at ``temp_c``.
+    start_temp_c: float | None = None
 
 
 @dataclass(frozen=True)
@@ -280,7 +297,31 @@ def plan_icfn(spec: DatasetSpec) -> list[IcfnEpisode]:
             n_samples=n,
             split=_split_of(ranks[i], n_episodes, spec.split),
         ))
-    return episodes
+    return _with_mode_changes(episodes, np.random.default_rng([spec.seed, 103]))
+
+
+def _with_mode_changes(episodes: list[IcfnEpisode],
+                       rng: np.random.Generator) -> list[IcfnEpisode]:
+    """Make some episodes close during a change of stiffness mode (their own generator,
+    so the rest of the plan is the steady one's).
+
+    A finger cooling with its heaters off is warmest towards its tip, and one heating
+    up warmest at its heater: temperature profiles the steady episodes never show, and
+    where the gripper grasps after a mode change (the cup demo's glass, grasped stiff
+    as the fingers cool).  An ICFN trained on steady profiles alone read a cooling
+    finger's 5 N about 1.3 N low (session 51).
+    """
+    out = []
+    for ep in episodes:
+        u, rise = rng.uniform(), rng.uniform(*_MODE_CHANGE_K)
+        start = None
+        if u < _COOLING_SHARE and ep.temp_c >= _COOLING_MIN_C:
+            start = min(ep.temp_c + rise, _MODE_CHANGE_MAX_C)
+        elif u > 1.0 - _HEATING_SHARE and ep.temp_c - rise >= _MODE_CHANGE_MIN_C:
+            start = ep.temp_c - rise
+        out.append(ep if start is None or abs(start - ep.temp_c) < 1.0
+                   else replace(ep, start_temp_c=start))
+    return out
 
 
 def plan_rcfn(spec: DatasetSpec) -> list[RcfnSequence]:
@@ -364,6 +405,23 @@ class _Harness:
         self._command = Command(speed_mm_s, (self.duty, self.duty))
         self.twin.act(self._command)
 
+    def change_mode(self, temp_c: float, timeout_s: float = 900.0) -> None:
+        """Cool with the heaters off, or heat at full duty, until the fingers' mean true
+        temperature reaches ``temp_c`` (no frames needed); cooling, the heaters stay off
+        from then on, heating, they go to the duty that holds ``temp_c``."""
+        cooling = float(np.mean(self.twin.truth().finger_temps_c)) > temp_c
+        self.duty = 0.0 if cooling else 1.0
+        self.run(0.0)
+        for _ in range(round(timeout_s / _MODE_CHANGE_STEP_S)):
+            mean_c = float(np.mean(self.twin.truth().finger_temps_c))
+            if (mean_c <= temp_c) if cooling else (mean_c >= temp_c):
+                break
+            self.wait(round(_MODE_CHANGE_STEP_S * _RATE_HZ))
+        if not cooling:
+            self.duty = duty_for_mean_temp(temp_c, self.twin.config.heat,
+                                           self.twin.config.ambient_c)
+        self.run(0.0)
+
     def zero(self) -> None:
         """Zero the marker on the open finger (rendered frames at the camera rate)."""
         self.run(0.0)
@@ -384,8 +442,11 @@ class _Harness:
 
 def run_icfn_episode(ep: IcfnEpisode) -> UnitResult:
     """Close through ``n_samples`` force levels and sample features at each."""
-    h = _Harness(ep.object_name, ep.contact_m, ep.temp_c, ep.seed)
+    start_c = ep.temp_c if ep.start_temp_c is None else ep.start_temp_c
+    h = _Harness(ep.object_name, ep.contact_m, start_c, ep.seed)
     h.zero()
+    if ep.start_temp_c is not None:
+        h.change_mode(ep.temp_c)
     out = UnitResult("icfn", ep.index)
     rows: dict[str, list[Any]] = {name: [] for name in _ICFN_COLUMNS}
     n_free = _FREE_SAMPLES

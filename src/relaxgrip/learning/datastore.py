@@ -53,7 +53,9 @@ _META: dict[str, tuple[str, str]] = {
                       "all repeats of a condition share a split"),
     "split": ("", "train, val or test"),
     "object": ("", "object grasped (catalogue name)"),
-    "temp_set_c": ("degC", "finger temperature the heaters were set to"),
+    "temp_set_c": ("degC", "finger temperature the heaters were set to (an ICFN episode "
+                           "during a change of stiffness mode: the mean finger temperature "
+                           "it began to close at)"),
     "contact_set_m": ("m", "nominal contact position along the finger"),
     "speed_mm_s": ("mm/s", "closing speed of the episode"),
     "force_set_n": ("N", "start force the hold was closed to"),

@@ -17,10 +17,10 @@ from relaxgrip.validate import check_positive, check_temp_c
 __all__ = ["SAME_RUNS_AS", "TWIN_VERSION", "MotorParams", "ScatterParams", "TwinConfig"]
 
 #: Bumped whenever the twin's behaviour changes; every result records it.
-TWIN_VERSION = "relaxgrip-twin-v5"
+TWIN_VERSION = "relaxgrip-twin-v6"
 #: Earlier versions whose runs this one repeats bit for bit (for a calibration made on them
-#: to be added to).  None for v5, whose infrared camera draws the fingers bent by their load
-#: (``IrSensorConfig.draw_bend``): every infrared frame of a held object changed.
+#: to be added to).  None for v6, whose RGB camera draws the marker tab as the exact area of
+#: each pixel (``RgbSensorConfig.drawing``): every frame of the marker changed.
 SAME_RUNS_AS: tuple[str, ...] = ()
 
 

@@ -50,7 +50,7 @@ class RgbSensorConfig:
         Fraction of the marker width covered from its left side (0 for none).
     """
 
-    drawing: str = "supersampled"
+    drawing: str = "exact"
     supersample: int = 4
     noise_dn: float = 2.0
     blur_sigma_px: float = 0.0
