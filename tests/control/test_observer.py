@@ -506,9 +506,30 @@ def test_drift_scale_is_its_own_and_old_files_keep_one_scale(tmp_path: Path) -> 
     assert legacy.drift_scale == 0.3
     assert legacy.band_drift_rel(45.0) == pytest.approx(0.3 * one.band_drift_rel(45.0))
     for bad in ({"drift_scale": -1.0}, {"band_scale": 0.0}, {"drift_scale": math.nan},
-                {"band_scale": "wide"}, {"band_scale": math.inf}):
-        with pytest.raises(ValueError, match="band_scale must be > 0 and drift_scale >= 0"):
+                {"band_scale": "wide"}, {"band_scale": math.inf}, {"band_floor_n": -0.01},
+                {"band_floor_n": math.inf}):
+        with pytest.raises(ValueError, match="band_scale must be > 0, drift_scale and "
+                                             "band_floor_n >= 0"):
             ObserverModel.from_arrays(arrays, {**params, **bad})
+
+
+def test_the_band_floor_adds_newtons_and_old_files_have_none(tmp_path: Path) -> None:
+    """The floor is added to the band in and before the hold, whatever the force; a file
+    from before the band had one (no ``band_floor_n``) has none."""
+    arrays = _arrays(_model())
+    params = ObserverModel().get_params()
+    plain = ObserverModel.from_arrays(arrays, params)
+    floored = ObserverModel.from_arrays(arrays, {**params, "band_floor_n": 0.02})
+    for f in (1.0, 8.0):
+        assert floored.band_half_n(100.0, f) == pytest.approx(plain.band_half_n(100.0, f) + 0.02)
+        assert plain.band_half_n(100.0, f) == pytest.approx(plain.band_rel(100.0) * f)
+        assert floored.closing_half_n(f) == pytest.approx(plain.closing_half_n(f) + 0.02)
+    assert floored.closing_half_n(0.0) == 0.02  # around an open gripper's zero too
+    save_observer(tmp_path / "m", floored, {})
+    assert load_observer(tmp_path / "m").band_floor_n == 0.02
+    assert load_observer(tmp_path / "m").provenance()["band_floor_n"] == 0.02
+    old = {k: v for k, v in params.items() if k != "band_floor_n"}
+    assert ObserverModel.from_arrays(arrays, old).band_floor_n == 0.0
 
 
 def test_in_a_hold_the_push_ends_the_share_fit_when_it_moves_the_marker() -> None:

@@ -12,11 +12,14 @@ import pytest
 
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.band_calibration import (
+    DEFAULT_SCENARIOS,
     BandCalibration,
     BandSamples,
+    BandScales,
     calibrate_band,
     fit_scales,
     least_covering,
+    quantile_floor,
     seed_intervals,
 )
 from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
@@ -45,27 +48,30 @@ def test_samples_do_not_depend_on_the_scales_the_observer_held_with(
     wide = load_default_observer()
     wide.band_scale = 2.0 * model.band_scale
     wide.drift_scale = 3.0 * model.drift_scale
+    wide.band_floor_n = model.band_floor_n + 0.05
     ramp = scenario_hold("observer", "ramp", seed=1, duration_s=40.0)
     other = scenario_hold("observer", "ramp", seed=1, duration_s=40.0, observer=wide)
-    x = BandSamples.of(ramp, model.band_scale, model.drift_scale)
+    x = BandSamples.of(ramp, BandScales.of(model))
     assert x.size > 100
     assert np.count_nonzero(x.drift_n > 0) > 100
-    y = BandSamples.of(other, wide.band_scale, wide.drift_scale)
+    y = BandSamples.of(other, BandScales.of(wide))
     for name in ("error_n", "onset_n", "drift_n"):
-        np.testing.assert_allclose(getattr(y, name), getattr(x, name), rtol=1e-9)
-    assert ramp.metrics()["band_coverage"] == pytest.approx(
-        x.coverage(model.band_scale, model.drift_scale))
+        np.testing.assert_allclose(getattr(y, name), getattr(x, name), rtol=1e-9, atol=1e-12)
+    assert ramp.metrics()["band_coverage"] == pytest.approx(x.coverage(BandScales.of(model)))
+    assert other.metrics()["band_coverage"] == pytest.approx(x.coverage(BandScales.of(wide)))
     np.testing.assert_array_equal(other.estimate_n, ramp.estimate_n)
-    standard = BandSamples.of(short_hold, model.band_scale, model.drift_scale)
+    standard = BandSamples.of(short_hold, BandScales.of(model))
     assert short_hold.metrics()["band_coverage"] == pytest.approx(
-        standard.coverage(model.band_scale, model.drift_scale))
+        standard.coverage(BandScales.of(model)))
 
 
 def test_the_drift_part_is_recorded_once_the_share_fit_ends() -> None:
     """A short ramp: zero while the share is fitted, then the relaxing share's part, the
-    recorded half-width the sum of the onset part and it."""
+    recorded half-width the sum of the floor, the onset part and it; before the hold, the
+    floor and the ICFN's onset error."""
     model = load_default_observer()
-    hold = scenario_hold("observer", "ramp", seed=1, duration_s=40.0)
+    model.band_floor_n = 0.03
+    hold = scenario_hold("observer", "ramp", seed=1, duration_s=40.0, observer=model)
     drift, hold_s = hold.series("band_drift_n"), hold.series("hold_s")
     assert np.all(drift[hold_s < 5.0] == 0.0)
     assert drift[-1] > 0.0
@@ -73,9 +79,16 @@ def test_the_drift_part_is_recorded_once_the_share_fit_ends() -> None:
     onset = np.array([model.band_rel(t) for t in hold_s]) * hold.series("f_onset_n")
     started = np.isfinite(onset)  # the onset frame itself has the band of the closing
     assert started.mean() > 0.99
-    np.testing.assert_allclose(half[started], (onset + drift)[started], rtol=1e-9, atol=1e-12)
-    x = BandSamples.of(hold, model.band_scale, model.drift_scale)
-    assert x.coverage(model.band_scale, 0.0) <= x.coverage(model.band_scale, model.drift_scale)
+    np.testing.assert_allclose(half[started], (0.03 + onset + drift)[started], rtol=1e-9,
+                               atol=1e-12)
+    closing = np.isnan(hold_s) & np.isfinite(half)
+    assert closing.any()
+    est = hold.series("estimate_n")[closing]
+    np.testing.assert_allclose(half[closing], 0.03 + model.onset_rel_ * model.band_scale * est,
+                               rtol=1e-9, atol=1e-12)
+    x = BandSamples.of(hold, BandScales.of(model))
+    assert x.coverage(BandScales.of(model)._replace(drift_scale=0.0)) <= x.coverage(
+        BandScales.of(model))
 
 
 def test_the_least_covering_scale_by_hand() -> None:
@@ -103,19 +116,58 @@ def test_fit_scales_by_hand() -> None:
     error = np.concatenate([still, 95.0 + 2.0 * np.arange(1.0, 21.0)])  # 20 over by 2..40
     onset = np.ones(120)
     drift = np.concatenate([np.zeros(100), np.ones(20)])
-    band, scale = fit_scales(BandSamples(error, onset, drift), 0.95)
+    (band, scale, floor), drift_set = fit_scales(BandSamples(error, onset, drift), 0.95)
+    assert drift_set
+    assert floor == 0.0  # one onset part for all: a floor is a scale
     assert band == 95.0
     assert scale == 38.0  # 19 of the 20 excesses (2, 4, .., 40) within 38
     x = BandSamples(error, onset, drift)
-    assert x.coverage(band, scale) == pytest.approx(114 / 120)  # 95 of 100 and 19 of 20
-    assert x.coverage(band, scale - 1e-9) < x.coverage(band, scale)  # the least such scale
-    assert x.coverage(band, 0.0) == pytest.approx(95 / 120)  # no drift part: none of the 20
+    assert x.coverage(BandScales(band, scale, 0.0)) == pytest.approx(114 / 120)  # 95 + 19
+    assert x.coverage(BandScales(band, scale - 1e-9, 0.0)) < x.coverage(
+        BandScales(band, scale, 0.0))  # the least such scale
+    assert x.coverage(BandScales(band, 0.0, 0.0)) == pytest.approx(95 / 120)  # none of the 20
     # Covered by the onset part alone: no drift part needed.
     assert fit_scales(BandSamples(np.full(4, 0.5), np.ones(4), np.array([0, 0, 1, 1.0])),
-                      0.95) == (0.5, 0.0)
-    assert fit_scales(BandSamples(still, onset[:100], drift[:100]), 0.95, 0.7) == (95.0, 0.7)
+                      0.95) == ((0.5, 0.0, 0.0), True)
+    assert fit_scales(BandSamples(still, onset[:100], drift[:100]), 0.95, 0.7) == (
+        (95.0, 0.7, 0.0), False)
     with pytest.raises(InputError, match="without its drift part"):
         fit_scales(BandSamples(still, onset[:100], np.ones(100)), 0.95)
+
+
+def _two_forces(rng: np.random.Generator, floor: float, share: float,
+                n: int = 4000) -> BandSamples:
+    """Holds at 1 N and 8 N (onset parts 0.1 and 0.8 N): errors whose 95 % quantile is
+    ``floor + share * onset``, a quarter of the samples at 1 N."""
+    onset = np.where(rng.uniform(size=n) < 0.25, 0.1, 0.8)
+    error = rng.uniform(0.0, 1.0, n) * (floor + share * onset) / 0.95
+    return BandSamples(error, onset, np.zeros(n))
+
+
+def test_the_floor_covers_each_force_where_a_share_covers_only_the_whole() -> None:
+    """An error partly absolute: a share of the force alone covers 95 % of the samples, but
+    at 1 N far fewer; the floor and the share cover each force.  An error in proportion to
+    the force keeps no floor."""
+    rng = np.random.default_rng(3)
+    x = _two_forces(rng, floor=0.05, share=0.2)
+    assert quantile_floor(x.error_n, x.onset_n, 0.95) == pytest.approx(0.05, abs=0.008)
+    scales, _ = fit_scales(x, 0.95)
+    assert scales.band_scale == pytest.approx(0.2, abs=0.02)
+    assert x.coverage(scales) >= 0.95
+    light = x.onset_n < 0.5
+    for group in (light, ~light):
+        part = BandSamples(x.error_n[group], x.onset_n[group], x.drift_n[group])
+        assert part.coverage(scales) == pytest.approx(0.95, abs=0.015)
+    share_only = BandScales(least_covering(x.error_n / x.onset_n, 0.95), 0.0, 0.0)
+    light_part = BandSamples(x.error_n[light], x.onset_n[light], x.drift_n[light])
+    assert light_part.coverage(share_only) < 0.85  # the share alone is too narrow at 1 N
+    heavy_part = BandSamples(x.error_n[~light], x.onset_n[~light], x.drift_n[~light])
+    assert heavy_part.coverage(share_only) == 1.0  # and wider than it need be at 8 N
+    relative = _two_forces(rng, floor=0.0, share=0.3)
+    assert quantile_floor(relative.error_n, relative.onset_n, 0.95) < 0.005
+    assert quantile_floor(np.zeros(5), np.ones(5), 0.95) == 0.0
+    with pytest.raises(InputError, match="no band"):
+        quantile_floor(np.zeros(0), np.zeros(0), 0.95)
 
 
 def test_seed_intervals_show_how_sure_the_scales_are() -> None:
@@ -123,19 +175,19 @@ def test_seed_intervals_show_how_sure_the_scales_are() -> None:
     seeds narrow the intervals."""
     rng = np.random.default_rng(1)
     alike = [_samples(rng, 500) for _ in range(12)]
-    (lo, hi), (dlo, dhi) = seed_intervals(alike, 0.95)
-    band, drift = fit_scales(BandSamples.join(alike), 0.95)
-    assert drift is not None
+    (lo, hi), (dlo, dhi), _ = seed_intervals(alike, 0.95)
+    (band, drift, _), drift_set = fit_scales(BandSamples.join(alike), 0.95)
+    assert drift_set
     assert lo <= band <= hi
     assert dlo <= drift <= dhi
     assert hi - lo < 0.03
     offsets = [_samples(rng, 500, spread=0.5) for _ in range(36)]
-    (lo12, hi12), _ = seed_intervals(offsets[:12], 0.95)
-    (lo36, hi36), _ = seed_intervals(offsets, 0.95)
+    (lo12, hi12), _, _ = seed_intervals(offsets[:12], 0.95)
+    (lo36, hi36), _, _ = seed_intervals(offsets, 0.95)
     assert hi12 - lo12 > 0.2
     assert hi36 - lo36 < hi12 - lo12
     one = seed_intervals([alike[0]], 0.95)
-    assert one[0] == pytest.approx((fit_scales(alike[0], 0.95)[0],) * 2)
+    assert one[0] == pytest.approx((fit_scales(alike[0], 0.95)[0].band_scale,) * 2)
     assert seed_intervals(offsets, 0.95)[0] == (lo36, hi36)  # reproducible
     none = seed_intervals([_samples(rng, 50, drift_share=0.0)], 0.95)[1]
     assert all(math.isnan(v) for v in none)
@@ -145,8 +197,12 @@ def test_calibration_sets_the_least_scales_that_cover_the_level() -> None:
     model = load_default_observer()
     result = calibrate_band(model, [0], ["standard"], duration_s=8.0)
     hold = run_hold("observer", duration_s=8.0, seed=0)
-    x = BandSamples.of(hold, model.band_scale, model.drift_scale)
-    assert result.band_scale == pytest.approx(least_covering(x.error_n / x.onset_n, 0.95))
+    x = BandSamples.of(hold, BandScales.of(model))
+    floor = quantile_floor(x.error_n, x.onset_n, 0.95)
+    assert result.band_floor_n == pytest.approx(floor)
+    assert result.band_scale == pytest.approx(
+        least_covering((x.error_n - floor) / x.onset_n, 0.95))
+    assert result.floor_interval == pytest.approx((floor,) * 2)
     assert result.scale_interval == pytest.approx((result.band_scale,) * 2)  # one seed
     assert result.record()["scale_interval_90"] == list(result.scale_interval)
     # The standard hold never ends its share fit: the drift scale is kept.
@@ -167,15 +223,13 @@ def test_calibration_sets_the_drift_scale_where_the_drift_is() -> None:
     result = calibrate_band(model, [1, 2], ["ramp"], duration_s=40.0, n_jobs=2)
     assert result.drift_samples > 0
     holds = [scenario_hold("observer", "ramp", seed, 40.0) for seed in (1, 2)]
-    every = BandSamples.join([BandSamples.of(h, model.band_scale, model.drift_scale)
-                              for h in holds])
-    assert (result.band_scale, result.drift_scale) == pytest.approx(fit_scales(every, 0.95))
-    assert every.coverage(result.band_scale, result.drift_scale) >= 0.95
+    every = BandSamples.join([BandSamples.of(h, BandScales.of(model)) for h in holds])
+    assert result.scales == pytest.approx(fit_scales(every, 0.95)[0])
+    assert every.coverage(result.scales) >= 0.95
     silent = load_default_observer()
     silent.drift_scale = 0.0
     again = calibrate_band(silent, [1, 2], ["ramp"], duration_s=40.0, n_jobs=2)
-    assert (again.band_scale, again.drift_scale) == pytest.approx(
-        (result.band_scale, result.drift_scale))
+    assert again.scales == pytest.approx(result.scales)
     assert again.previous_drift_scale == 0.0
 
 
@@ -204,8 +258,13 @@ def test_set_band_scale_keeps_the_parameters_and_records_how(tmp_path: Path) -> 
     assert manifest["training"]["n_sequences"] == shipped["n_sequences"]  # the record is kept
     assert manifest["training"]["dataset"] == shipped["dataset"]
     assert after.drift_scale == before.drift_scale  # kept without a new one
-    set_band_scale(directory, 0.42, {"method": "test"}, drift_scale=1.5)
+    assert after.band_floor_n == before.band_floor_n
+    set_band_scale(directory, 0.42, {"method": "test"}, drift_scale=1.5, floor_n=0.02)
     assert load_observer(directory).drift_scale == 1.5
+    assert load_observer(directory).band_floor_n == 0.02
+    for bad in (-0.01, math.inf, math.nan):
+        with pytest.raises(InputError, match="band floor"):
+            set_band_scale(directory, 0.5, {}, floor_n=bad)
     for bad in (0.0, -1.0, math.nan):
         with pytest.raises(InputError, match="band scale"):
             set_band_scale(directory, bad, {})
@@ -214,6 +273,7 @@ def test_set_band_scale_keeps_the_parameters_and_records_how(tmp_path: Path) -> 
             set_band_scale(directory, 0.5, {}, drift_scale=bad)
     assert load_observer(directory).band_scale == 0.42
     assert load_observer(directory).drift_scale == 1.5
+    assert load_observer(directory).band_floor_n == 0.02
     with pytest.raises(ObserverFileError):
         set_band_scale(tmp_path / "missing", 0.5, {})
     with pytest.raises(InputError, match="band scale"):  # checked before the directory is read
@@ -233,6 +293,7 @@ def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: py
     lo, hi = record["scale_interval_90"]
     assert lo <= record["band_scale"] <= hi
     assert load_observer(directory).band_scale == pytest.approx(record["band_scale"])
+    assert load_observer(directory).band_floor_n == pytest.approx(record["band_floor_n"])
     code, out, _ = run_main(["hold", "--estimator", "observer", "--observer", directory,
                              "--duration-s", "8", "--json"], monkeypatch, capsys)
     assert code == 0
@@ -247,15 +308,26 @@ def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: py
     assert code == 0
     assert "measured (not written)" in out
     assert "90 % over resampled seeds" in out
+    assert "band floor" in out
     assert "per scenario, mean over its holds" in out
     assert load_observer(directory).band_scale == pytest.approx(record["band_scale"])
+
+
+def test_the_command_calibrates_at_three_forces_by_default() -> None:
+    """The command's default scenarios are the library's: holds at 1, 5 and 8 N, so that
+    the floor is set where the band's absolute part shows."""
+    from relaxgrip.cli.learning import _TWIN_BAND
+    from relaxgrip.experiments.scenarios import SCENARIOS
+
+    assert _TWIN_BAND["--scenarios"] == ",".join(DEFAULT_SCENARIOS)
+    assert {SCENARIOS[name].target_n for name in DEFAULT_SCENARIOS} == {1.0, 5.0, 8.0}
 
 
 def test_summary_is_the_mean_over_each_scenarios_holds() -> None:
     rows = {"1": {"mae_n": 0.1, "coverage_before": 0.5, "coverage_after": 1.0},
             "2": {"mae_n": 0.3, "coverage_before": 0.7, "coverage_after": 0.9}}
-    result = BandCalibration(0.2, (0.1, 0.3), 1.0, (0.8, 1.2), 0.95, 10, 4, [1, 2], 0.25, 0.25,
-                             {"ramp": {"seeds": rows}})
+    result = BandCalibration(0.2, (0.1, 0.3), 1.0, (0.8, 1.2), 0.01, (0.0, 0.02), 0.95, 10, 4,
+                             [1, 2], 0.25, 0.25, 0.0, {"ramp": {"seeds": rows}})
     assert result.summary() == {"ramp": pytest.approx(
         {"mae_n": 0.2, "coverage_before": 0.6, "coverage_after": 0.95})}
 

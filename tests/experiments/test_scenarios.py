@@ -29,6 +29,16 @@ def test_profiles_scale_with_the_hold_and_describe_it() -> None:
     assert SCENARIOS["push"].describe() == "push on the object: 2 N from 200 s"
     assert SCENARIOS["standard"].profiles(280.0) == {
         "temp_profile": None, "target_profile": None, "disturbance": None}
+    assert SCENARIOS["step"].describe() == "new target: 5 → 3 N at 150 s"
+    assert [SCENARIOS[n].target_n for n in ("standard", "light", "firm")] == [5.0, 1.0, 8.0]
+    assert SCENARIOS["light"].describe() == "light hold, 1 N at 40 °C"
+    assert SCENARIOS["firm"].to_dict()["target_n"] == 8.0
+
+
+def test_a_scenario_holds_its_own_target() -> None:
+    hold = scenario_hold("observer", "light", seed=0, duration_s=8.0)
+    assert np.all(hold.target_t_n == 1.0)
+    assert hold.metrics()["mae_n"] < 0.3  # closed on 1 N, not 5
 
 
 @pytest.mark.parametrize("names", [[], ["warp"], ["ramp", "warp"]])

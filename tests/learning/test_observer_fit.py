@@ -50,7 +50,7 @@ def test_fit_refuses_hyperparameters_out_of_range(holds: Path) -> None:
         ObserverModel(n_terms=0).fit(data)
     with pytest.raises(InputError, match="band_level"):
         ObserverModel(band_level=1.0).fit(data)
-    with pytest.raises(InputError, match=r"band_scale must be > 0 .* got inf"):
+    with pytest.raises(InputError, match=r"band_scale must be > 0, .* got inf"):
         ObserverModel(band_scale=float("inf")).fit(data)  # a band that covers everything
 
 

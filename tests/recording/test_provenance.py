@@ -142,6 +142,11 @@ def test_differences_name_the_calibration_and_the_band() -> None:
                 "observer": {"sha256": "d", "band_scale": 0.25, "drift_scale": 1.0}}
     same = json.loads(json.dumps(recorded))
     assert model_differences(recorded, same) == []
+    same["observer"]["band_floor_n"] = 0.0  # recorded before the band had a floor: none
+    assert model_differences(recorded, same) == []
+    same["observer"]["band_floor_n"] = 0.02
+    assert model_differences(recorded, same) == ["observer band"]
+    same["observer"]["band_floor_n"] = 0.0
     same["hold_bias_sha256"] = None
     same["observer"]["band_scale"] = 0.3
     assert model_differences(recorded, same) == ["calibration", "observer band"]

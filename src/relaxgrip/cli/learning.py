@@ -224,7 +224,8 @@ def fit_observer_command(
 
 
 #: The twin's band holds: options and defaults; ``--recordings`` takes recorded holds instead.
-_TWIN_BAND = {"--seeds": "3000-3035", "--scenarios": "standard,ramp,step", "--duration-s": "280"}
+_TWIN_BAND = {"--seeds": "3000-3035", "--scenarios": "standard,ramp,step,light,firm",
+              "--duration-s": "280"}
 
 
 def _refuse_twin_options(options: dict[str, str], given: tuple[object, ...]) -> None:
@@ -315,7 +316,8 @@ def calibrate_band_command(
               if not json_out else nullcontext()):
             result = calibrate_band(model, seed_list, names, duration_s, bundle, jobs)
     if not dry_run:
-        set_band_scale(observer, result.band_scale, result.record(), result.drift_scale)
+        set_band_scale(observer, result.band_scale, result.record(), result.drift_scale,
+                       result.band_floor_n)
     if json_out:
         emit_json({"observer": str(observer), "written": not dry_run, **result.record(),
                    "summary": result.summary(), "models_note": note})
@@ -324,7 +326,8 @@ def calibrate_band_command(
         err_console.print(f"note: {note}", markup=False, highlight=False, soft_wrap=True)
     table = Table(title=f"band coverage at {result.level:.0%}: scale {result.previous_scale:.3g}"
                         f" -> {result.band_scale:.3g}, drift scale "
-                        f"{result.previous_drift_scale:.3g} -> {result.drift_scale:.3g}")
+                        f"{result.previous_drift_scale:.3g} -> {result.drift_scale:.3g}, floor "
+                        f"{result.previous_floor_n:.3g} -> {result.band_floor_n:.3g} N")
     for column in ("scenario", "seed" if recordings is None else "recording",
                    "true − target: MAE (N)", "coverage before", "coverage after"):
         table.add_column(column)
@@ -347,8 +350,10 @@ def calibrate_band_command(
     drift = (f"drift scale {result.drift_scale:.4g} ({drift_lo:.3g}-{drift_hi:.3g}) over the "
              f"{result.drift_samples} samples with the share's drift" if result.drift_samples else
              f"drift scale kept at {result.drift_scale:.4g}: no sample had the share's drift")
+    floor_lo, floor_hi = result.floor_interval
     console.print(f"band scale {result.band_scale:.4g} (90 % over resampled seeds: {lo:.3g}-"
                   f"{hi:.3g}) over {result.samples} hold samples")
+    console.print(f"band floor {result.band_floor_n:.4g} N ({floor_lo:.3g}-{floor_hi:.3g})")
     console.print(drift)
     console.print(f"{verb}, {time.perf_counter() - start:.0f} s")
 

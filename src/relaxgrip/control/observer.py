@@ -57,8 +57,9 @@ A chain of the observer's own,
 counted from the fit's end and blended in at 0.3, held the ramp worse
 (0.085 against 0.072 N, seeds 2000-2023) and was not kept.
 
-The band: 95 % half-width ``band_rel(t) F_onset`` from the model's held-out
-residuals (ICFN onset error included), the ICFN's onset error before; once
+The band: 95 % half-width ``band_floor_n + band_rel(t) F_onset``, a floor in
+newtons and a share of the onset force from the model's held-out residuals
+(ICFN onset error included), the floor and the ICFN's onset error before; once
 the share fit has ended, plus the run-to-run spread of the relaxing share
 times what the branches have relaxed since (``band_drift_rel``): a
 temperature ramp relaxes the finger by a share the fit at the old
@@ -299,7 +300,7 @@ class ObserverEstimator:
             self.advance(t, float(pose[0]), self.temp_c)
         u = self.unit_force_m()
         if self._onset_t is None:
-            half = self.model.onset_rel_ * self.model.band_scale * f
+            half = self.model.closing_half_n(f)
             return ForceEstimate(f, raw, band_lo_n=f - half, band_hi_n=f + half,
                                  band_drift_n=0.0)
         hold = t - self._onset_t
@@ -314,7 +315,7 @@ class ObserverEstimator:
         if not (math.isfinite(self.scale_n_per_m) and math.isfinite(u)):
             return ForceEstimate(NAN, raw, hold_s=hold)
         est = self.scale_n_per_m * u
-        half = self.model.band_rel(hold) * self.f_onset_n
+        half = self.model.band_half_n(hold, self.f_onset_n)
         return ForceEstimate(est, raw, self.f_onset_n, hold_s=hold,
                              band_lo_n=est - half, band_hi_n=est + half, band_drift_n=0.0)
 
@@ -405,7 +406,7 @@ class ObserverEstimator:
             # What the branches relax after the fit carries the run's share spread.
             unseen = self.scale_n_per_m * self.share * abs(r - self._r_end)
             drift = self.model.band_drift_rel(self.temp_c) * unseen
-        half = self.model.band_rel(hold) * f_on + drift
+        half = self.model.band_half_n(hold, f_on) + drift
         return ForceEstimate(est, raw, f_on, relax.k_n, relax.tau_s, hold,
                              band_lo_n=est - half, band_hi_n=est + half, band_drift_n=drift,
                              calibration_n=(calibration if math.isfinite(relax.calibration_n)

@@ -40,6 +40,7 @@ from relaxgrip.experiments.band_calibration import (
     BandCalibration,
     BandHold,
     BandSamples,
+    BandScales,
     calibration_of,
     measuring,
 )
@@ -352,16 +353,16 @@ def calibrate_band_on_recordings(observer: ObserverModel, paths: Sequence[Path |
     files = recording_files(paths)
     for path in files:  # every plan checked before any replay
         recorded_plan(path)
-    previous = observer.band_scale, observer.drift_scale
+    previous = BandScales.of(observer)
     observer = measuring(observer)
-    used = observer.band_scale, observer.drift_scale
+    used = BandScales.of(observer)
     holds = map_holds(_replayed, [(path, models, "observer", observer) for path in files], n_jobs)
     measured = []
     for seed, hold in enumerate(holds):
         keep = hold.within(hold.length_s)
         samples = BandSamples.of_series(
             hold.estimate_n[keep], hold.truth_n[keep], hold.band_lo_n[keep],
-            hold.band_hi_n[keep], hold.band_drift_n[keep], *used)
+            hold.band_hi_n[keep], hold.band_drift_n[keep], used)
         row = {"recording": hold.path.name, "mae_n": hold.row(hold.length_s)["mae_n"]}
         measured.append(BandHold(RECORDED_SCENARIO, {"source": RECORDINGS_SOURCE}, seed, row,
                                  samples))

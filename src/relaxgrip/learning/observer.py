@@ -182,31 +182,38 @@ class ObserverModel:
         (:meth:`band_drift_rel`; a recalibration, 1: as identified).  Files
         written before the two parts had scales of their own take
         ``band_scale``, as both parts had then.
+    band_floor_n : float
+        Half-width in newtons added to the relative parts (a recalibration;
+        0: as identified, and files written before the band had one).  The
+        ICFN's onset error is partly absolute: a band that is only a share
+        of the force is too narrow at small forces.
     """
 
     def __init__(self, n_terms: int = 3, loading_speed_mm_s: float = LOADING_SPEED_MM_S,
                  band_level: float = 0.95, band_scale: float = 1.0,
-                 drift_scale: float = 1.0) -> None:
+                 drift_scale: float = 1.0, band_floor_n: float = 0.0) -> None:
         self.n_terms = n_terms
         self.loading_speed_mm_s = loading_speed_mm_s
         self.band_level = band_level
         self.band_scale = band_scale
         self.drift_scale = drift_scale
+        self.band_floor_n = band_floor_n
         #: The directory it was loaded from and its file's sha256 (None: built in memory).
         self.source: tuple[Path, str] | None = None
 
     def provenance(self) -> dict[str, Any]:
         """What a recording says of this observer: where it was loaded from, its file's
-        sha256 (both None for one built in memory) and its band's scales."""
+        sha256 (both None for one built in memory) and its band's scales and floor."""
         directory, sha256 = (None, None) if self.source is None else self.source
         return {"directory": None if directory is None else str(directory), "sha256": sha256,
-                "band_scale": self.band_scale, "drift_scale": self.drift_scale}
+                "band_scale": self.band_scale, "drift_scale": self.drift_scale,
+                "band_floor_n": self.band_floor_n}
 
     def get_params(self) -> dict[str, Any]:
         """Hyperparameters (scikit-learn style)."""
         return {"n_terms": self.n_terms, "loading_speed_mm_s": self.loading_speed_mm_s,
                 "band_level": self.band_level, "band_scale": self.band_scale,
-                "drift_scale": self.drift_scale}
+                "drift_scale": self.drift_scale, "band_floor_n": self.band_floor_n}
 
     # -- evaluation ---------------------------------------------------------------------
 
@@ -254,9 +261,20 @@ class ObserverModel:
         return self.drift_scale * z * float(np.interp(temp_c, self.temps_c_, self.share_spread_))
 
     def band_rel(self, hold_s: float) -> float:
-        """Half-width of the band relative to the onset force, ``hold_s`` into the hold."""
+        """Half-width of the band's relative part per newton of onset force, ``hold_s`` into
+        the hold."""
         self._check_fitted()
         return self.band_scale * float(np.interp(hold_s, self.band_t_s_, self.band_rel_))
+
+    def band_half_n(self, hold_s: float, f_onset_n: float) -> float:
+        """Half-width of the band without the share's drift, ``hold_s`` into a hold whose
+        onset force is ``f_onset_n`` (N): the floor and the relative part."""
+        return self.band_floor_n + self.band_rel(hold_s) * f_onset_n
+
+    def closing_half_n(self, force_n: float) -> float:
+        """Half-width of the band before the hold, on an ICFN estimate of ``force_n`` (N):
+        the floor and the ICFN's onset error."""
+        return self.band_floor_n + self.onset_rel_ * self.band_scale * force_n
 
     # -- identification -------------------------------------------------------------------
 
@@ -514,9 +532,11 @@ class ObserverModel:
         if isinstance(self.n_terms, bool) or self.n_terms not in range(1, 6):
             raise InputError(f"n_terms must be 1-5, got {self.n_terms!r}")
         if not (_finite_at_least(self.band_scale, 0.0, strict=True)
-                and _finite_at_least(self.drift_scale, 0.0, strict=False)):
-            raise InputError(f"band_scale must be > 0 and drift_scale >= 0 (finite), got "
-                             f"{self.band_scale!r} and {self.drift_scale!r}")
+                and _finite_at_least(self.drift_scale, 0.0, strict=False)
+                and _finite_at_least(self.band_floor_n, 0.0, strict=False)):
+            raise InputError(f"band_scale must be > 0, drift_scale and band_floor_n >= 0 "
+                             f"(finite), got {self.band_scale!r}, {self.drift_scale!r} and "
+                             f"{self.band_floor_n!r}")
         if not (self.loading_speed_mm_s > 0 and 0.5 <= self.band_level < 1.0):
             raise InputError("need loading_speed_mm_s > 0, 0.5 <= band_level < 1")
 
@@ -641,7 +661,8 @@ def load_observer(directory: Path) -> ObserverModel:
 
 
 def set_band_scale(directory: Path, band_scale: float, record: Mapping[str, Any],
-                   drift_scale: float | None = None) -> ObserverModel:
+                   drift_scale: float | None = None,
+                   floor_n: float | None = None) -> ObserverModel:
     """Rewrite an observer directory with a recalibrated band, atomically.
 
     The parameters and the training record are kept; ``record`` (how the
@@ -658,18 +679,23 @@ def set_band_scale(directory: Path, band_scale: float, record: Mapping[str, Any]
     drift_scale : float, optional
         The new :attr:`ObserverModel.drift_scale` (>= 0); the directory's is
         kept without one.
+    floor_n : float, optional
+        The new :attr:`ObserverModel.band_floor_n` (N, >= 0); the directory's
+        is kept without one.
 
     Raises
     ------
     ObserverFileError
         The directory cannot be loaded.
     InputError
-        A band scale that is not a positive number, or a drift scale that is
-        not a number >= 0.
+        A band scale that is not a positive number, or a drift scale or floor
+        that is not a number >= 0.
     """
     check_positive(band_scale, "band scale")
     if drift_scale is not None and check_finite(drift_scale, "drift scale") < 0:
         raise InputError(f"drift scale must be >= 0, got {drift_scale}")
+    if floor_n is not None and check_finite(floor_n, "band floor") < 0:
+        raise InputError(f"band floor must be >= 0 N, got {floor_n}")
     directory = Path(directory)
     model = load_observer(directory)
     manifest = read_manifest(directory / MANIFEST_NAME, OBSERVER_FORMAT, OBSERVER_VERSION,
@@ -680,6 +706,8 @@ def set_band_scale(directory: Path, band_scale: float, record: Mapping[str, Any]
     model.band_scale = float(band_scale)
     if drift_scale is not None:
         model.drift_scale = float(drift_scale)
+    if floor_n is not None:
+        model.band_floor_n = float(floor_n)
     save_observer(directory, model, training)
     return model
 

@@ -159,7 +159,9 @@ def model_differences(recorded: Mapping[str, Any] | None, used: Mapping[str, Any
     if isinstance(observer, Mapping) and isinstance(observer_now, Mapping):
         if observer.get("sha256") != observer_now.get("sha256"):
             out.append("observer")
-        elif any(observer.get(k) != observer_now.get(k) for k in ("band_scale", "drift_scale")):
+        elif any(observer.get(k, default) != observer_now.get(k, default)
+                 for k, default in (("band_scale", None), ("drift_scale", None),
+                                    ("band_floor_n", 0.0))):  # recorded before the floor: 0
             out.append("observer band")
     return out
 
