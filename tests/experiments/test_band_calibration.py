@@ -189,6 +189,10 @@ def test_seed_intervals_show_how_sure_the_scales_are() -> None:
     one = seed_intervals([alike[0]], 0.95)
     assert one[0] == pytest.approx((fit_scales(alike[0], 0.95)[0].band_scale,) * 2)
     assert seed_intervals(offsets, 0.95)[0] == (lo36, hi36)  # reproducible
+    # Thinned to every 4th frame (6000 of them to 1500): about the same intervals.
+    (tlo, thi), _, _ = seed_intervals(alike, 0.95, frames=1500)
+    assert (tlo, thi) != (lo, hi)
+    assert (tlo, thi) == pytest.approx((lo, hi), abs=0.03)
     none = seed_intervals([_samples(rng, 50, drift_share=0.0)], 0.95)[1]
     assert all(math.isnan(v) for v in none)
 
