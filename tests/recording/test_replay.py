@@ -234,7 +234,9 @@ def test_an_observer_recording_replays_with_the_observer_it_ran_with(
 
     narrow, wide = widths(observer), widths(other)
     assert narrow.size > 50
-    np.testing.assert_allclose(wide, 2.0 * narrow, rtol=1e-9)
+    # Twice the relative part, the same floor: each width 2 (floor + 2 r) = 2 W - 2 floor.
+    np.testing.assert_allclose(wide, 2.0 * narrow - 2.0 * observer.band_floor_n, rtol=1e-9)
+    assert observer.band_floor_n > 0  # the shipped band has one: the floor is in the test
     directory = tmp_path / "observer-dir"
     shutil.copytree(default_observer_dir(), directory)
     code, out, err = run_main(["replay", path, "--observer", directory, "--json"], monkeypatch,
