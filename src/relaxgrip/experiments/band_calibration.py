@@ -221,11 +221,10 @@ def quantile_floor(error_n: FloatArray, onset_n: FloatArray, level: float) -> fl
         return 0.0
     best = optimize.minimize_scalar(loss, bounds=(0.0, top), method="bounded",
                                     options={"xatol": 1e-5 * top})
-    floor = float(best.x)
     # The bounded search never evaluates the bound itself: no floor is a candidate too, and
     # the one kept where a floor does no better (one force: a floor is a scale there).
     none = loss(0.0)
-    return floor if loss(floor) < none - 1e-9 * abs(none) else 0.0
+    return float(best.x) if float(best.fun) < none - 1e-9 * abs(none) else 0.0
 
 
 def fit_scales(samples: BandSamples, level: float,
@@ -278,9 +277,8 @@ Interval = tuple[float, float]
 
 
 #: The resampled fits of :func:`seed_intervals` use every k-th frame of each seed, at
-#: most about this many in all: a floor fitted on the 1.5 million frames of 180 holds
-#: took 8 s, on 50 000 of them 0.26 s, and frames 33 ms apart in one run carry little
-#: the others do not.
+#: most about this many in all: a floor fitted on 1.2 million frames took 8 s, on 50 000
+#: 0.26 s, and frames 33 ms apart in one run carry little the others do not.
 INTERVAL_FRAMES = 50_000
 
 
@@ -394,11 +392,6 @@ class BandCalibration:
     def scales(self) -> BandScales:
         """The new scales and floor."""
         return BandScales(self.band_scale, self.drift_scale, self.band_floor_n)
-
-    @property
-    def previous(self) -> BandScales:
-        """The scales and floor the holds ran with."""
-        return BandScales(self.previous_scale, self.previous_drift_scale, self.previous_floor_n)
 
     def summary(self) -> dict[str, dict[str, float]]:
         """Per scenario, the mean over its holds of the MAE and of each coverage."""
