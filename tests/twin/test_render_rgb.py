@@ -5,6 +5,7 @@ import pytest
 
 from relaxgrip.rig import RigGeometry
 from relaxgrip.twin import render_rgb
+from relaxgrip.twin.raster import area_coverage
 from relaxgrip.twin.render_rgb import _TAB_TINT, RgbObject, RgbRenderer, _composite
 from relaxgrip.twin.sensors import RgbSensorConfig
 
@@ -47,6 +48,23 @@ def test_the_tab_is_composited_as_the_float32_formula_says():
         roi = scene.copy()
         _composite(roi, tab, coverage)
         np.testing.assert_array_equal(roi, np.clip(expected, 0.0, 255.0).astype(np.uint8))
+
+
+def test_the_noise_saturates_as_opencv_adds_and_subtracts() -> None:
+    """One pass of 8-bit arithmetic, each step clipped as OpenCV's add then subtract."""
+    import cv2
+
+    rng = np.random.default_rng(1)
+    image = rng.choice(np.array([0, 1, 2, 127, 253, 254, 255], np.uint8), (23, 40, 3))
+    bank = rng.integers(0, 256, (2, 30, 50, 3), dtype=np.uint8)
+    positive, negative = bank[0, 3:26, 5:45], bank[1, 3:26, 5:45]  # views into a bank
+    out = np.empty_like(image)
+    render_rgb._add_noise(image, positive, negative, out)
+    np.testing.assert_array_equal(out, cv2.subtract(cv2.add(image, positive), negative))
+    render_rgb._add_noise(image, positive, negative, image)  # in place
+    np.testing.assert_array_equal(image, out)
+    with pytest.raises(ValueError, match="contiguous"):
+        render_rgb._add_noise(image[:, ::2], positive[:, ::2], negative[:, ::2], out[:, ::2])
 
 
 def test_a_frame_is_the_same_in_any_order_across_blocks_of_draws():
@@ -135,11 +153,10 @@ def test_the_exact_drawing_reads_the_bend_better_than_four_times_supersampling()
     assert (exact[0].std(axis=0) < 1.0).all()  # um
 
 
-def _shoelace(px: np.ndarray) -> np.ndarray:
-    """Areas of the quadrilaterals ``px`` (P, 4, 2), clockwise on the screen positive."""
-    x, y = px[..., 0], px[..., 1]
-    areas: np.ndarray = 0.5 * (x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y).sum(axis=1)
-    return areas
+def _enclosed(start: np.ndarray, stop: np.ndarray) -> float:
+    """Area enclosed by closed outlines given as directed edges (N, 2) each, clockwise
+    on the screen positive (the shoelace formula, edge by edge)."""
+    return 0.5 * float(np.sum(start[:, 0] * stop[:, 1] - stop[:, 0] * start[:, 1]))
 
 
 @pytest.mark.parametrize(("deflection_m", "slope"), [(0.0, 0.0), (0.004, 0.05), (-0.002, -0.2)])
@@ -152,9 +169,10 @@ def test_the_exact_tab_holds_the_area_of_its_white_and_black(deflection_m: float
     tab, coverage = renderer._exact_tab(box)
     import cv2
 
-    px = cv2.perspectiveTransform(renderer._shape.vertices, box.plane_to_img).reshape(-1, 4, 2)
-    areas = _shoelace(px)
-    outline, black = areas[0], areas[2:].sum()
+    shape = renderer._shape
+    px = cv2.perspectiveTransform(shape.vertices, box.plane_to_img)[:, 0]
+    start, stop = px[shape.ends[0]], px[shape.ends[1]]
+    outline, black = (_enclosed(start[shape.planes == k], stop[shape.planes == k]) for k in (0, 1))
     assert outline > 0
     assert black > 0
     white, ink = render_rgb._TAB_WHITE, render_rgb._INK
@@ -166,6 +184,30 @@ def test_the_exact_tab_holds_the_area_of_its_white_and_black(deflection_m: float
     modules = RIG.marker.aruco_dictionary.markerSize + 2
     ring = (modules**2 - (modules - 2) ** 2) / (modules + 2) ** 2
     assert ring * outline < black < (modules / (modules + 2)) ** 2 * outline
+
+
+def test_the_black_is_drawn_as_its_boundary_the_same_area_as_its_modules() -> None:
+    """The tab's black is the boundary of the black modules' union, every straight run
+    of it one edge: it encloses each black module of the marker once."""
+    import cv2
+
+    renderer = RgbRenderer(RIG, RgbSensorConfig(), 0)
+    shape = renderer._shape
+    modules = RIG.marker.aruco_dictionary.markerSize + 2
+    bits = cv2.aruco.generateImageMarker(RIG.marker.aruco_dictionary, RIG.marker.marker_id,
+                                         modules, borderBits=1) < 128
+    # On a grid of modules (x right, y down, the black square from 0 to `modules`), the
+    # union's boundary covers each module by its exact area: 1 black, 0 white.
+    module_m = RIG.marker.size_m / modules
+    grid = shape.vertices[:, 0] * (1.0, -1.0) / module_m + 0.5 * modules - 0.5
+    black = shape.planes == 1
+    edges = np.stack([grid[shape.ends[0][black]], grid[shape.ends[1][black]]])
+    covered = area_coverage(edges, 1.0, (modules, modules))[0]
+    np.testing.assert_allclose(covered, bits, atol=1e-12)
+    # Straight runs merged: no two edges of the black continue one another.
+    along = edges[1] - edges[0]
+    for i, j in zip(*np.nonzero(np.all(edges[1][:, None] == edges[0][None], axis=2)), strict=True):
+        assert abs(along[i, 0] * along[j, 1] - along[i, 1] * along[j, 0]) > 0
 
 
 def test_a_tab_half_out_of_the_frame_is_the_crop_of_a_larger_frame():

@@ -24,6 +24,7 @@ from functools import lru_cache
 from typing import NamedTuple
 
 import cv2
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -83,16 +84,15 @@ class RgbObject:
 
 
 class _TabShape(NamedTuple):
-    """The tab as polygons on the marker plane (metres): the white outline, then one
-    rectangle per run of black modules along a row, four vertices each, all running
-    the same way round.  Each polygon's edges carry a weight and an output plane:
-    plane 0 is the grey premultiplied by coverage (the white's level, then the ink's
-    difference from it), plane 1 the outline's coverage."""
+    """The tab as closed outlines on the marker plane (metres), as directed edges
+    between vertices, all running the same way round: plane 0 is the white
+    outline (the black square and its quiet zone), plane 1 the boundary of the
+    black modules' union, each straight run of it one edge.  The first four
+    vertices are the outline's corners, clockwise on the screen."""
 
-    vertices: FloatArray  # (4 P, 1, 2), as cv2.perspectiveTransform takes them
-    ends: NDArray[np.intp]  # (2, 4 P): each edge's first and last vertex
-    weights: FloatArray  # (4 P,)
-    planes: NDArray[np.intp]  # (4 P,)
+    vertices: FloatArray  # (V, 1, 2), as cv2.perspectiveTransform takes them
+    ends: NDArray[np.intp]  # (2, E): each edge's first and last vertex
+    planes: NDArray[np.intp]  # (E,)
 
 
 class _TabBox(NamedTuple):
@@ -186,13 +186,13 @@ class RgbRenderer:
         if _FUSED and cfg.noise_dn > 0 and cfg.blur_sigma_px == 0 and gain == 1.0:
             # The frame is the scene plus noise but where the tab is: one pass over it
             # fewer than copying the scene first, with the same pixels.
-            img: Image = np.asarray(cv2.add(scene, noise[0]))
+            img: Image = np.empty_like(scene)
+            _add_noise(scene, *noise, img)
             if box is not None:
                 rows, cols = box.rows, box.cols
                 roi = scene[rows, cols].copy()
                 self._paint_tab(roi, box, marker2cam)
-                cv2.add(roi, noise[0][rows, cols], dst=img[rows, cols])
-            cv2.subtract(img, noise[1], dst=img)
+                _add_noise(roi, noise[0][rows, cols], noise[1][rows, cols], img[rows, cols])
             return img
         img = scene.copy()
         if box is not None:
@@ -202,8 +202,7 @@ class RgbRenderer:
         if gain != 1.0:
             cv2.convertScaleAbs(img, dst=img, alpha=max(gain, 0.0))
         if cfg.noise_dn > 0:
-            cv2.add(img, noise[0], dst=img)
-            cv2.subtract(img, noise[1], dst=img)
+            _add_noise(img, *noise, img)
         return img
 
     def _draws(self, seq: int) -> tuple[float, int, int, int]:
@@ -304,18 +303,19 @@ class RgbRenderer:
 
     def _exact_tab(self, box: _TabBox) -> tuple[Image, Image]:
         """The tab's premultiplied grey and coverage in ``box``, each pixel the exact
-        area of the white and of the black runs it covers."""
+        area of the white and of the black it covers."""
         shape = self._shape
         px = cv2.perspectiveTransform(shape.vertices, box.plane_to_img)[:, 0]
         px -= (box.x0, box.y0)
-        # Projected with the marker facing the camera the polygons run clockwise on the
-        # screen; seen from behind, the other way, and every weight changes sign.
+        # Projected with the marker facing the camera the outlines run clockwise on the
+        # screen; seen from behind, the other way, and every area changes sign.
         (ax, ay), (bx, by), (cx, cy) = px[:3].tolist()
         sign = 1.0 if (bx - ax) * (cy - by) - (by - ay) * (cx - bx) >= 0 else -1.0
-        planes = area_coverage(px[shape.ends], sign * shape.weights,
-                               (box.y1 - box.y0, box.x1 - box.x0), plane=shape.planes, planes=2)
-        tab: Image = np.asarray(cv2.convertScaleAbs(planes[0]))
-        coverage: Image = np.asarray(cv2.convertScaleAbs(planes[1], alpha=255.0))
+        outline, black = area_coverage(px[shape.ends], sign, (box.y1 - box.y0, box.x1 - box.x0),
+                                       plane=shape.planes, planes=2)
+        grey = cv2.addWeighted(outline, float(_TAB_WHITE), black, float(_INK - _TAB_WHITE), 0.0)
+        tab: Image = np.asarray(cv2.convertScaleAbs(grey))
+        coverage: Image = np.asarray(cv2.convertScaleAbs(outline, alpha=255.0))
         return tab, coverage
 
     def _supersampled_tab(self, box: _TabBox) -> tuple[Image, Image]:
@@ -366,12 +366,13 @@ def _frame_draws(seed: int, seq: int) -> tuple[float, int, int, int]:
 def _luts() -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     levels = np.arange(256, dtype=np.float32)
     tab = levels[:, None] * np.array(_TAB_TINT, dtype=np.float32)
-    transmit = np.repeat((1.0 - levels * np.float32(1.0 / 255.0))[:, None], 3, axis=1)
-    return tab.reshape(1, 256, 3), transmit.reshape(1, 256, 3)
+    transmit = 1.0 - levels * np.float32(1.0 / 255.0)
+    return np.ascontiguousarray(tab), transmit
 
 
-#: The compositing's float32 terms as tables of their uint8 inputs, per channel: the
-#: tab's grey times its tint, and the scene's transmission ``1 - coverage / 255``.
+#: The compositing's float32 terms as tables of their 8-bit inputs: the tab's grey
+#: times its tint, per channel (256, 3); the scene's transmission ``1 - coverage /
+#: 255`` (256,).
 _TAB_LUT, _TRANSMIT_LUT = _luts()
 
 
@@ -379,17 +380,56 @@ def _composite(roi: Image, tab: Image, coverage: Image) -> None:
     """``roi = scene (1 - coverage / 255) + tab * tint`` in float32, clipped and truncated.
 
     ``roi`` (H, W, 3) is the scene, written in place; ``tab`` and ``coverage`` are
-    (H, W) grey levels.  The products are looked up (the same float32 values, one
-    pass each), and OpenCV does the per-channel arithmetic: numpy's broadcast over
-    a last axis of 3 costs five times as much here.
+    (H, W) grey levels.  The products are looked up (the same float32 values).
     """
-    transmit = cv2.LUT(cv2.merge((coverage,) * 3), _TRANSMIT_LUT)
-    blended = np.asarray(cv2.multiply(roi, transmit, dtype=cv2.CV_32F), dtype=np.float32)
-    cv2.add(blended, cv2.LUT(cv2.merge((tab,) * 3), _TAB_LUT), dst=blended)
-    # Below 0 only by rounding (a fully covered pixel transmits -6e-8), which the
-    # truncation to uint8 takes to 0 as well.
-    np.minimum(blended, 255.0, out=blended)
-    roi[...] = blended
+    _composite_rows(_rows(roi), tab, coverage, _TAB_LUT, _TRANSMIT_LUT)
+
+
+def _add_noise(image: Image, positive: Image, negative: Image, out: Image) -> None:
+    """``out = image + positive - negative``, each step saturated to 8 bits as OpenCV's
+    ``add`` and ``subtract`` are; ``out`` may be ``image``."""
+    _add_noise_rows(_rows(image), _rows(positive), _rows(negative), _rows(out))
+
+
+def _rows(image: Image) -> Image:
+    """An (H, W, C) image as H rows of W C values: a view, so that writes reach it."""
+    h, w, c = image.shape
+    if image.strides[1:] != (c, 1):
+        raise ValueError(f"image rows must be contiguous, got strides {image.strides}")
+    rows: Image = np.lib.stride_tricks.as_strided(
+        image, (h, w * c), (image.strides[0], 1), writeable=image.flags.writeable)
+    return rows
+
+
+# Compiled (numba), a row at a time: the per-pixel work is a few operations, which
+# as whole-array passes cost more in memory traffic than in arithmetic.
+
+
+@numba.njit(cache=True, nogil=True)
+def _composite_rows(roi: Image, tab: Image, coverage: Image, tab_lut: NDArray[np.float32],
+                    transmit_lut: NDArray[np.float32]) -> None:  # pragma: no cover - compiled
+    for i in range(roi.shape[0]):
+        row, grey, cover = roi[i], tab[i], coverage[i]
+        for j in range(grey.shape[0]):
+            transmit = transmit_lut[cover[j]]
+            for c in range(3):
+                value = np.float32(row[3 * j + c]) * transmit + tab_lut[grey[j], c]
+                # Below 0 only by rounding (a fully covered pixel transmits -6e-8).
+                row[3 * j + c] = np.uint8(max(min(value, np.float32(255.0)), np.float32(0.0)))
+
+
+@numba.njit(cache=True, nogil=True)
+def _add_noise_rows(image: Image, positive: Image, negative: Image,
+                    out: Image) -> None:  # pragma: no cover - compiled
+    for i in range(image.shape[0]):
+        a, p, n, o = image[i], positive[i], negative[i], out[i]
+        for k in range(a.shape[0]):
+            # 8-bit arithmetic wraps: a sum below an addend overflowed, a difference
+            # above the minuend went under.
+            total = np.uint8(a[k] + p[k])
+            total = total if total >= a[k] else np.uint8(255)
+            rest = np.uint8(total - n[k])
+            o[k] = rest if rest <= total else np.uint8(0)
 
 
 def _fill(image: Image, polygon_px: FloatArray, colour: float | tuple[float, ...]) -> None:
@@ -404,8 +444,14 @@ def _module_count(rig: RigGeometry) -> int:
 
 
 def _tab_shape(rig: RigGeometry) -> _TabShape:
-    """The tab's white outline (the black square and its quiet zone) and its runs of
-    black modules, as polygons on the marker plane (x right, y up, metres)."""
+    """The tab's white outline (the black square and its quiet zone) and the boundary
+    of its black modules, as edges on the marker plane (x right, y up, metres).
+
+    The black is drawn as its union's boundary, not module by module or run by
+    run: an edge two black modules share would add and take away the same
+    area, and the rasteriser's cost is the edges' length in pixels (the
+    boundary is 46 modules long for the default marker, its rows' runs 80).
+    """
     marker = rig.marker
     dictionary = marker.aruco_dictionary
     modules = _module_count(rig)
@@ -413,27 +459,38 @@ def _tab_shape(rig: RigGeometry) -> _TabShape:
     module_m = marker.size_m / modules
     half = 0.5 * marker.size_m
     quiet = half + _QUIET_MODULES * module_m
+    # Top-left, top-right, bottom-right, bottom-left: clockwise on the screen.
+    vertices = [[-quiet, quiet], [quiet, quiet], [quiet, -quiet], [-quiet, -quiet]]
+    ends = [[0, 1], [1, 2], [2, 3], [3, 0]]
+    black = np.pad(bits < 128, 1)  # a white module all round
+    index: dict[tuple[int, int], int] = {}
 
-    def rect(left: float, top: float, right: float, bottom: float) -> list[list[float]]:
-        # Top-left, top-right, bottom-right, bottom-left: clockwise on the screen.
-        return [[left, top], [right, top], [right, bottom], [left, bottom]]
+    def vertex(row: int, col: int) -> int:
+        """The lattice point ``row`` module lines down and ``col`` across from the
+        black square's top-left corner."""
+        if (row, col) not in index:
+            index[row, col] = len(vertices)
+            vertices.append([-half + col * module_m, half - row * module_m])
+        return index[row, col]
 
-    polygons = [rect(-quiet, quiet, quiet, -quiet)]
-    for r, row in enumerate(bits < 128):
-        padded = np.concatenate([[False], row, [False]])
-        changes = np.flatnonzero(padded[1:] != padded[:-1])
-        top, bottom = half - r * module_m, half - (r + 1) * module_m
-        for start, stop in zip(changes[::2], changes[1::2], strict=True):
-            polygons.append(rect(-half + start * module_m, top, -half + stop * module_m, bottom))
-    runs = len(polygons) - 1
-    weights = np.repeat(np.r_[_TAB_WHITE, np.full(runs, _INK - _TAB_WHITE)], 4).astype(np.float64)
-    # The outline twice: its grey in plane 0, its coverage in plane 1.
-    vertices = np.array([polygons[0], *polygons], dtype=np.float64).reshape(-1, 1, 2)
-    first = np.arange(len(vertices))
-    ends = np.stack([first, first - first % 4 + (first + 1) % 4])
-    weights = np.r_[np.ones(4), weights]
-    planes = np.r_[np.ones(4, np.intp), np.zeros(4 * (runs + 1), np.intp)]
-    return _TabShape(vertices, ends, weights, planes)
+    def runs(side: NDArray[np.bool_]) -> list[tuple[int, int]]:
+        """The runs ``[a, b)`` of True in one lattice line's modules (padding dropped)."""
+        changes = np.flatnonzero(np.diff(np.r_[0, side[1:-1].astype(np.int8), 0]))
+        return [(int(a), int(b)) for a, b in zip(changes[::2], changes[1::2], strict=True)]
+
+    # Lattice line k runs between padded modules k and k + 1.  Clockwise round the
+    # black: rightwards along a line with black below it, leftwards with black above,
+    # down a line with black to its left, up one with black to its right.
+    for k in range(modules + 1):
+        above, below = black[k], black[k + 1]
+        left, right = black[:, k], black[:, k + 1]
+        ends += [[vertex(k, a), vertex(k, b)] for a, b in runs(below & ~above)]
+        ends += [[vertex(k, b), vertex(k, a)] for a, b in runs(above & ~below)]
+        ends += [[vertex(a, k), vertex(b, k)] for a, b in runs(left & ~right)]
+        ends += [[vertex(b, k), vertex(a, k)] for a, b in runs(right & ~left)]
+    planes = np.r_[np.zeros(4, np.intp), np.ones(len(ends) - 4, np.intp)]
+    return _TabShape(np.array(vertices, dtype=np.float64).reshape(-1, 1, 2),
+                     np.array(ends, dtype=np.intp).T, planes)
 
 
 def _tab_texture(rig: RigGeometry, px_per_module: int) -> tuple[Image, FloatArray]:
