@@ -365,12 +365,18 @@ class MarkerMount:
         ndarray, shape (4, 4)
             ``marker2finger``.
         """
+        bend = rotation_y(-slope_rad)
+        return transform_from(bend @ self._rest, [self.position_m, 0.0, deflection_m])
+
+    @functools.cached_property
+    def _rest(self) -> FloatArray:
+        """The marker's orientation on the unbent finger (the renderer asks every frame)."""
         # Unbent, the marker faces the root: its x along the finger's z,
         # its y along the finger's y, its normal towards -x.
         facing = np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])
-        rest = rotation_y(math.radians(self.tilt_deg)) @ facing
-        bend = rotation_y(-slope_rad)
-        return transform_from(bend @ rest, [self.position_m, 0.0, deflection_m])
+        rest: FloatArray = rotation_y(math.radians(self.tilt_deg)) @ facing
+        rest.flags.writeable = False
+        return rest
 
 
 @dataclass(frozen=True)

@@ -144,6 +144,9 @@ class RgbRenderer:
             rig, _TEXELS_PER_MODULE_PER_SUPERSAMPLE
             * (config.supersample if config.drawing == "supersampled" else 1))
         self._shape = _tab_shape(rig)
+        th, tw = self._texture.shape[:2]
+        self._texture_outline = np.array(
+            [[[-0.5, -0.5], [tw - 0.5, -0.5], [tw - 0.5, th - 0.5], [-0.5, th - 0.5]]])
         self._matrix = self.intrinsics.matrix
         self._background = _background(self.intrinsics.shape)
         self._noise_pos, self._noise_neg = _noise_banks(self.intrinsics.shape, config.noise_dn)
@@ -253,7 +256,8 @@ class RgbRenderer:
         x, y, z = obj.center_cam_m
         if z <= obj.radius_m + 0.005:
             return ()  # touching or behind the lens: nothing sensible to draw
-        (u, v), = self.intrinsics.project([[x, y, z]])
+        cam = self.intrinsics  # CameraIntrinsics.project's arithmetic, on plain floats
+        u, v = x / z * cam.fx_px + cam.cx_px, y / z * cam.fy_px + cam.cy_px
         r_px = self.intrinsics.fx_px * obj.radius_m / math.sqrt(z * z - obj.radius_m**2)
         h, w = self.intrinsics.shape
         if r_px < 0.5 or u + r_px < 0 or u - r_px > w or v + r_px < 0 or v - r_px > h:
@@ -272,13 +276,9 @@ class RgbRenderer:
         """Where the tab lands in the image, with a margin; None if nowhere."""
         plane_to_img = self._matrix @ marker2cam[:3, [0, 1, 3]]
         tex_to_img = plane_to_img @ self._texture_to_marker
-        th, tw = self._texture.shape[:2]
-        outline = np.array(
-            [[[-0.5, -0.5], [tw - 0.5, -0.5], [tw - 0.5, th - 0.5], [-0.5, th - 0.5]]]
-        )
         if marker2cam[2, 3] <= 0.0:
             return None  # behind the camera
-        corners = cv2.perspectiveTransform(outline, tex_to_img)[0]
+        corners = cv2.perspectiveTransform(self._texture_outline, tex_to_img)[0]
         xs, ys = corners[:, 0].tolist(), corners[:, 1].tolist()
         h, w = self.intrinsics.shape
         x0 = max(math.floor(min(xs)) - 2, 0)
