@@ -100,7 +100,7 @@ def test_save_load_round_trip_and_bad_files(tmp_path: Path) -> None:
         assert a[0] == b[0]
         assert np.array_equal(a[1], b[1])
         assert np.array_equal(a[2], b[2])
-    assert back.band_rel(150.0) == model.band_rel(150.0)
+    assert back.band_rel(150.0, 40.0) == model.band_rel(150.0, 40.0)
     with pytest.raises(ObserverFileError, match="missing"):
         load_observer(tmp_path / "none")
     npz = tmp_path / "m" / "observer.npz"
@@ -133,7 +133,7 @@ def test_shipped_observer_loads_with_physical_parameters() -> None:
     assert np.all(tau_hot < tau_cold)  # relaxation speeds up with temperature
     assert np.all(k_cold > 0)
     assert np.all(k_hot > 0)
-    assert 0.0 < model.band_rel(100.0) < 0.5
+    assert 0.0 < model.band_rel(100.0, 40.0) < 0.5
 
 
 def test_profile_grammar() -> None:
@@ -459,9 +459,9 @@ def test_band_widens_after_the_fit_by_what_a_share_error_would_move_the_estimate
         ref = plain._with_share(ForceEstimate(eq10, math.nan), math.nan, float(t) - 1.2,
                                 plain.unit_force_m(), motor, d)
         assert got.force_n == ref.force_n
-        assert ref.band_hi_n - ref.force_n == pytest.approx(no_spread.band_rel(t - 1.2) * 5.0)
+        assert ref.band_hi_n - ref.force_n == pytest.approx(no_spread.band_rel(t - 1.2, 40.0) * 5.0)
         rows.append((t, est._fitting, got.force_n, got.band_hi_n - got.force_n,
-                     other.unit_force_m(), model.band_rel(t - 1.2) * 5.0))
+                     other.unit_force_m(), model.band_rel(t - 1.2, 40.0) * 5.0))
     assert est.share == pytest.approx(1.0, abs=1e-6)
     end = next(i for i, r in enumerate(rows) if not r[1])
     _t_end, _, f_end, half_end, u_other_end, base_end = rows[end]
@@ -498,7 +498,7 @@ def test_drift_scale_is_its_own_and_old_files_keep_one_scale(tmp_path: Path) -> 
     one = ObserverModel.from_arrays(arrays, params)
     split = ObserverModel.from_arrays(arrays, {**params, "band_scale": 0.5, "drift_scale": 2.0})
     assert split.band_drift_rel(45.0) == pytest.approx(2.0 * one.band_drift_rel(45.0))
-    assert split.band_rel(100.0) == pytest.approx(0.5 * one.band_rel(100.0))
+    assert split.band_rel(100.0, 40.0) == pytest.approx(0.5 * one.band_rel(100.0, 40.0))
     save_observer(tmp_path / "m", split, {})
     assert load_observer(tmp_path / "m").drift_scale == 2.0
     old = {k: v for k, v in params.items() if k != "drift_scale"}
@@ -521,10 +521,12 @@ def test_the_band_floor_adds_newtons_and_old_files_have_none(tmp_path: Path) -> 
     plain = ObserverModel.from_arrays(arrays, params)
     floored = ObserverModel.from_arrays(arrays, {**params, "band_floor_n": 0.02})
     for f in (1.0, 8.0):
-        assert floored.band_half_n(100.0, f) == pytest.approx(plain.band_half_n(100.0, f) + 0.02)
-        assert plain.band_half_n(100.0, f) == pytest.approx(plain.band_rel(100.0) * f)
-        assert floored.closing_half_n(f) == pytest.approx(plain.closing_half_n(f) + 0.02)
-    assert floored.closing_half_n(0.0) == 0.02  # around an open gripper's zero too
+        assert floored.band_half_n(100.0, f, 40.0) == pytest.approx(
+            plain.band_half_n(100.0, f, 40.0) + 0.02)
+        assert plain.band_half_n(100.0, f, 40.0) == pytest.approx(plain.band_rel(100.0, 40.0) * f)
+        assert floored.closing_half_n(f, 40.0) == pytest.approx(
+            plain.closing_half_n(f, 40.0) + 0.02)
+    assert floored.closing_half_n(0.0, 40.0) == 0.02  # around an open gripper's zero too
     save_observer(tmp_path / "m", floored, {})
     assert load_observer(tmp_path / "m").band_floor_n == 0.02
     assert load_observer(tmp_path / "m").provenance()["band_floor_n"] == 0.02

@@ -19,6 +19,7 @@ from relaxgrip.experiments.band_calibration import (
     calibrate_band,
     fit_scales,
     least_covering,
+    measuring,
     quantile_floor,
     seed_intervals,
 )
@@ -76,7 +77,7 @@ def test_the_drift_part_is_recorded_once_the_share_fit_ends() -> None:
     assert np.all(drift[hold_s < 5.0] == 0.0)
     assert drift[-1] > 0.0
     half = 0.5 * (hold.series("band_hi_n") - hold.series("band_lo_n"))
-    onset = np.array([model.band_rel(t) for t in hold_s]) * hold.series("f_onset_n")
+    onset = np.array([model.band_rel(t, 40.0) for t in hold_s]) * hold.series("f_onset_n")
     started = np.isfinite(onset)  # the onset frame itself has the band of the closing
     assert started.mean() > 0.99
     np.testing.assert_allclose(half[started], (0.03 + onset + drift)[started], rtol=1e-9,
@@ -116,7 +117,7 @@ def test_fit_scales_by_hand() -> None:
     error = np.concatenate([still, 95.0 + 2.0 * np.arange(1.0, 21.0)])  # 20 over by 2..40
     onset = np.ones(120)
     drift = np.concatenate([np.zeros(100), np.ones(20)])
-    (band, scale, floor), drift_set = fit_scales(BandSamples(error, onset, drift), 0.95)
+    (band, scale, floor, _, _), drift_set = fit_scales(BandSamples(error, onset, drift), 0.95)
     assert drift_set
     assert floor == 0.0  # one onset part for all: a floor is a scale
     assert band == 95.0
@@ -128,9 +129,9 @@ def test_fit_scales_by_hand() -> None:
     assert x.coverage(BandScales(band, 0.0, 0.0)) == pytest.approx(95 / 120)  # none of the 20
     # Covered by the onset part alone: no drift part needed.
     assert fit_scales(BandSamples(np.full(4, 0.5), np.ones(4), np.array([0, 0, 1, 1.0])),
-                      0.95) == ((0.5, 0.0, 0.0), True)
+                      0.95) == (BandScales(0.5, 0.0, 0.0), True)
     assert fit_scales(BandSamples(still, onset[:100], drift[:100]), 0.95, 0.7) == (
-        (95.0, 0.7, 0.0), False)
+        BandScales(95.0, 0.7, 0.0), False)
     with pytest.raises(InputError, match="without its drift part"):
         fit_scales(BandSamples(still, onset[:100], np.ones(100)), 0.95)
 
@@ -175,22 +176,22 @@ def test_seed_intervals_show_how_sure_the_scales_are() -> None:
     seeds narrow the intervals."""
     rng = np.random.default_rng(1)
     alike = [_samples(rng, 500) for _ in range(12)]
-    (lo, hi), (dlo, dhi), _ = seed_intervals(alike, 0.95)
-    (band, drift, _), drift_set = fit_scales(BandSamples.join(alike), 0.95)
+    (lo, hi), (dlo, dhi), _, _ = seed_intervals(alike, 0.95)
+    (band, drift, _, _, _), drift_set = fit_scales(BandSamples.join(alike), 0.95)
     assert drift_set
     assert lo <= band <= hi
     assert dlo <= drift <= dhi
     assert hi - lo < 0.03
     offsets = [_samples(rng, 500, spread=0.5) for _ in range(36)]
-    (lo12, hi12), _, _ = seed_intervals(offsets[:12], 0.95)
-    (lo36, hi36), _, _ = seed_intervals(offsets, 0.95)
+    (lo12, hi12), _, _, _ = seed_intervals(offsets[:12], 0.95)
+    (lo36, hi36), _, _, _ = seed_intervals(offsets, 0.95)
     assert hi12 - lo12 > 0.2
     assert hi36 - lo36 < hi12 - lo12
     one = seed_intervals([alike[0]], 0.95)
     assert one[0] == pytest.approx((fit_scales(alike[0], 0.95)[0].band_scale,) * 2)
     assert seed_intervals(offsets, 0.95)[0] == (lo36, hi36)  # reproducible
     # Thinned to every 4th frame (6000 of them to 1500): about the same intervals.
-    (tlo, thi), _, _ = seed_intervals(alike, 0.95, frames=1500)
+    (tlo, thi), _, _, _ = seed_intervals(alike, 0.95, frames=1500)
     assert (tlo, thi) != (lo, hi)
     assert (tlo, thi) == pytest.approx((lo, hi), abs=0.03)
     none = seed_intervals([_samples(rng, 50, drift_share=0.0)], 0.95)[1]
@@ -200,8 +201,9 @@ def test_seed_intervals_show_how_sure_the_scales_are() -> None:
 def test_calibration_sets_the_least_scales_that_cover_the_level() -> None:
     model = load_default_observer()
     result = calibrate_band(model, [0], ["standard"], duration_s=8.0)
-    hold = run_hold("observer", duration_s=8.0, seed=0)
-    x = BandSamples.of(hold, BandScales.of(model))
+    held = measuring(model)  # the band the holds ran with: no temperature factors
+    hold = run_hold("observer", duration_s=8.0, seed=0, observer=held)
+    x = BandSamples.of(hold, BandScales.of(held))
     floor = quantile_floor(x.error_n, x.onset_n, 0.95)
     assert result.band_floor_n == pytest.approx(floor)
     assert result.band_scale == pytest.approx(
@@ -226,8 +228,9 @@ def test_calibration_sets_the_drift_scale_where_the_drift_is() -> None:
     model = load_default_observer()
     result = calibrate_band(model, [1, 2], ["ramp"], duration_s=40.0, n_jobs=2)
     assert result.drift_samples > 0
-    holds = [scenario_hold("observer", "ramp", seed, 40.0) for seed in (1, 2)]
-    every = BandSamples.join([BandSamples.of(h, BandScales.of(model)) for h in holds])
+    held = measuring(model)
+    holds = [scenario_hold("observer", "ramp", seed, 40.0, observer=held) for seed in (1, 2)]
+    every = BandSamples.join([BandSamples.of(h, BandScales.of(held)) for h in holds])
     assert result.scales == pytest.approx(fit_scales(every, 0.95)[0])
     assert every.coverage(result.scales) >= 0.95
     silent = load_default_observer()
@@ -331,7 +334,7 @@ def test_summary_is_the_mean_over_each_scenarios_holds() -> None:
     rows = {"1": {"mae_n": 0.1, "coverage_before": 0.5, "coverage_after": 1.0},
             "2": {"mae_n": 0.3, "coverage_before": 0.7, "coverage_after": 0.9}}
     result = BandCalibration(0.2, (0.1, 0.3), 1.0, (0.8, 1.2), 0.01, (0.0, 0.02), 0.95, 10, 4,
-                             [1, 2], 0.25, 0.25, 0.0, {"ramp": {"seeds": rows}})
+                             [1, 2], 0.25, 0.25, 0.0, scenarios={"ramp": {"seeds": rows}})
     assert result.summary() == {"ramp": pytest.approx(
         {"mae_n": 0.2, "coverage_before": 0.6, "coverage_after": 0.95})}
 

@@ -38,7 +38,7 @@ def test_fit_on_twin_holds_gives_physical_parameters_and_a_share_spread(holds: P
     assert np.all(np.isfinite(model.share_spread_))
     assert np.all(model.share_spread_ >= 0)
     assert 0.01 < float(np.max(model.share_spread_)) < 0.5
-    assert 0 < model.band_rel(100.0) < 0.5
+    assert 0 < model.band_rel(100.0, 40.0) < 0.5
     back = load_observer(tmp_path / "obs")
     assert np.array_equal(back.share_spread_, model.share_spread_)
     assert back.band_drift_rel(45.0) == model.band_drift_rel(45.0)

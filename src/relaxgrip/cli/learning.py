@@ -7,7 +7,7 @@ import time
 from contextlib import nullcontext
 from dataclasses import replace
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn
@@ -15,6 +15,9 @@ from rich.table import Table
 
 from relaxgrip.cli._app import app, console, emit_json, err_console, float_option, int_option
 from relaxgrip.errors import InputError
+
+if TYPE_CHECKING:  # the CLI imports its commands' modules lazily
+    from relaxgrip.experiments.band_calibration import BandCalibration
 
 dataset_app = typer.Typer(help="Generate and convert training datasets.", no_args_is_help=True)
 app.add_typer(dataset_app, name="dataset")
@@ -224,7 +227,7 @@ def fit_observer_command(
 
 
 #: The twin's band holds: options and defaults; ``--recordings`` takes recorded holds instead.
-_TWIN_BAND = {"--seeds": "3000-3035", "--scenarios": "standard,ramp,step,light,firm",
+_TWIN_BAND = {"--seeds": "3000-3035", "--scenarios": "standard,ramp,step,light,firm,hot",
               "--duration-s": "280"}
 
 
@@ -250,7 +253,9 @@ def calibrate_band_command(
                         f"{_TWIN_BAND['--seeds']})", show_default=False)] = None,
     scenarios: Annotated[str | None, typer.Option(
         "--scenarios", help="Comma-separated: standard, ramp (40 -> 55 °C from 150 s), "
-                            "step (5 -> 3 N at 150 s), push (2 N from 200 s). (default: "
+                            "step (5 -> 3 N at 150 s), push (2 N from 200 s), light (1 N), "
+                            "firm (8 N), hot (55 °C); holds at more than one temperature "
+                            "set the band's temperature factors. (default: "
                             f"{_TWIN_BAND['--scenarios']})", show_default=False)] = None,
     duration_s: Annotated[float | None, float_option(
         "--duration-s", help="Hold length (s); profile times scale with it. (default: "
@@ -317,7 +322,7 @@ def calibrate_band_command(
             result = calibrate_band(model, seed_list, names, duration_s, bundle, jobs)
     if not dry_run:
         set_band_scale(observer, result.band_scale, result.record(), result.drift_scale,
-                       result.band_floor_n)
+                       result.band_floor_n, (result.band_temps_c, result.band_temp_factors))
     if json_out:
         emit_json({"observer": str(observer), "written": not dry_run, **result.record(),
                    "summary": result.summary(), "models_note": note})
@@ -354,8 +359,22 @@ def calibrate_band_command(
     console.print(f"band scale {result.band_scale:.4g} (90 % over resampled seeds: {lo:.3g}-"
                   f"{hi:.3g}) over {result.samples} hold samples")
     console.print(f"band floor {result.band_floor_n:.4g} N ({floor_lo:.3g}-{floor_hi:.3g})")
+    console.print(_temp_factors_line(result))
     console.print(drift)
     console.print(f"{verb}, {time.perf_counter() - start:.0f} s")
+
+
+def _temp_factors_line(result: BandCalibration) -> str:
+    """What the recalibration did with the band's temperature factors, in one line."""
+    def listed(temps: tuple[float, ...], factors: tuple[float, ...]) -> str:
+        return ", ".join(f"{f:.3g} at {t:g} °C" for t, f in zip(temps, factors, strict=True))
+
+    if not result.factor_intervals:
+        kept = listed(result.band_temps_c, result.band_temp_factors) or "none"
+        return f"temperature factors kept ({kept}): the holds were at one temperature"
+    spans = ", ".join(f"{f:.3g} ({lo:.3g}-{hi:.3g}) at {t:g} °C" for t, f, (lo, hi) in zip(
+        result.band_temps_c, result.band_temp_factors, result.factor_intervals, strict=True))
+    return f"temperature factors {spans}"
 
 
 def _calibrate_hold_command(models: str, targets: str, temps: str, seeds: str,

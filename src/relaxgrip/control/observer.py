@@ -57,9 +57,11 @@ A chain of the observer's own,
 counted from the fit's end and blended in at 0.3, held the ramp worse
 (0.085 against 0.072 N, seeds 2000-2023) and was not kept.
 
-The band: 95 % half-width ``band_floor_n + band_rel(t) F_onset``, a floor in
+The band: 95 % half-width ``band_floor_n + band_rel(t, T) F_onset``, a floor in
 newtons and a share of the onset force from the model's held-out residuals
-(ICFN onset error included), the floor and the ICFN's onset error before; once
+(ICFN onset error included) times a factor at the finger's temperature ``T``
+(``band_factor``: 1 where the band was calibrated, wider where it is hot), the
+floor and the ICFN's onset error before; once
 the share fit has ended, plus the run-to-run spread of the relaxing share
 times what the branches have relaxed since (``band_drift_rel``): a
 temperature ramp relaxes the finger by a share the fit at the old
@@ -300,7 +302,7 @@ class ObserverEstimator:
             self.advance(t, float(pose[0]), self.temp_c)
         u = self.unit_force_m()
         if self._onset_t is None:
-            half = self.model.closing_half_n(f)
+            half = self.model.closing_half_n(f, self.temp_c)
             return ForceEstimate(f, raw, band_lo_n=f - half, band_hi_n=f + half,
                                  band_drift_n=0.0)
         hold = t - self._onset_t
@@ -315,7 +317,7 @@ class ObserverEstimator:
         if not (math.isfinite(self.scale_n_per_m) and math.isfinite(u)):
             return ForceEstimate(NAN, raw, hold_s=hold)
         est = self.scale_n_per_m * u
-        half = self.model.band_half_n(hold, self.f_onset_n)
+        half = self.model.band_half_n(hold, self.f_onset_n, self.temp_c)
         return ForceEstimate(est, raw, self.f_onset_n, hold_s=hold,
                              band_lo_n=est - half, band_hi_n=est + half, band_drift_n=0.0)
 
@@ -406,7 +408,7 @@ class ObserverEstimator:
             # What the branches relax after the fit carries the run's share spread.
             unseen = self.scale_n_per_m * self.share * abs(r - self._r_end)
             drift = self.model.band_drift_rel(self.temp_c) * unseen
-        half = self.model.band_half_n(hold, f_on) + drift
+        half = self.model.band_half_n(hold, f_on, self.temp_c) + drift
         return ForceEstimate(est, raw, f_on, relax.k_n, relax.tau_s, hold,
                              band_lo_n=est - half, band_hi_n=est + half, band_drift_n=drift,
                              calibration_n=(calibration if math.isfinite(relax.calibration_n)

@@ -84,6 +84,7 @@ from relaxgrip.learning.store import ModelBundle
 __all__ = [
     "DEFAULT_SCENARIOS",
     "INTERVAL_FRAMES",
+    "KNOT_REACH_K",
     "BandCalibration",
     "BandHold",
     "BandSamples",
@@ -100,7 +101,7 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 
 #: The scenarios the band is calibrated on by default (any of :data:`SCENARIOS` can be).
-DEFAULT_SCENARIOS = ("standard", "ramp", "step", "light", "firm")
+DEFAULT_SCENARIOS = ("standard", "ramp", "step", "light", "firm", "hot")
 
 
 class BandScales(NamedTuple):
@@ -114,15 +115,30 @@ class BandScales(NamedTuple):
         Factor on the relaxing share's part.
     floor_n : float
         Half-width in newtons added to both (``band_floor_n``).
+    temps_c, temp_factors : tuple of float
+        Factors on the relative part at finger temperatures (``band_temps_c``,
+        ``band_temp_factors``; none: 1 everywhere).
     """
 
     band_scale: float
     drift_scale: float
     floor_n: float
+    temps_c: tuple[float, ...] = ()
+    temp_factors: tuple[float, ...] = ()
 
     @classmethod
     def of(cls, observer: ObserverModel) -> BandScales:
-        return cls(observer.band_scale, observer.drift_scale, observer.band_floor_n)
+        return cls(observer.band_scale, observer.drift_scale, observer.band_floor_n,
+                   observer.band_temps_c, observer.band_temp_factors)
+
+    def factor(self, temp_c: FloatArray) -> FloatArray:
+        """The relative part's factor at each temperature (°C), as
+        :meth:`ObserverModel.band_factor` has it: 1 without factors or a temperature."""
+        temp_c = np.asarray(temp_c, dtype=np.float64)
+        if not self.temp_factors:
+            return np.ones_like(temp_c)
+        out: FloatArray = np.interp(temp_c, self.temps_c, self.temp_factors)
+        return np.where(np.isfinite(temp_c), out, 1.0)
 
 
 @dataclass(frozen=True)
@@ -138,36 +154,58 @@ class BandSamples:
     drift_n : ndarray
         The relaxing share's part at ``drift_scale`` 1 (N; 0 while the share
         fit runs).
+    temp_c : ndarray, optional
+        The finger temperature (°C; nan where none was read, and everywhere
+        without it).
     """
 
     error_n: FloatArray
     onset_n: FloatArray
     drift_n: FloatArray
+    temp_c: FloatArray = field(default_factory=lambda: np.zeros(0))
+
+    def __post_init__(self) -> None:
+        if self.temp_c.size == 0 and self.error_n.size:  # none read
+            object.__setattr__(self, "temp_c", np.full(self.error_n.shape, np.nan))
 
     @classmethod
     def of(cls, hold: HoldResult, scales: BandScales) -> BandSamples:
-        """The samples of an ``observer`` hold whose band had these scales."""
+        """The samples of an ``observer`` hold whose band had these scales (the
+        temperature the infrared camera read of both fingers)."""
+        temp = 0.5 * (hold.series("ir_temp_0_c") + hold.series("ir_temp_1_c"))
         return cls.of_series(hold.series("estimate_n"), hold.series("truth_force_n"),
                              hold.series("band_lo_n"), hold.series("band_hi_n"),
-                             hold.series("band_drift_n"), scales)
+                             hold.series("band_drift_n"), scales, temp)
 
     @classmethod
     def of_series(cls, est: FloatArray, truth: FloatArray, lo: FloatArray, hi: FloatArray,
-                  drift: FloatArray, scales: BandScales) -> BandSamples:
+                  drift: FloatArray, scales: BandScales,
+                  temp_c: FloatArray | float) -> BandSamples:
         """The samples of a hold's series: the estimate, the truth, the band (its low and
-        high edge and its drift part), the band's scales."""
-        onset = (0.5 * (hi - lo) - drift - scales.floor_n) / scales.band_scale
+        high edge and its drift part), the band's scales, the finger temperature.
+
+        The relative part is recovered through ``scales``' temperature factors
+        at ``temp_c``: exactly when the hold ran without them (:func:`measuring`).
+        """
+        temp_c = np.broadcast_to(np.asarray(temp_c, dtype=np.float64), est.shape)
+        onset = ((0.5 * (hi - lo) - drift - scales.floor_n)
+                 / (scales.band_scale * scales.factor(temp_c)))
         ok = (np.isfinite(onset) & (onset > 0) & np.isfinite(drift) & np.isfinite(est)
               & np.isfinite(truth))
         # A part with no scale recorded nothing to learn its size from.
         unit = (drift[ok] / scales.drift_scale if scales.drift_scale > 0
                 else np.zeros(int(ok.sum())))
-        return cls(np.abs(est[ok] - truth[ok]), onset[ok], unit)
+        return cls(np.abs(est[ok] - truth[ok]), onset[ok], unit, temp_c[ok].copy())
 
     @classmethod
     def join(cls, parts: Sequence[BandSamples]) -> BandSamples:
         return cls(*(np.concatenate([getattr(p, name) for p in parts]) if parts else np.zeros(0)
-                     for name in ("error_n", "onset_n", "drift_n")))
+                     for name in ("error_n", "onset_n", "drift_n", "temp_c")))
+
+    def every(self, stride: int) -> BandSamples:
+        """Every ``stride``-th sample."""
+        return BandSamples(self.error_n[::stride], self.onset_n[::stride],
+                           self.drift_n[::stride], self.temp_c[::stride])
 
     @property
     def size(self) -> int:
@@ -177,7 +215,8 @@ class BandSamples:
         """Share of the samples inside the band at these scales (nan without samples)."""
         if not self.size:
             return math.nan
-        half = scales.floor_n + scales.band_scale * self.onset_n + scales.drift_scale * self.drift_n
+        half = (scales.floor_n + scales.band_scale * scales.factor(self.temp_c) * self.onset_n
+                + scales.drift_scale * self.drift_n)
         return float(np.mean(self.error_n <= half))
 
 
@@ -227,10 +266,20 @@ def quantile_floor(error_n: FloatArray, onset_n: FloatArray, level: float) -> fl
     return float(best.x) if float(best.fun) < none - 1e-9 * abs(none) else 0.0
 
 
-def fit_scales(samples: BandSamples, level: float,
-               drift_scale: float | None = None) -> tuple[BandScales, bool]:
-    """The band's floor, then the least ``band_scale``, then the least ``drift_scale``,
-    that cover ``level``.
+#: Samples within this of a held temperature are its holds' (K): the infrared reading
+#: of a held finger scatters by a few tenths of a kelvin.
+KNOT_REACH_K = 2.0
+#: The least temperature factor: where the floor alone covers a temperature's holds, the
+#: relative part all but gone rather than below zero.
+_MIN_FACTOR = 0.05
+
+
+def fit_scales(samples: BandSamples, level: float, drift_scale: float | None = None,
+               temps_c: Sequence[float] = (),
+               kept: tuple[tuple[float, ...], tuple[float, ...]] = ((), ()),
+               ) -> tuple[BandScales, bool]:
+    """The band's floor and ``band_scale``, its temperature factors, then the least
+    ``drift_scale``, that cover ``level``.
 
     Parameters
     ----------
@@ -239,38 +288,74 @@ def fit_scales(samples: BandSamples, level: float,
         Coverage the band states.
     drift_scale : float, optional
         Kept when no sample has a drift part (default: 1).
+    temps_c : sequence of float
+        The temperatures the holds were held at (°C).  With two or more, each
+        gets a factor, set on the samples within :data:`KNOT_REACH_K` of it
+        without a drift part: 1 at the one with the most, where the floor and
+        ``band_scale`` are set; elsewhere the least covering of ``(error -
+        floor) / (band_scale onset)``.
+    kept : (temperatures, factors)
+        The factors with fewer than two temperatures: kept, and applied to
+        the samples the floor and scale are set on.
 
     Returns
     -------
     scales : BandScales
-        ``floor_n``: :func:`quantile_floor` over the samples without a drift
-        part; ``band_scale``: the least covering of ``(error - floor) /
-        onset`` over them (``level`` of them inside, whatever the line's fit);
-        ``drift_scale``: the least covering of ``(error - floor - band_scale
-        onset) / drift`` (0 where the rest covers) over the samples with one.
+        ``floor_n``: :func:`quantile_floor`; ``band_scale``: the least covering
+        of ``(error - floor) / onset`` (``level`` of them inside, whatever the
+        line's fit), both over the samples without a drift part (at the base
+        temperature); the temperature factors; ``drift_scale``: the least
+        covering of ``(error - floor - band_scale factor onset) / drift`` (0
+        where the rest covers) over the samples with one.
     drift_set : bool
         Whether any sample had a drift part to set ``drift_scale`` on.
 
     Raises
     ------
     InputError
-        No sample without a drift part (nothing to set ``band_scale`` on).
+        No sample without a drift part (nothing to set ``band_scale`` on), or
+        none at one of ``temps_c``.
     """
     still = samples.drift_n <= 0
     if not still.any():
         raise InputError("no hold sample has the band without its drift part to set the band "
                          "scale on")
-    error, onset = samples.error_n[still], samples.onset_n[still]
+    error, onset, temp = samples.error_n[still], samples.onset_n[still], samples.temp_c[still]
+    knots = sorted({float(t) for t in temps_c})
+    if len(knots) >= 2:
+        near = [np.abs(temp - knot) <= KNOT_REACH_K for knot in knots]
+        for knot, mask in zip(knots, near, strict=True):
+            if not mask.any():
+                raise InputError(f"no hold sample at {knot:g} °C to set the band's factor there")
+        base = int(np.argmax([np.count_nonzero(mask) for mask in near]))
+        floor, band = _floor_and_scale(error[near[base]], onset[near[base]], level)
+        factors = tuple(
+            1.0 if k == base else max(_MIN_FACTOR, least_covering(
+                (error[mask] - floor) / (band * onset[mask]), level))
+            for k, mask in enumerate(near))
+        first = BandScales(band, 1.0, floor, tuple(knots), factors)
+    else:
+        keep = BandScales(1.0, 1.0, 0.0, *kept)
+        floor, band = _floor_and_scale(error, onset * keep.factor(temp), level)
+        first = keep._replace(band_scale=band, floor_n=floor)
+    first = first._replace(drift_scale=1.0 if drift_scale is None else drift_scale)
+    moving = ~still
+    if not moving.any():
+        return first, False
+    part = first.band_scale * first.factor(samples.temp_c[moving]) * samples.onset_n[moving]
+    excess = np.maximum(samples.error_n[moving] - floor - part, 0.0)
+    return first._replace(drift_scale=least_covering(excess / samples.drift_n[moving],
+                                                     level)), True
+
+
+def _floor_and_scale(error: FloatArray, onset: FloatArray, level: float) -> tuple[float, float]:
+    """:func:`quantile_floor`, then the least ``band_scale`` covering ``level`` with it."""
     floor = quantile_floor(error, onset, level)
     band = least_covering((error - floor) / onset, level)
     if band <= 0:  # the floor alone covers: keep a relative part of the line's
         floor = 0.0
         band = least_covering(error / onset, level)
-    moving = ~still
-    if not moving.any():
-        return BandScales(band, 1.0 if drift_scale is None else drift_scale, floor), False
-    excess = np.maximum(samples.error_n[moving] - floor - band * samples.onset_n[moving], 0.0)
-    return BandScales(band, least_covering(excess / samples.drift_n[moving], level), floor), True
+    return floor, band
 
 
 Interval = tuple[float, float]
@@ -283,8 +368,10 @@ INTERVAL_FRAMES = 50_000
 
 
 def seed_intervals(samples_by_seed: Sequence[BandSamples], level: float, resamples: int = 200,
-                   rng_seed: int = 0,
-                   frames: int = INTERVAL_FRAMES) -> tuple[Interval, Interval, Interval]:
+                   rng_seed: int = 0, frames: int = INTERVAL_FRAMES,
+                   temps_c: Sequence[float] = (),
+                   kept: tuple[tuple[float, ...], tuple[float, ...]] = ((), ()),
+                   ) -> tuple[Interval, Interval, Interval, list[Interval]]:
     """90 % intervals of :func:`fit_scales`' scales with the seeds resampled (bootstrap).
 
     Parameters
@@ -300,30 +387,36 @@ def seed_intervals(samples_by_seed: Sequence[BandSamples], level: float, resampl
     frames : int
         Each seed's samples are thinned to every k-th, one k for all, so that
         about this many are left in all.
+    temps_c, kept
+        As :func:`fit_scales` takes them.
 
     Returns
     -------
-    tuple of (lo, hi) for ``band_scale``, for ``drift_scale``, then for the floor (N)
+    tuple of (lo, hi) for ``band_scale``, ``drift_scale``, the floor (N); list for the factors
         Each over the draws that could set it: the drift scale's over those
-        with a drift part (nan, nan when none had one).
+        with a drift part (nan, nan when none had one); one per temperature
+        factor fitted (none with fewer than two temperatures).
     """
     rng = np.random.default_rng(rng_seed)
     n = len(samples_by_seed)
     stride = max(1, math.ceil(sum(x.size for x in samples_by_seed) / max(frames, 1)))
     if stride > 1:
-        samples_by_seed = [BandSamples(x.error_n[::stride], x.onset_n[::stride],
-                                       x.drift_n[::stride]) for x in samples_by_seed]
+        samples_by_seed = [x.every(stride) for x in samples_by_seed]
     band: list[float] = []
     drift: list[float] = []
     floor: list[float] = []
+    factors: list[tuple[float, ...]] = []
+    fitted = len({float(t) for t in temps_c}) >= 2
     for _ in range(resamples):
         draw = BandSamples.join([samples_by_seed[i] for i in rng.integers(0, n, n)])
         try:
-            scales, drift_set = fit_scales(draw, level)
-        except InputError:  # a draw of seeds that recorded nothing to set the band scale on
+            scales, drift_set = fit_scales(draw, level, temps_c=temps_c, kept=kept)
+        except InputError:  # a draw of seeds that recorded nothing to set a scale on
             continue
         band.append(scales.band_scale)
         floor.append(scales.floor_n)
+        if fitted:
+            factors.append(scales.temp_factors)
         if drift_set:
             drift.append(scales.drift_scale)
 
@@ -333,7 +426,8 @@ def seed_intervals(samples_by_seed: Sequence[BandSamples], level: float, resampl
         lo, hi = np.percentile(values, [5.0, 95.0])
         return float(lo), float(hi)
 
-    return interval(band), interval(drift), interval(floor)
+    each = [interval([f[k] for f in factors]) for k in range(len(factors[0]))] if factors else []
+    return interval(band), interval(drift), interval(floor), each
 
 
 @dataclass(frozen=True)
@@ -364,6 +458,13 @@ class BandCalibration:
     seeds : list of int
     previous_scale, previous_drift_scale, previous_floor_n : float
         The scales and floor the holds ran with.
+    band_temps_c, band_temp_factors : tuple of float
+        The new temperature factors (:func:`fit_scales`; the previous ones
+        when the holds had fewer than two temperatures).
+    factor_intervals : list of tuple of float
+        Their 90 % intervals (none when kept).
+    previous_temps_c, previous_temp_factors : tuple of float
+        The temperature factors the observer had.
     scenarios : dict of str to dict
         Per scenario: its profiles, and per seed the MAE (N) and the coverage
         of the hold samples at the old and at the new scales.  Measured on
@@ -386,12 +487,18 @@ class BandCalibration:
     previous_scale: float
     previous_drift_scale: float
     previous_floor_n: float
+    band_temps_c: tuple[float, ...] = ()
+    band_temp_factors: tuple[float, ...] = ()
+    factor_intervals: list[tuple[float, float]] = field(default_factory=list)
+    previous_temps_c: tuple[float, ...] = ()
+    previous_temp_factors: tuple[float, ...] = ()
     scenarios: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def scales(self) -> BandScales:
-        """The new scales and floor."""
-        return BandScales(self.band_scale, self.drift_scale, self.band_floor_n)
+        """The new scales, floor and temperature factors."""
+        return BandScales(self.band_scale, self.drift_scale, self.band_floor_n,
+                          self.band_temps_c, self.band_temp_factors)
 
     def summary(self) -> dict[str, dict[str, float]]:
         """Per scenario, the mean over its holds of the MAE and of each coverage."""
@@ -412,19 +519,27 @@ class BandCalibration:
             "drift_scale": self.drift_scale,
             "drift_interval_90": [v if math.isfinite(v) else None for v in self.drift_interval],
             "band_floor_n": self.band_floor_n, "floor_interval_90_n": list(self.floor_interval),
+            "band_temps_c": list(self.band_temps_c),
+            "band_temp_factors": list(self.band_temp_factors),
+            "temp_factor_intervals_90": [list(i) for i in self.factor_intervals],
             "level": self.level,
             "method": f"floor: intercept of the {self.level:g} quantile of |estimate - truth| "
                       "as a line in the identified half-width (least pinball loss), then least "
                       f"band scale with {self.level:g} of |estimate - truth| within the floor "
-                      "and the identified half-width, both where it is the whole band, then "
-                      "least drift scale with the same share within all parts where the "
+                      "and the identified half-width, both where it is the whole band at the "
+                      "temperature with the most holds, then at each other temperature held the "
+                      "least factor on the identified half-width with the same share within, "
+                      "then least drift scale with the same share within all parts where the "
                       f"share's drift is there, over {holds}; intervals: the seeds resampled, "
                       f"every k-th frame, about {INTERVAL_FRAMES} in all "
                       "(relaxgrip calibrate-band)",
             "seeds": self.seeds, "samples": self.samples, "drift_samples": self.drift_samples,
             "previous_scale": self.previous_scale,
             "previous_drift_scale": self.previous_drift_scale,
-            "previous_floor_n": self.previous_floor_n, "scenarios": self.scenarios,
+            "previous_floor_n": self.previous_floor_n,
+            "previous_temps_c": list(self.previous_temps_c),
+            "previous_temp_factors": list(self.previous_temp_factors),
+            "scenarios": self.scenarios,
         }
 
 
@@ -473,16 +588,21 @@ def calibrate_band(observer: ObserverModel, seeds: Sequence[int],
     measured = [BandHold(name, SCENARIOS[name].to_dict(), seed,
                          {"mae_n": hold.metrics()["mae_n"]}, BandSamples.of(hold, used))
                 for (name, seed), hold in zip(jobs, holds, strict=True)]
-    return calibration_of(measured, seeds, observer.band_level, previous)
+    return calibration_of(measured, seeds, observer.band_level, previous,
+                          [SCENARIOS[name].temp_c for name in scenarios])
 
 
 def measuring(observer: ObserverModel) -> ObserverModel:
-    """The observer to run the holds with: a band part at scale 0 records nothing of its
-    size, so the drift part gets scale 1 (a copy; the scales set do not depend on it)."""
-    if observer.drift_scale > 0:
+    """The observer to run the holds with (a copy where it differs; the scales set do not
+    depend on it): a band part at scale 0 records nothing of its size, so the drift part
+    gets scale 1, and without temperature factors the relative part is recovered exactly
+    whatever temperature the observer read."""
+    if observer.drift_scale > 0 and not observer.band_temp_factors:
         return observer
     observer = copy.deepcopy(observer)
-    observer.drift_scale = 1.0
+    if observer.drift_scale <= 0:
+        observer.drift_scale = 1.0
+    observer.band_temps_c, observer.band_temp_factors = (), ()
     return observer
 
 
@@ -511,10 +631,11 @@ class BandHold:
 
 
 def calibration_of(holds: Sequence[BandHold], seeds: Sequence[int], level: float,
-                   previous: BandScales) -> BandCalibration:
-    """The band's scales and floor set on ``holds`` (:func:`fit_scales`), their intervals
-    with ``seeds`` resampled (:func:`seed_intervals`), and each hold's coverage at the
-    ``previous`` and the new ones.
+                   previous: BandScales, temps_c: Sequence[float] = ()) -> BandCalibration:
+    """The band's scales, floor and temperature factors set on ``holds`` held at
+    ``temps_c`` (:func:`fit_scales`), their intervals with ``seeds`` resampled
+    (:func:`seed_intervals`), and each hold's coverage at the ``previous`` and the new
+    ones.
 
     Raises
     ------
@@ -524,9 +645,11 @@ def calibration_of(holds: Sequence[BandHold], seeds: Sequence[int], level: float
     every = BandSamples.join([h.samples for h in holds])
     if not every.size:
         raise InputError("the holds recorded no band to calibrate")
-    scales, _ = fit_scales(every, level, previous.drift_scale)
+    kept = (previous.temps_c, previous.temp_factors)
+    scales, _ = fit_scales(every, level, previous.drift_scale, temps_c, kept)
     by_seed = [BandSamples.join([h.samples for h in holds if h.seed == seed]) for seed in seeds]
-    band_interval, drift_interval, floor_interval = seed_intervals(by_seed, level)
+    band_interval, drift_interval, floor_interval, factor_intervals = seed_intervals(
+        by_seed, level, temps_c=temps_c, kept=kept)
     report: dict[str, dict[str, Any]] = {}
     for hold in holds:
         entry = report.setdefault(hold.scenario, {**hold.header, "seeds": {}})
@@ -535,7 +658,9 @@ def calibration_of(holds: Sequence[BandHold], seeds: Sequence[int], level: float
             "coverage_before": hold.samples.coverage(previous),
             "coverage_after": hold.samples.coverage(scales),
         }
-    return BandCalibration(scales.band_scale, band_interval, scales.drift_scale, drift_interval,
-                           scales.floor_n, floor_interval, level, every.size,
-                           int(np.count_nonzero(every.drift_n > 0)), list(seeds), *previous,
-                           report)
+    return BandCalibration(
+        scales.band_scale, band_interval, scales.drift_scale, drift_interval, scales.floor_n,
+        floor_interval, level, every.size, int(np.count_nonzero(every.drift_n > 0)),
+        list(seeds), previous.band_scale, previous.drift_scale, previous.floor_n,
+        scales.temps_c, scales.temp_factors, factor_intervals, previous.temps_c,
+        previous.temp_factors, report)

@@ -362,8 +362,11 @@ def calibrate_band_on_recordings(observer: ObserverModel, paths: Sequence[Path |
         keep = hold.within(hold.length_s)
         samples = BandSamples.of_series(
             hold.estimate_n[keep], hold.truth_n[keep], hold.band_lo_n[keep],
-            hold.band_hi_n[keep], hold.band_drift_n[keep], used)
+            hold.band_hi_n[keep], hold.band_drift_n[keep], used, hold.temp_c)
         row = {"recording": hold.path.name, "mae_n": hold.row(hold.length_s)["mae_n"]}
         measured.append(BandHold(RECORDED_SCENARIO, {"source": RECORDINGS_SOURCE}, seed, row,
                                  samples))
-    return calibration_of(measured, range(len(holds)), observer.band_level, previous)
+    # The plans' temperatures (a plan by stiffness mode has none): holds at two or more set
+    # the band's temperature factors.
+    temps = [hold.temp_c for hold in holds if math.isfinite(hold.temp_c)]
+    return calibration_of(measured, range(len(holds)), observer.band_level, previous, temps)

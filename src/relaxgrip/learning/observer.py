@@ -46,9 +46,10 @@ aperture after a loading at a known closing speed):
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -85,6 +86,7 @@ __all__ = [
     "OBSERVER_VERSION",
     "ObserverModel",
     "branch_responses",
+    "check_temp_factors",
     "default_observer_dir",
     "load_default_observer",
     "load_observer",
@@ -187,17 +189,28 @@ class ObserverModel:
         0: as identified, and files written before the band had one).  The
         ICFN's onset error is partly absolute: a band that is only a share
         of the force is too narrow at small forces.
+    band_temps_c, band_temp_factors : sequence of float
+        Factors on the relative parts of the band at finger temperatures
+        (°C, ascending), interpolated between them and held beyond (a
+        recalibration; none: 1 at every temperature, as identified and in
+        files written before the band had them).  The relative parts are
+        calibrated where most holds are, at 40 °C; hotter, the relaxing
+        share that the hold's error follows scatters more.
     """
 
     def __init__(self, n_terms: int = 3, loading_speed_mm_s: float = LOADING_SPEED_MM_S,
                  band_level: float = 0.95, band_scale: float = 1.0,
-                 drift_scale: float = 1.0, band_floor_n: float = 0.0) -> None:
+                 drift_scale: float = 1.0, band_floor_n: float = 0.0,
+                 band_temps_c: Sequence[float] = (),
+                 band_temp_factors: Sequence[float] = ()) -> None:
         self.n_terms = n_terms
         self.loading_speed_mm_s = loading_speed_mm_s
         self.band_level = band_level
         self.band_scale = band_scale
         self.drift_scale = drift_scale
         self.band_floor_n = band_floor_n
+        self.band_temps_c = tuple(band_temps_c)
+        self.band_temp_factors = tuple(band_temp_factors)
         #: The directory it was loaded from and its file's sha256 (None: built in memory).
         self.source: tuple[Path, str] | None = None
 
@@ -207,13 +220,16 @@ class ObserverModel:
         directory, sha256 = (None, None) if self.source is None else self.source
         return {"directory": None if directory is None else str(directory), "sha256": sha256,
                 "band_scale": self.band_scale, "drift_scale": self.drift_scale,
-                "band_floor_n": self.band_floor_n}
+                "band_floor_n": self.band_floor_n, "band_temps_c": list(self.band_temps_c),
+                "band_temp_factors": list(self.band_temp_factors)}
 
     def get_params(self) -> dict[str, Any]:
         """Hyperparameters (scikit-learn style)."""
         return {"n_terms": self.n_terms, "loading_speed_mm_s": self.loading_speed_mm_s,
                 "band_level": self.band_level, "band_scale": self.band_scale,
-                "drift_scale": self.drift_scale, "band_floor_n": self.band_floor_n}
+                "drift_scale": self.drift_scale, "band_floor_n": self.band_floor_n,
+                "band_temps_c": list(self.band_temps_c),
+                "band_temp_factors": list(self.band_temp_factors)}
 
     # -- evaluation ---------------------------------------------------------------------
 
@@ -260,21 +276,33 @@ class ObserverModel:
         z = NormalDist().inv_cdf(0.5 + 0.5 * self.band_level)  # per frame: not scipy's 46 µs
         return self.drift_scale * z * float(np.interp(temp_c, self.temps_c_, self.share_spread_))
 
-    def band_rel(self, hold_s: float) -> float:
+    def band_factor(self, temp_c: float) -> float:
+        """The factor on the band's relative parts at finger temperature ``temp_c`` (°C):
+        ``band_temp_factors`` interpolated, held beyond the ends; 1 without them or
+        without a temperature read (the band as calibrated where most holds were)."""
+        factors = self.band_temp_factors
+        if not factors or not math.isfinite(temp_c):
+            return 1.0
+        return float(np.interp(temp_c, self.band_temps_c, factors))
+
+    def band_rel(self, hold_s: float, temp_c: float) -> float:
         """Half-width of the band's relative part per newton of onset force, ``hold_s`` into
-        the hold."""
+        the hold with the fingers at ``temp_c`` (°C)."""
         self._check_fitted()
-        return self.band_scale * float(np.interp(hold_s, self.band_t_s_, self.band_rel_))
+        return (self.band_scale * self.band_factor(temp_c)
+                * float(np.interp(hold_s, self.band_t_s_, self.band_rel_)))
 
-    def band_half_n(self, hold_s: float, f_onset_n: float) -> float:
+    def band_half_n(self, hold_s: float, f_onset_n: float, temp_c: float) -> float:
         """Half-width of the band without the share's drift, ``hold_s`` into a hold whose
-        onset force is ``f_onset_n`` (N): the floor and the relative part."""
-        return self.band_floor_n + self.band_rel(hold_s) * f_onset_n
+        onset force is ``f_onset_n`` (N), at ``temp_c`` (°C): the floor and the relative
+        part."""
+        return self.band_floor_n + self.band_rel(hold_s, temp_c) * f_onset_n
 
-    def closing_half_n(self, force_n: float) -> float:
-        """Half-width of the band before the hold, on an ICFN estimate of ``force_n`` (N):
-        the floor and the ICFN's onset error."""
-        return self.band_floor_n + self.onset_rel_ * self.band_scale * force_n
+    def closing_half_n(self, force_n: float, temp_c: float) -> float:
+        """Half-width of the band before the hold, on an ICFN estimate of ``force_n`` (N) at
+        ``temp_c`` (°C): the floor and the ICFN's onset error."""
+        return (self.band_floor_n
+                + self.onset_rel_ * self.band_scale * self.band_factor(temp_c) * force_n)
 
     # -- identification -------------------------------------------------------------------
 
@@ -539,6 +567,7 @@ class ObserverModel:
                              f"{self.band_floor_n!r}")
         if not (self.loading_speed_mm_s > 0 and 0.5 <= self.band_level < 1.0):
             raise InputError("need loading_speed_mm_s > 0, 0.5 <= band_level < 1")
+        check_temp_factors(self.band_temps_c, self.band_temp_factors)
 
     @classmethod
     def from_arrays(cls, arrays: Mapping[str, Any], params: Mapping[str, Any]) -> ObserverModel:
@@ -661,8 +690,9 @@ def load_observer(directory: Path) -> ObserverModel:
 
 
 def set_band_scale(directory: Path, band_scale: float, record: Mapping[str, Any],
-                   drift_scale: float | None = None,
-                   floor_n: float | None = None) -> ObserverModel:
+                   drift_scale: float | None = None, floor_n: float | None = None,
+                   temp_factors: tuple[Sequence[float], Sequence[float]] | None = None,
+                   ) -> ObserverModel:
     """Rewrite an observer directory with a recalibrated band, atomically.
 
     The parameters and the training record are kept; ``record`` (how the
@@ -682,20 +712,27 @@ def set_band_scale(directory: Path, band_scale: float, record: Mapping[str, Any]
     floor_n : float, optional
         The new :attr:`ObserverModel.band_floor_n` (N, >= 0); the directory's
         is kept without one.
+    temp_factors : (temperatures, factors), optional
+        The new :attr:`ObserverModel.band_temps_c` (°C, ascending) and
+        :attr:`ObserverModel.band_temp_factors` (> 0, one per temperature;
+        both empty: none); the directory's are kept without them.
 
     Raises
     ------
     ObserverFileError
         The directory cannot be loaded.
     InputError
-        A band scale that is not a positive number, or a drift scale or floor
-        that is not a number >= 0.
+        A band scale that is not a positive number, a drift scale or floor
+        that is not a number >= 0, or temperature factors as
+        :func:`check_temp_factors` refuses.
     """
     check_positive(band_scale, "band scale")
     if drift_scale is not None and check_finite(drift_scale, "drift scale") < 0:
         raise InputError(f"drift scale must be >= 0, got {drift_scale}")
     if floor_n is not None and check_finite(floor_n, "band floor") < 0:
         raise InputError(f"band floor must be >= 0 N, got {floor_n}")
+    if temp_factors is not None:
+        check_temp_factors(*temp_factors)
     directory = Path(directory)
     model = load_observer(directory)
     manifest = read_manifest(directory / MANIFEST_NAME, OBSERVER_FORMAT, OBSERVER_VERSION,
@@ -708,8 +745,24 @@ def set_band_scale(directory: Path, band_scale: float, record: Mapping[str, Any]
         model.drift_scale = float(drift_scale)
     if floor_n is not None:
         model.band_floor_n = float(floor_n)
+    if temp_factors is not None:
+        model.band_temps_c = tuple(float(t) for t in temp_factors[0])
+        model.band_temp_factors = tuple(float(f) for f in temp_factors[1])
     save_observer(directory, model, training)
     return model
+
+
+def check_temp_factors(temps_c: Sequence[Any], factors: Sequence[Any]) -> None:
+    """Refuse band temperature factors no band can use (:class:`InputError`): one factor
+    (finite, > 0) per temperature (finite, ascending)."""
+    ok = (len(temps_c) == len(factors)
+          and all(_finite_at_least(f, 0.0, strict=True) for f in factors)
+          and all(_finite_at_least(t, -math.inf, strict=True) for t in temps_c)
+          and all(a < b for a, b in itertools.pairwise(temps_c)))
+    if not ok:
+        raise InputError(f"band temperature factors must be one number > 0 per temperature, "
+                         f"the temperatures ascending, got {list(temps_c)!r} °C and "
+                         f"{list(factors)!r}")
 
 
 def _finite_at_least(value: Any, low: float, strict: bool) -> bool:

@@ -161,7 +161,10 @@ def model_differences(recorded: Mapping[str, Any] | None, used: Mapping[str, Any
             out.append("observer")
         elif any(observer.get(k, default) != observer_now.get(k, default)
                  for k, default in (("band_scale", None), ("drift_scale", None),
-                                    ("band_floor_n", 0.0))):  # recorded before the floor: 0
+                                    # recorded before the floor and the temperature
+                                    # factors: none
+                                    ("band_floor_n", 0.0), ("band_temps_c", []),
+                                    ("band_temp_factors", []))):
             out.append("observer band")
     return out
 
