@@ -534,6 +534,40 @@ def test_the_band_floor_adds_newtons_and_old_files_have_none(tmp_path: Path) -> 
     assert ObserverModel.from_arrays(arrays, old).band_floor_n == 0.0
 
 
+def test_the_band_temperature_factors_widen_its_relative_part(tmp_path: Path) -> None:
+    """The factor is interpolated between its temperatures and held beyond, 1 without a
+    temperature read; it multiplies the relative parts, not the floor.  Saved, loaded and
+    carried in provenance; files from before have none; bad ones are refused."""
+    arrays = _arrays(_model())
+    params = {**ObserverModel().get_params(), "band_floor_n": 0.01}
+    plain = ObserverModel.from_arrays(arrays, params)
+    hot = ObserverModel.from_arrays(arrays, {**params, "band_temps_c": [40.0, 55.0],
+                                             "band_temp_factors": [1.0, 3.0]})
+    for temp, factor in ((30.0, 1.0), (40.0, 1.0), (47.5, 2.0), (55.0, 3.0), (70.0, 3.0),
+                         (math.nan, 1.0)):
+        assert hot.band_factor(temp) == pytest.approx(factor)
+        assert hot.band_rel(100.0, temp) == pytest.approx(factor * plain.band_rel(100.0, temp))
+        assert hot.band_half_n(100.0, 5.0, temp) - 0.01 == pytest.approx(
+            factor * (plain.band_half_n(100.0, 5.0, temp) - 0.01))
+        assert hot.closing_half_n(5.0, temp) - 0.01 == pytest.approx(
+            factor * (plain.closing_half_n(5.0, temp) - 0.01))
+    assert plain.band_factor(55.0) == 1.0
+    save_observer(tmp_path / "m", hot, {})
+    back = load_observer(tmp_path / "m")
+    assert (back.band_temps_c, back.band_temp_factors) == ((40.0, 55.0), (1.0, 3.0))
+    assert back.provenance()["band_temp_factors"] == [1.0, 3.0]
+    old = {k: v for k, v in params.items() if not k.startswith("band_temp")}
+    assert ObserverModel.from_arrays(arrays, old).band_temp_factors == ()
+    for temps, factors in (([40.0], []), ([55.0, 40.0], [1.0, 2.0]), ([40.0], [0.0]),
+                           ([40.0], [math.nan]), ([math.inf], [1.0]), ([40.0], ["wide"])):
+        with pytest.raises(ValueError, match="band temperature factors must be one number"):
+            ObserverModel.from_arrays(arrays, {**params, "band_temps_c": temps,
+                                               "band_temp_factors": factors})
+    with pytest.raises(ValueError, match="bad observer parameters"):
+        ObserverModel.from_arrays(arrays, {**params, "band_temps_c": 40.0,
+                                           "band_temp_factors": 1.0})
+
+
 def test_in_a_hold_the_push_ends_the_share_fit_when_it_moves_the_marker() -> None:
     """Through the whole loop: the frames' marker pose reaches the share fit, which ends
     (the observer's ``chain_n`` stops) within a tenth of a second of a 2 N push at 12 s,

@@ -198,6 +198,67 @@ def test_seed_intervals_show_how_sure_the_scales_are() -> None:
     assert all(math.isnan(v) for v in none)
 
 
+def _held_at(rng: np.random.Generator, n: int, temp_c: float, spread_n: float,
+             drift_n: float = 0.0) -> BandSamples:
+    """Samples of holds at ``temp_c`` (read with 0.3 K of noise) whose errors spread by
+    ``spread_n`` against an identified half-width of 0.1 N."""
+    return BandSamples(np.abs(rng.normal(0.0, spread_n, n)), np.full(n, 0.1),
+                       np.full(n, drift_n), temp_c + rng.normal(0.0, 0.3, n))
+
+
+def test_holds_at_two_temperatures_set_a_factor_at_the_hotter() -> None:
+    """Errors twice as wide at 55 °C: the factor there is 2 and each temperature is covered
+    95 % of the time, where one factor for both covers the hot holds under 80 %."""
+    rng = np.random.default_rng(3)
+    warm, hot = _held_at(rng, 20000, 40.0, 0.05), _held_at(rng, 5000, 55.0, 0.10)
+    both = BandSamples.join([warm, hot])
+    scales, _ = fit_scales(both, 0.95, temps_c=[40.0, 55.0, 40.0])
+    assert scales.temps_c == (40.0, 55.0)
+    assert scales.temp_factors[0] == 1.0  # where most samples are
+    assert scales.temp_factors[1] == pytest.approx(2.0, rel=0.05)
+    assert warm.coverage(scales) == pytest.approx(0.95, abs=0.005)
+    assert hot.coverage(scales) == pytest.approx(0.95, abs=0.005)
+    one, _ = fit_scales(both, 0.95)
+    assert one.temp_factors == ()
+    assert hot.coverage(one) < 0.8
+    # A ramp's samples with the drift part: the first part at its factor there.
+    ramp = _held_at(rng, 2000, 55.0, 0.10, drift_n=0.05)
+    scales, drift_set = fit_scales(BandSamples.join([both, ramp]), 0.95, temps_c=[40.0, 55.0])
+    assert drift_set
+    assert scales.drift_scale < 0.2  # the factor covers nearly all of it
+    with pytest.raises(InputError, match="no hold sample at 70 °C"):
+        fit_scales(both, 0.95, temps_c=[40.0, 70.0])
+    # With one temperature the factors kept apply: the hot holds at the kept factor 2.
+    kept = ((40.0, 55.0), (1.0, 2.0))
+    scales, _ = fit_scales(hot, 0.95, temps_c=[55.0], kept=kept)
+    assert (scales.temps_c, scales.temp_factors) == kept
+    assert hot.coverage(scales) == pytest.approx(0.95, abs=0.005)
+    (_, _, _, factors) = seed_intervals([BandSamples.join([_held_at(rng, 400, 40.0, 0.05),
+                                                          _held_at(rng, 100, 55.0, 0.1)])
+                                         for _ in range(12)], 0.95, resamples=40,
+                                        temps_c=[40.0, 55.0])
+    assert factors[0] == (1.0, 1.0)
+    assert factors[1][0] < 2.0 < factors[1][1]
+
+
+def test_samples_recover_the_identified_part_through_the_factors() -> None:
+    """A band recorded with temperature factors gives back the part at factor 1; the
+    observer the holds run with has none (and a drift scale), so that it is exact."""
+    scales = BandScales(0.2, 1.0, 0.01, (40.0, 55.0), (1.0, 3.0))
+    temp = np.array([40.0, 47.5, 55.0, math.nan])
+    onset = np.array([0.1, 0.2, 0.3, 0.4])
+    half = 0.01 + 0.2 * np.array([1.0, 2.0, 3.0, 1.0]) * onset
+    x = BandSamples.of_series(np.zeros(4), np.zeros(4), -half, half, np.zeros(4), scales, temp)
+    np.testing.assert_allclose(x.onset_n, onset)
+    assert x.coverage(scales) == 1.0
+    assert BandSamples(np.zeros(2), np.ones(2), np.zeros(2)).temp_c.shape == (2,)  # none read
+    model = load_default_observer()
+    model.band_temps_c, model.band_temp_factors, model.drift_scale = (40.0, 55.0), (1.0, 2.0), 0.0
+    held = measuring(model)
+    assert (held.band_temp_factors, held.drift_scale) == ((), 1.0)
+    assert model.band_temp_factors == (1.0, 2.0)  # a copy
+
+
 def test_calibration_sets_the_least_scales_that_cover_the_level() -> None:
     model = load_default_observer()
     result = calibrate_band(model, [0], ["standard"], duration_s=8.0)
@@ -281,6 +342,16 @@ def test_set_band_scale_keeps_the_parameters_and_records_how(tmp_path: Path) -> 
     assert load_observer(directory).band_scale == 0.42
     assert load_observer(directory).drift_scale == 1.5
     assert load_observer(directory).band_floor_n == 0.02
+    set_band_scale(directory, 0.42, {}, temp_factors=([40.0, 55.0], [1.0, 1.8]))
+    assert load_observer(directory).band_temp_factors == (1.0, 1.8)
+    set_band_scale(directory, 0.42, {})  # kept without new ones
+    assert load_observer(directory).band_temps_c == (40.0, 55.0)
+    for temps, factors in (([40.0], [1.0, 2.0]), ([55.0, 40.0], [1.0, 2.0]), ([40.0], [-1.0])):
+        with pytest.raises(InputError, match="band temperature factors"):
+            set_band_scale(directory, 0.5, {}, temp_factors=(temps, factors))
+    assert load_observer(directory).band_temp_factors == (1.0, 1.8)
+    set_band_scale(directory, 0.42, {}, temp_factors=([], []))  # none: 1 everywhere
+    assert load_observer(directory).band_temp_factors == ()
     with pytest.raises(ObserverFileError):
         set_band_scale(tmp_path / "missing", 0.5, {})
     with pytest.raises(InputError, match="band scale"):  # checked before the directory is read
@@ -305,8 +376,10 @@ def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: py
                              "--duration-s", "8", "--json"], monkeypatch, capsys)
     assert code == 0
     coverage = json.loads(out)["band_coverage"]
+    # The same frames, the band's temperature factor at the temperature the observer read
+    # (the calibration places samples by the temperature loop's reading): within a frame.
     assert coverage == pytest.approx(
-        record["scenarios"]["standard"]["seeds"]["0"]["coverage_after"])
+        record["scenarios"]["standard"]["seeds"]["0"]["coverage_after"], abs=1 / 240)
     assert record["summary"]["standard"]["coverage_after"] == pytest.approx(
         record["scenarios"]["standard"]["seeds"]["0"]["coverage_after"])
     code, out, _ = run_main(["calibrate-band", directory, "--seeds", "1", "--scenarios",
@@ -316,11 +389,12 @@ def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: py
     assert "measured (not written)" in out
     assert "90 % over resampled seeds" in out
     assert "band floor" in out
+    assert "temperature factors kept" in out  # one temperature held
     assert "per scenario, mean over its holds" in out
     assert load_observer(directory).band_scale == pytest.approx(record["band_scale"])
 
 
-def test_the_command_calibrates_at_three_forces_by_default() -> None:
+def test_the_command_calibrates_at_three_forces_and_two_temperatures_by_default() -> None:
     """The command's default scenarios are the library's: holds at 1, 5 and 8 N, so that
     the floor is set where the band's absolute part shows."""
     from relaxgrip.cli.learning import _TWIN_BAND
@@ -328,6 +402,7 @@ def test_the_command_calibrates_at_three_forces_by_default() -> None:
 
     assert _TWIN_BAND["--scenarios"] == ",".join(DEFAULT_SCENARIOS)
     assert {SCENARIOS[name].target_n for name in DEFAULT_SCENARIOS} == {1.0, 5.0, 8.0}
+    assert {SCENARIOS[name].temp_c for name in DEFAULT_SCENARIOS} == {40.0, 55.0}
 
 
 def test_summary_is_the_mean_over_each_scenarios_holds() -> None:

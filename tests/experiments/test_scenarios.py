@@ -33,12 +33,20 @@ def test_profiles_scale_with_the_hold_and_describe_it() -> None:
     assert [SCENARIOS[n].target_n for n in ("standard", "light", "firm")] == [5.0, 1.0, 8.0]
     assert SCENARIOS["light"].describe() == "light hold, 1 N at 40 °C"
     assert SCENARIOS["firm"].to_dict()["target_n"] == 8.0
+    assert [SCENARIOS[n].temp_c for n in ("standard", "firm", "hot")] == [40.0, 40.0, 55.0]
+    assert SCENARIOS["hot"].to_dict()["temp_c"] == 55.0
 
 
 def test_a_scenario_holds_its_own_target() -> None:
     hold = scenario_hold("observer", "light", seed=0, duration_s=8.0)
     assert np.all(hold.target_t_n == 1.0)
     assert hold.metrics()["mae_n"] < 0.3  # closed on 1 N, not 5
+
+
+def test_a_scenario_holds_at_its_own_temperature() -> None:
+    hold = scenario_hold("observer", "hot", seed=0, duration_s=8.0)
+    assert hold.temp_c == 55.0
+    assert hold.to_dict()["temp_c"] == 55.0
 
 
 @pytest.mark.parametrize("names", [[], ["warp"], ["ramp", "warp"]])

@@ -147,6 +147,12 @@ def test_differences_name_the_calibration_and_the_band() -> None:
     same["observer"]["band_floor_n"] = 0.02
     assert model_differences(recorded, same) == ["observer band"]
     same["observer"]["band_floor_n"] = 0.0
+    # Recorded before the band had temperature factors: none.
+    same["observer"].update(band_temps_c=[], band_temp_factors=[])
+    assert model_differences(recorded, same) == []
+    same["observer"].update(band_temps_c=[40.0, 55.0], band_temp_factors=[1.0, 1.5])
+    assert model_differences(recorded, same) == ["observer band"]
+    same["observer"].update(band_temps_c=[], band_temp_factors=[])
     same["hold_bias_sha256"] = None
     same["observer"]["band_scale"] = 0.3
     assert model_differences(recorded, same) == ["calibration", "observer band"]
