@@ -568,6 +568,28 @@ def test_the_band_temperature_factors_widen_its_relative_part(tmp_path: Path) ->
                                            "band_temp_factors": 1.0})
 
 
+def test_in_a_hot_hold_the_band_widens_by_its_factor_there() -> None:
+    """Through the whole loop at 55 °C: the band's parts but the floor are the factor's
+    times as wide as without it, at the temperature the infrared camera reads."""
+    from relaxgrip.experiments.scenarios import scenario_hold
+    from relaxgrip.learning.observer import load_default_observer
+
+    plain = load_default_observer()
+    plain.band_temps_c, plain.band_temp_factors = (), ()
+    hot = load_default_observer()
+    hot.band_temps_c, hot.band_temp_factors = (40.0, 55.0), (1.0, 3.0)
+    halves = []
+    for model in (plain, hot):
+        hold = scenario_hold("observer", "hot", seed=0, duration_s=8.0, observer=model)
+        half = 0.5 * (hold.series("band_hi_n") - hold.series("band_lo_n"))
+        halves.append(half - hold.series("band_drift_n") - model.band_floor_n)
+    ratio = halves[1] / halves[0]
+    ratio = ratio[np.isfinite(ratio)]
+    assert ratio.size > 200
+    # The camera reads the fingers within a few tenths of a kelvin of 55 °C.
+    assert np.all((ratio > 2.9) & (ratio <= 3.0 + 1e-9))
+
+
 def test_in_a_hold_the_push_ends_the_share_fit_when_it_moves_the_marker() -> None:
     """Through the whole loop: the frames' marker pose reaches the share fit, which ends
     (the observer's ``chain_n`` stops) within a tenth of a second of a 2 N push at 12 s,

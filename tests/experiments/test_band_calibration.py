@@ -72,6 +72,7 @@ def test_the_drift_part_is_recorded_once_the_share_fit_ends() -> None:
     floor and the ICFN's onset error."""
     model = load_default_observer()
     model.band_floor_n = 0.03
+    model.band_temps_c, model.band_temp_factors = (), ()  # the ramp heats: 1 throughout
     hold = scenario_hold("observer", "ramp", seed=1, duration_s=40.0, observer=model)
     drift, hold_s = hold.series("band_drift_n"), hold.series("hold_s")
     assert np.all(drift[hold_s < 5.0] == 0.0)
@@ -265,10 +266,14 @@ def test_calibration_sets_the_least_scales_that_cover_the_level() -> None:
     held = measuring(model)  # the band the holds ran with: no temperature factors
     hold = run_hold("observer", duration_s=8.0, seed=0, observer=held)
     x = BandSamples.of(hold, BandScales.of(held))
-    floor = quantile_floor(x.error_n, x.onset_n, 0.95)
+    # One temperature held: the shipped factors are kept and apply where the loop read it.
+    onset = x.onset_n * BandScales.of(model).factor(x.temp_c)
+    floor = quantile_floor(x.error_n, onset, 0.95)
     assert result.band_floor_n == pytest.approx(floor)
-    assert result.band_scale == pytest.approx(
-        least_covering((x.error_n - floor) / x.onset_n, 0.95))
+    assert result.band_scale == pytest.approx(least_covering((x.error_n - floor) / onset, 0.95))
+    assert (result.band_temps_c, result.band_temp_factors) == (model.band_temps_c,
+                                                               model.band_temp_factors)
+    assert result.factor_intervals == []
     assert result.floor_interval == pytest.approx((floor,) * 2)
     assert result.scale_interval == pytest.approx((result.band_scale,) * 2)  # one seed
     assert result.record()["scale_interval_90"] == list(result.scale_interval)
@@ -292,12 +297,15 @@ def test_calibration_sets_the_drift_scale_where_the_drift_is() -> None:
     held = measuring(model)
     holds = [scenario_hold("observer", "ramp", seed, 40.0, observer=held) for seed in (1, 2)]
     every = BandSamples.join([BandSamples.of(h, BandScales.of(held)) for h in holds])
-    assert result.scales == pytest.approx(fit_scales(every, 0.95)[0])
+    kept = (model.band_temps_c, model.band_temp_factors)
+    expected = fit_scales(every, 0.95, temps_c=[40.0], kept=kept)[0]
+    assert result.scales[:3] == pytest.approx(expected[:3])
+    assert result.scales[3:] == expected[3:] == kept
     assert every.coverage(result.scales) >= 0.95
     silent = load_default_observer()
     silent.drift_scale = 0.0
     again = calibrate_band(silent, [1, 2], ["ramp"], duration_s=40.0, n_jobs=2)
-    assert again.scales == pytest.approx(result.scales)
+    assert again.scales[:3] == pytest.approx(result.scales[:3])
     assert again.previous_drift_scale == 0.0
 
 

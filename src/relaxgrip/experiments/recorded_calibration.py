@@ -100,6 +100,10 @@ class RecordedHold:
         with an infrared percept.
     band_lo_n, band_hi_n, band_drift_n : ndarray
         The ``observer``'s band and its drift part (N; nan for ``relax``).
+    ir_temp_c : ndarray
+        The temperature loop's reading of the fingers, their mean (°C; nan
+        where none was recorded): the twin's holds place the band's samples
+        by it (:meth:`relaxgrip.experiments.band_calibration.BandSamples.of`).
     """
 
     path: Path
@@ -115,6 +119,7 @@ class RecordedHold:
     band_lo_n: FloatArray
     band_hi_n: FloatArray
     band_drift_n: FloatArray
+    ir_temp_c: FloatArray
 
     def within(self, duration_s: float) -> NDArray[np.bool_]:
         """The periods of the hold's first ``duration_s`` (from its onset on)."""
@@ -206,7 +211,8 @@ def recorded_hold(path: Path, models: ModelBundle, estimator: str = "relax",
             rows.append((period.t_s - onset_s, estimate.force_n,
                          estimate.chain_n if math.isfinite(estimate.chain_n) else 0.0,
                          truth_force_n(period.messages), estimate.f_onset_n,
-                         estimate.band_lo_n, estimate.band_hi_n, estimate.band_drift_n))
+                         estimate.band_lo_n, estimate.band_hi_n, estimate.band_drift_n,
+                         _reading_c(period.messages)))
             if math.isfinite(estimate.hold_s) and percept.thermal is not None:
                 value = finger_temperature_c(percept.thermal)
                 if math.isfinite(value):
@@ -214,7 +220,7 @@ def recorded_hold(path: Path, models: ModelBundle, estimator: str = "relax",
     if onsets != 1:
         raise InputError(f"{path}: {onsets} holds in the recording; calibrating takes one hold "
                          "per recording" if onsets else f"{path}: the recording has no hold")
-    cols = np.array(rows, dtype=np.float64).reshape(-1, 8)
+    cols = np.array(rows, dtype=np.float64).reshape(-1, 9)
     after = cols[:, 0] >= 0.0
     cols = cols[after]
     reached = float(cols[-1, 0]) if cols.size else 0.0
@@ -226,9 +232,19 @@ def recorded_hold(path: Path, models: ModelBundle, estimator: str = "relax",
     if not np.isfinite(cols[:, 3]).any():
         raise InputError(f"{path}: no force reference (the twin's truth or a force sensor's "
                          "/relaxgrip/force_ref) in the hold")
-    t, force, chain, truth, f_onset, lo, hi, drift = cols.T
+    t, force, chain, truth, f_onset, lo, hi, drift, read_c = cols.T
     return RecordedHold(path, target_n, temp_c, float(length), t, force, chain, truth,
-                        f_onset, temps, lo, hi, drift)
+                        f_onset, temps, lo, hi, drift, read_c)
+
+
+def _reading_c(messages: dict[str, Any]) -> float:
+    """The temperature loop's reading of the fingers in a period, their mean (°C; nan
+    without one)."""
+    read = messages.get("/relaxgrip/temperature", {}).get("ir_temp_c")
+    try:
+        return 0.5 * (float(read[0]) + float(read[1]))
+    except (TypeError, IndexError, ValueError):  # none recorded (null), or not a pair
+        return math.nan
 
 
 def _check_constant(path: Path, messages: dict[str, Any], target_n: float, temp_c: float,
@@ -362,7 +378,7 @@ def calibrate_band_on_recordings(observer: ObserverModel, paths: Sequence[Path |
         keep = hold.within(hold.length_s)
         samples = BandSamples.of_series(
             hold.estimate_n[keep], hold.truth_n[keep], hold.band_lo_n[keep],
-            hold.band_hi_n[keep], hold.band_drift_n[keep], used, hold.temp_c)
+            hold.band_hi_n[keep], hold.band_drift_n[keep], used, hold.ir_temp_c[keep])
         row = {"recording": hold.path.name, "mae_n": hold.row(hold.length_s)["mae_n"]}
         measured.append(BandHold(RECORDED_SCENARIO, {"source": RECORDINGS_SOURCE}, seed, row,
                                  samples))
