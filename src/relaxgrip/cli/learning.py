@@ -366,11 +366,9 @@ def calibrate_band_command(
 
 def _temp_factors_line(result: BandCalibration) -> str:
     """What the recalibration did with the band's temperature factors, in one line."""
-    def listed(temps: tuple[float, ...], factors: tuple[float, ...]) -> str:
-        return ", ".join(f"{f:.3g} at {t:g} °C" for t, f in zip(temps, factors, strict=True))
-
     if not result.factor_intervals:
-        kept = listed(result.band_temps_c, result.band_temp_factors) or "none"
+        kept = ", ".join(f"{f:.3g} at {t:g} °C" for t, f in zip(
+            result.band_temps_c, result.band_temp_factors, strict=True)) or "none"
         return f"temperature factors kept ({kept}): the holds were at one temperature"
     spans = ", ".join(f"{f:.3g} ({lo:.3g}-{hi:.3g}) at {t:g} °C" for t, f, (lo, hi) in zip(
         result.band_temps_c, result.band_temp_factors, result.factor_intervals, strict=True))

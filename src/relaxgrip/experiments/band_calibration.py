@@ -89,7 +89,7 @@ from relaxgrip.errors import InputError
 from relaxgrip.experiments.controlled_hold import HoldResult
 from relaxgrip.experiments.hold_calibration import RECORDINGS_SOURCE
 from relaxgrip.experiments.scenarios import SCENARIOS, check_scenarios, scenario_holds
-from relaxgrip.learning.observer import ObserverModel
+from relaxgrip.learning.observer import ObserverModel, band_factors
 from relaxgrip.learning.store import ModelBundle
 
 __all__ = [
@@ -143,13 +143,9 @@ class BandScales(NamedTuple):
                    observer.band_temps_c, observer.band_temp_factors)
 
     def factor(self, temp_c: FloatArray) -> FloatArray:
-        """The relative part's factor at each temperature (°C), as
-        :meth:`ObserverModel.band_factor` has it: 1 without factors or a temperature."""
-        temp_c = np.asarray(temp_c, dtype=np.float64)
-        if not self.temp_factors:
-            return np.ones_like(temp_c)
-        out: FloatArray = np.interp(temp_c, self.temps_c, self.temp_factors)
-        return np.where(np.isfinite(temp_c), out, 1.0)
+        """The relative part's factor at each temperature (°C), as the observer has it
+        (:func:`band_factors`)."""
+        return band_factors(self.temps_c, self.temp_factors, temp_c)
 
 
 @dataclass(frozen=True)
@@ -340,16 +336,14 @@ def fit_scales(samples: BandSamples, level: float, drift_scale: float | None = N
                 raise InputError(f"no hold sample at {knot:g} °C to set the band's factor there")
         base = int(np.argmax([np.count_nonzero(mask) for mask in near]))
         floor, band = _floor_and_scale(error[near[base]], onset[near[base]], level)
-        factors = tuple(
+        temps, factors = tuple(knots), tuple(
             1.0 if k == base else max(_MIN_FACTOR, least_covering(
                 (error[mask] - floor) / (band * onset[mask]), level))
             for k, mask in enumerate(near))
-        first = BandScales(band, 1.0, floor, tuple(knots), factors)
     else:
-        keep = BandScales(1.0, 1.0, 0.0, *kept)
-        floor, band = _floor_and_scale(error, onset * keep.factor(temp), level)
-        first = keep._replace(band_scale=band, floor_n=floor)
-    first = first._replace(drift_scale=1.0 if drift_scale is None else drift_scale)
+        temps, factors = kept
+        floor, band = _floor_and_scale(error, onset * band_factors(temps, factors, temp), level)
+    first = BandScales(band, 1.0 if drift_scale is None else drift_scale, floor, temps, factors)
     moving = ~still
     if not moving.any():
         return first, False
@@ -406,7 +400,7 @@ def seed_intervals(samples_by_seed: Sequence[BandSamples], level: float, resampl
     tuple of (lo, hi) for ``band_scale``, ``drift_scale``, the floor (N); list for the factors
         Each over the draws that could set it: the drift scale's over those
         with a drift part (nan, nan when none had one); one per temperature
-        factor fitted (none with fewer than two temperatures).
+        held when there are two or more (none with fewer: the factors are kept).
     """
     rng = np.random.default_rng(rng_seed)
     n = len(samples_by_seed)
@@ -417,7 +411,7 @@ def seed_intervals(samples_by_seed: Sequence[BandSamples], level: float, resampl
     drift: list[float] = []
     floor: list[float] = []
     factors: list[tuple[float, ...]] = []
-    fitted = len({float(t) for t in temps_c}) >= 2
+    knots = len({float(t) for t in temps_c})
     for _ in range(resamples):
         draw = BandSamples.join([samples_by_seed[i] for i in rng.integers(0, n, n)])
         try:
@@ -426,7 +420,7 @@ def seed_intervals(samples_by_seed: Sequence[BandSamples], level: float, resampl
             continue
         band.append(scales.band_scale)
         floor.append(scales.floor_n)
-        if fitted:
+        if knots >= 2:
             factors.append(scales.temp_factors)
         if drift_set:
             drift.append(scales.drift_scale)
@@ -437,7 +431,7 @@ def seed_intervals(samples_by_seed: Sequence[BandSamples], level: float, resampl
         lo, hi = np.percentile(values, [5.0, 95.0])
         return float(lo), float(hi)
 
-    each = [interval([f[k] for f in factors]) for k in range(len(factors[0]))] if factors else []
+    each = [interval([f[k] for f in factors]) for k in range(knots)] if knots >= 2 else []
     return interval(band), interval(drift), interval(floor), each
 
 

@@ -57,7 +57,7 @@ from statistics import NormalDist
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 import relaxgrip
 from relaxgrip.errors import InputError
@@ -85,6 +85,7 @@ __all__ = [
     "OBSERVER_FORMAT",
     "OBSERVER_VERSION",
     "ObserverModel",
+    "band_factors",
     "branch_responses",
     "check_temp_factors",
     "default_observer_dir",
@@ -280,10 +281,7 @@ class ObserverModel:
         """The factor on the band's relative parts at finger temperature ``temp_c`` (°C):
         ``band_temp_factors`` interpolated, held beyond the ends; 1 without them or
         without a temperature read (the band as calibrated where most holds were)."""
-        factors = self.band_temp_factors
-        if not factors or not math.isfinite(temp_c):
-            return 1.0
-        return float(np.interp(temp_c, self.band_temps_c, factors))
+        return float(band_factors(self.band_temps_c, self.band_temp_factors, temp_c))
 
     def band_rel(self, hold_s: float, temp_c: float) -> float:
         """Half-width of the band's relative part per newton of onset force, ``hold_s`` into
@@ -750,6 +748,18 @@ def set_band_scale(directory: Path, band_scale: float, record: Mapping[str, Any]
         model.band_temp_factors = tuple(float(f) for f in temp_factors[1])
     save_observer(directory, model, training)
     return model
+
+
+def band_factors(temps_c: Sequence[float], factors: Sequence[float],
+                 temp_c: ArrayLike) -> FloatArray:
+    """The band's temperature factors at each of ``temp_c`` (°C): ``factors`` at
+    ``temps_c`` interpolated, held beyond the ends; 1 without factors or where no
+    temperature was read.  The one rule for the observer and its calibration."""
+    temp = np.asarray(temp_c, dtype=np.float64)
+    if not factors:
+        return np.ones_like(temp)
+    out: FloatArray = np.where(np.isfinite(temp), np.interp(temp, temps_c, factors), 1.0)
+    return out
 
 
 def check_temp_factors(temps_c: Sequence[Any], factors: Sequence[Any]) -> None:
