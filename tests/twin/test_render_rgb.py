@@ -51,20 +51,41 @@ def test_the_tab_is_composited_as_the_float32_formula_says():
 
 
 def test_the_noise_saturates_as_opencv_adds_and_subtracts() -> None:
-    """One pass of 8-bit arithmetic, each step clipped as OpenCV's add then subtract."""
+    """One pass of 8-bit arithmetic on signed noise: OpenCV's add of its positive part,
+    then subtract of its negative part, each clipped."""
     import cv2
 
     rng = np.random.default_rng(1)
-    image = rng.choice(np.array([0, 1, 2, 127, 253, 254, 255], np.uint8), (23, 40, 3))
-    bank = rng.integers(0, 256, (2, 30, 50, 3), dtype=np.uint8)
-    positive, negative = bank[0, 3:26, 5:45], bank[1, 3:26, 5:45]  # views into a bank
+    image = rng.choice(np.array([0, 1, 2, 127, 128, 253, 254, 255], np.uint8), (23, 40, 3))
+    signed = rng.integers(-127, 128, (30, 50, 3), dtype=np.int16)
+    signed[0, :8, 0] = [-127, -1, 0, 1, 127, -128 + 1, 2, -2]
+    bank = signed.astype(np.int8).view(np.uint8)
+    noise = bank[3:26, 5:45]  # a view into a bank
+    positive = np.clip(signed, 0, 255).astype(np.uint8)[3:26, 5:45]
+    negative = np.clip(-signed, 0, 255).astype(np.uint8)[3:26, 5:45]
     out = np.empty_like(image)
-    render_rgb._add_noise(image, positive, negative, out)
+    render_rgb._add_noise(image, noise, out)
     np.testing.assert_array_equal(out, cv2.subtract(cv2.add(image, positive), negative))
-    render_rgb._add_noise(image, positive, negative, image)  # in place
+    np.testing.assert_array_equal(
+        out, np.clip(image.astype(np.int16) + signed[3:26, 5:45], 0, 255).astype(np.uint8))
+    render_rgb._add_noise(image, noise, image)  # in place
     np.testing.assert_array_equal(image, out)
     with pytest.raises(ValueError, match="contiguous"):
-        render_rgb._add_noise(image[:, ::2], positive[:, ::2], negative[:, ::2], out[:, ::2])
+        render_rgb._add_noise(image[:, ::2], noise[:, ::2], out[:, ::2])
+
+
+def test_the_noise_bank_is_the_rounded_gaussian_clipped_to_signed_bytes() -> None:
+    bank = render_rgb._noise_bank((40, 60), 2.0)
+    values = bank.view(np.int8).astype(np.float64)
+    assert bank.dtype == np.uint8
+    assert not bank.flags.writeable
+    assert values.shape == (render_rgb._NOISE_BANKS, 40 + render_rgb._NOISE_PAD,
+                            60 + render_rgb._NOISE_PAD, 3)
+    assert abs(values.mean()) < 0.02
+    assert 1.95 < values.std() < 2.1
+    wide = render_rgb._noise_bank((8, 8), 80.0).view(np.int8)
+    assert wide.min() == -127
+    assert wide.max() == 127
 
 
 def test_a_frame_is_the_same_in_any_order_across_blocks_of_draws():

@@ -12,7 +12,10 @@ onto an upsampled copy of the region it covers and area-averages it back
 down.  Objects are shaded discs, drawn with sub-pixel centres.
 Pixel noise comes from a bank of pre-drawn noise, sliced at a random offset
 per frame: a full frame of fresh Gaussian noise would cost more than the
-rest of the rendering together.
+rest of the rendering together.  The bank holds signed 8-bit values (noise
+beyond ±127 DN, 60 standard deviations at the default, is clipped there):
+one byte of noise per pixel channel to read, not two, for a pass whose cost
+is its memory traffic.
 """
 
 from __future__ import annotations
@@ -149,7 +152,7 @@ class RgbRenderer:
             [[[-0.5, -0.5], [tw - 0.5, -0.5], [tw - 0.5, th - 0.5], [-0.5, th - 0.5]]])
         self._matrix = self.intrinsics.matrix
         self._background = _background(self.intrinsics.shape)
-        self._noise_pos, self._noise_neg = _noise_banks(self.intrinsics.shape, config.noise_dn)
+        self._noise = _noise_bank(self.intrinsics.shape, config.noise_dn)
         self._scene_cache: tuple[tuple[_Circle, ...], Image] | None = None
         self._draw_cache: dict[int, list[tuple[float, int, int, int]]] = {}
         self._last_circles: tuple[_Circle, ...] | None = None
@@ -183,19 +186,18 @@ class RgbRenderer:
         scene = self._scene(tuple(objects))
         gain = cfg.lighting_gain * (1.0 + cfg.lighting_flicker * jitter)
         h, w = self.intrinsics.shape
-        noise = (self._noise_pos[bank, oy : oy + h, ox : ox + w],
-                 self._noise_neg[bank, oy : oy + h, ox : ox + w])
+        noise = self._noise[bank, oy : oy + h, ox : ox + w]
         box = self._tab_box(marker2cam)
         if _FUSED and cfg.noise_dn > 0 and cfg.blur_sigma_px == 0 and gain == 1.0:
             # The frame is the scene plus noise but where the tab is: one pass over it
             # fewer than copying the scene first, with the same pixels.
             img: Image = np.empty_like(scene)
-            _add_noise(scene, *noise, img)
+            _add_noise(scene, noise, img)
             if box is not None:
                 rows, cols = box.rows, box.cols
                 roi = scene[rows, cols].copy()
                 self._paint_tab(roi, box, marker2cam)
-                _add_noise(roi, noise[0][rows, cols], noise[1][rows, cols], img[rows, cols])
+                _add_noise(roi, noise[rows, cols], img[rows, cols])
             return img
         img = scene.copy()
         if box is not None:
@@ -205,7 +207,7 @@ class RgbRenderer:
         if gain != 1.0:
             cv2.convertScaleAbs(img, dst=img, alpha=max(gain, 0.0))
         if cfg.noise_dn > 0:
-            _add_noise(img, *noise, img)
+            _add_noise(img, noise, img)
         return img
 
     def _draws(self, seq: int) -> tuple[float, int, int, int]:
@@ -385,10 +387,11 @@ def _composite(roi: Image, tab: Image, coverage: Image) -> None:
     _composite_rows(_rows(roi), tab, coverage, _TAB_LUT, _TRANSMIT_LUT)
 
 
-def _add_noise(image: Image, positive: Image, negative: Image, out: Image) -> None:
-    """``out = image + positive - negative``, each step saturated to 8 bits as OpenCV's
-    ``add`` and ``subtract`` are; ``out`` may be ``image``."""
-    _add_noise_rows(_rows(image), _rows(positive), _rows(negative), _rows(out))
+def _add_noise(image: Image, noise: Image, out: Image) -> None:
+    """``out = image + noise``, saturated to 8 bits, ``noise`` signed 8-bit values held
+    in ``uint8`` (two's complement): OpenCV's ``add`` of the positive part then
+    ``subtract`` of the negative; ``out`` may be ``image``."""
+    _add_noise_rows(_rows(image), _rows(noise), _rows(out))
 
 
 def _rows(image: Image) -> Image:
@@ -420,16 +423,17 @@ def _composite_rows(roi: Image, tab: Image, coverage: Image, tab_lut: NDArray[np
 
 
 @numba.njit(cache=True, nogil=True)
-def _add_noise_rows(image: Image, positive: Image, negative: Image,
-                    out: Image) -> None:  # pragma: no cover - compiled
+def _add_noise_rows(image: Image, noise: Image, out: Image) -> None:  # pragma: no cover - compiled
     for i in range(image.shape[0]):
-        a, p, n, o = image[i], positive[i], negative[i], out[i]
+        a, z, o = image[i], noise[i], out[i]
         for k in range(a.shape[0]):
-            # 8-bit arithmetic wraps: a sum below an addend overflowed, a difference
-            # above the minuend went under.
-            total = np.uint8(a[k] + p[k])
+            # The signed value's two parts; 8-bit arithmetic wraps: a sum below an
+            # addend overflowed, a difference above the minuend went under.
+            up = z[k] if z[k] < 128 else np.uint8(0)
+            down = np.uint8(-z[k]) if z[k] >= 128 else np.uint8(0)
+            total = np.uint8(a[k] + up)
             total = total if total >= a[k] else np.uint8(255)
-            rest = np.uint8(total - n[k])
+            rest = np.uint8(total - down)
             o[k] = rest if rest <= total else np.uint8(0)
 
 
@@ -537,20 +541,19 @@ def _background(shape: tuple[int, int]) -> Image:
 
 
 @lru_cache(maxsize=4)
-def _noise_banks(shape: tuple[int, int], sigma_dn: float) -> tuple[Image, Image]:
-    """Positive and negative parts of pre-drawn Gaussian pixel noise (saturating adds).
+def _noise_bank(shape: tuple[int, int], sigma_dn: float) -> Image:
+    """Pre-drawn Gaussian pixel noise, rounded to signed 8-bit values (clipped at ±127)
+    and held as their two's complement in ``uint8``, the type :func:`_add_noise` reads.
 
-    The banks are shared by every renderer (read-only); each frame takes its
+    The bank is shared by every renderer (read-only); each frame takes its
     noise from a bank and offset drawn from its own seed.
     """
     rng = np.random.default_rng(11)
     h, w = shape
     size = (_NOISE_BANKS, h + _NOISE_PAD, w + _NOISE_PAD, 3)
     if sigma_dn <= 0:
-        zero = np.zeros((_NOISE_BANKS, _NOISE_PAD, _NOISE_PAD, 3), np.uint8)
-        return zero, zero
+        return np.zeros((_NOISE_BANKS, _NOISE_PAD, _NOISE_PAD, 3), np.uint8)
     noise = np.rint(rng.normal(0.0, sigma_dn, size=size).astype(np.float32))
-    pos, neg = np.clip(noise, 0, 255).astype(np.uint8), np.clip(-noise, 0, 255).astype(np.uint8)
-    pos.flags.writeable = False
-    neg.flags.writeable = False
-    return pos, neg
+    bank: Image = np.clip(noise, -127, 127).astype(np.int8).view(np.uint8)
+    bank.flags.writeable = False
+    return bank
