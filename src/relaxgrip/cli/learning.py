@@ -227,7 +227,7 @@ def fit_observer_command(
 
 
 #: The twin's band holds: options and defaults; ``--recordings`` takes recorded holds instead.
-_TWIN_BAND = {"--seeds": "3000-3035", "--scenarios": "standard,ramp,step,light,firm,hot",
+_TWIN_BAND = {"--seeds": "3000-3035", "--scenarios": "standard,ramp,step,light,firm,hot,warm",
               "--duration-s": "280"}
 
 
@@ -254,8 +254,8 @@ def calibrate_band_command(
     scenarios: Annotated[str | None, typer.Option(
         "--scenarios", help="Comma-separated: standard, ramp (40 -> 55 °C from 150 s), "
                             "step (5 -> 3 N at 150 s), push (2 N from 200 s), light (1 N), "
-                            "firm (8 N), hot (55 °C); holds at more than one temperature "
-                            "set the band's temperature factors. (default: "
+                            "firm (8 N), hot (55 °C), warm (48 °C); holds at more than one "
+                            "temperature set the band's temperature factors. (default: "
                             f"{_TWIN_BAND['--scenarios']})", show_default=False)] = None,
     duration_s: Annotated[float | None, float_option(
         "--duration-s", help="Hold length (s); profile times scale with it. (default: "

@@ -60,7 +60,8 @@ function of the hold's time, and the relaxing share that a hold's error
 follows scatters more in the rubbery state.  Calibrated at 40 °C alone,
 the band covered seeds 0-7 at 2 N, 52 °C 82.9 % of the time and at 5 N,
 55 °C 79.6 % (session 53).  With holds at two or more temperatures (the
-default scenarios hold ``hot``, 5 N at 55 °C), the floor and scale are set
+default scenarios hold ``hot``, 5 N at 55 °C, and ``warm``, 5 N at 48 °C, the
+glass transition), the floor and scale are set
 at the temperature with the most samples, and every other temperature held
 gets the least factor on the relative part that covers ``band_level`` of
 its samples; the observer interpolates the factor at the temperature the
@@ -112,7 +113,7 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 
 #: The scenarios the band is calibrated on by default (any of :data:`SCENARIOS` can be).
-DEFAULT_SCENARIOS = ("standard", "ramp", "step", "light", "firm", "hot")
+DEFAULT_SCENARIOS = ("standard", "ramp", "step", "light", "firm", "hot", "warm")
 
 
 class BandScales(NamedTuple):
