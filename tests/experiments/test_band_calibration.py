@@ -410,7 +410,7 @@ def test_the_command_calibrates_at_three_forces_and_two_temperatures_by_default(
 
     assert _TWIN_BAND["--scenarios"] == ",".join(DEFAULT_SCENARIOS)
     assert {SCENARIOS[name].target_n for name in DEFAULT_SCENARIOS} == {1.0, 5.0, 8.0}
-    assert {SCENARIOS[name].temp_c for name in DEFAULT_SCENARIOS} == {40.0, 55.0}
+    assert {SCENARIOS[name].temp_c for name in DEFAULT_SCENARIOS} == {40.0, 48.0, 55.0}
 
 
 def test_summary_is_the_mean_over_each_scenarios_holds() -> None:
