@@ -50,6 +50,35 @@ def test_the_tab_is_composited_as_the_float32_formula_says():
         np.testing.assert_array_equal(roi, np.clip(expected, 0.0, 255.0).astype(np.uint8))
 
 
+def test_the_tab_grey_levels_round_as_opencv_does() -> None:
+    """addWeighted in float64, then convertScaleAbs in float32 with halves to even; and
+    the fused compositing is the compositing of those levels."""
+    import cv2
+
+    rng = np.random.default_rng(4)
+    for trial in range(300):
+        h, w = (int(v) for v in rng.integers(3, 40, 2))
+        outline = rng.random((h, w))
+        outline[rng.random((h, w)) < 0.3] = 1.0
+        black = np.minimum(outline, rng.random((h, w)))
+        if trial % 3 == 0:  # values whose grey lands on or next to a half
+            outline, black = np.round(outline * 510) / 510, np.round(black * 408) / 408
+        if trial % 5 == 0:  # a tab seen from behind: every area negative
+            outline, black = -outline, -black
+        areas = np.stack([outline, black])
+        tab, coverage = np.empty((h, w), np.uint8), np.empty((h, w), np.uint8)
+        render_rgb._grey_levels(areas, tab, coverage)
+        grey = cv2.addWeighted(outline, float(render_rgb._TAB_WHITE), black,
+                               float(render_rgb._INK - render_rgb._TAB_WHITE), 0.0)
+        np.testing.assert_array_equal(tab, cv2.convertScaleAbs(grey))
+        np.testing.assert_array_equal(coverage, cv2.convertScaleAbs(outline, alpha=255.0))
+        scene = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+        fused, apart = scene.copy(), scene.copy()
+        render_rgb._composite_areas(fused, areas)
+        _composite(apart, tab, coverage)
+        np.testing.assert_array_equal(fused, apart)
+
+
 def test_the_noise_saturates_as_opencv_adds_and_subtracts() -> None:
     """One pass of 8-bit arithmetic on signed noise: OpenCV's add of its positive part,
     then subtract of its negative part, each clipped."""

@@ -296,16 +296,24 @@ class RgbRenderer:
         premultiplied by its coverage of each pixel, composited over the scene
         with the outline's coverage."""
         if self.config.drawing == "exact":
-            tab, coverage = self._exact_tab(box)
+            # The grey levels made and composited a pixel at a time, the same values.
+            _composite_areas(roi, self._exact_areas(box))
         else:
-            tab, coverage = self._supersampled_tab(box)
-        _composite(roi, tab, coverage)
+            _composite(roi, *self._supersampled_tab(box))
         if self.config.occlusion > 0:
             self._occlude(roi, marker2cam, (box.x0, box.y0))
 
     def _exact_tab(self, box: _TabBox) -> tuple[Image, Image]:
         """The tab's premultiplied grey and coverage in ``box``, each pixel the exact
         area of the white and of the black it covers."""
+        areas = self._exact_areas(box)
+        tab, coverage = np.empty(areas.shape[1:], np.uint8), np.empty(areas.shape[1:], np.uint8)
+        _grey_levels(areas, tab, coverage)
+        return tab, coverage
+
+    def _exact_areas(self, box: _TabBox) -> FloatArray:
+        """The area of each pixel in ``box`` that the tab's outline covers, and that its
+        black covers: shape (2, H, W)."""
         shape = self._shape
         px = cv2.perspectiveTransform(shape.vertices, box.plane_to_img)[:, 0]
         px -= (box.x0, box.y0)
@@ -313,12 +321,8 @@ class RgbRenderer:
         # screen; seen from behind, the other way, and every area changes sign.
         (ax, ay), (bx, by), (cx, cy) = px[:3].tolist()
         sign = 1.0 if (bx - ax) * (cy - by) - (by - ay) * (cx - bx) >= 0 else -1.0
-        outline, black = area_coverage(px[shape.ends], sign, (box.y1 - box.y0, box.x1 - box.x0),
-                                       plane=shape.planes, planes=2)
-        grey = cv2.addWeighted(outline, float(_TAB_WHITE), black, float(_INK - _TAB_WHITE), 0.0)
-        tab: Image = np.asarray(cv2.convertScaleAbs(grey))
-        coverage: Image = np.asarray(cv2.convertScaleAbs(outline, alpha=255.0))
-        return tab, coverage
+        return area_coverage(px[shape.ends], sign, (box.y1 - box.y0, box.x1 - box.x0),
+                             plane=shape.planes, planes=2)
 
     def _supersampled_tab(self, box: _TabBox) -> tuple[Image, Image]:
         """The tab's premultiplied grey and coverage in ``box``, warped at
@@ -387,6 +391,20 @@ def _composite(roi: Image, tab: Image, coverage: Image) -> None:
     _composite_rows(_rows(roi), tab, coverage, _TAB_LUT, _TRANSMIT_LUT)
 
 
+def _composite_areas(roi: Image, areas: FloatArray) -> None:
+    """:func:`_composite` of the tab whose outline and black cover ``areas`` (2, H, W) of
+    each pixel: its grey levels as :func:`_grey_levels` makes them."""
+    _composite_area_rows(_rows(roi), areas, float(_TAB_WHITE), float(_INK - _TAB_WHITE),
+                         _TAB_LUT, _TRANSMIT_LUT)
+
+
+def _grey_levels(areas: FloatArray, tab: Image, coverage: Image) -> None:
+    """The tab's premultiplied grey, ``|white outline + (ink - white) black|``, and its
+    coverage, ``|255 outline|``, rounded to 8 bits as OpenCV's ``addWeighted`` (in
+    float64) then ``convertScaleAbs`` (in float32, halves to even) make them."""
+    _grey_level_rows(areas, float(_TAB_WHITE), float(_INK - _TAB_WHITE), tab, coverage)
+
+
 def _add_noise(image: Image, noise: Image, out: Image) -> None:
     """``out = image + noise``, saturated to 8 bits, ``noise`` signed 8-bit values held
     in ``uint8`` (two's complement): OpenCV's ``add`` of the positive part then
@@ -409,17 +427,54 @@ def _rows(image: Image) -> Image:
 # as whole-array passes cost more in memory traffic than in arithmetic.
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _blend(row: Image, j: int, grey: int | np.uint8, cover: int | np.uint8,
+           tab_lut: NDArray[np.float32],
+           transmit_lut: NDArray[np.float32]) -> None:  # pragma: no cover - compiled
+    """Pixel ``j`` of an image row: the scene's transmitted part plus the tinted tab."""
+    transmit = transmit_lut[cover]
+    for c in range(3):
+        value = np.float32(row[3 * j + c]) * transmit + tab_lut[grey, c]
+        # Below 0 only by rounding (a fully covered pixel transmits -6e-8).
+        row[3 * j + c] = np.uint8(max(min(value, np.float32(255.0)), np.float32(0.0)))
+
+
 @numba.njit(cache=True, nogil=True)
 def _composite_rows(roi: Image, tab: Image, coverage: Image, tab_lut: NDArray[np.float32],
                     transmit_lut: NDArray[np.float32]) -> None:  # pragma: no cover - compiled
     for i in range(roi.shape[0]):
-        row, grey, cover = roi[i], tab[i], coverage[i]
-        for j in range(grey.shape[0]):
-            transmit = transmit_lut[cover[j]]
-            for c in range(3):
-                value = np.float32(row[3 * j + c]) * transmit + tab_lut[grey[j], c]
-                # Below 0 only by rounding (a fully covered pixel transmits -6e-8).
-                row[3 * j + c] = np.uint8(max(min(value, np.float32(255.0)), np.float32(0.0)))
+        for j in range(tab.shape[1]):
+            _blend(roi[i], j, tab[i, j], coverage[i, j], tab_lut, transmit_lut)
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _grey_level(outline: float, black: float, white: float,
+                ink_less_white: float) -> tuple[np.uint8, np.uint8]:  # pragma: no cover - compiled
+    # addWeighted's sum in float64; convertScaleAbs works in float32 and rounds halves to
+    # even (115.49999999999999 becomes 115.5, then 116).
+    grey = abs(np.float32(outline * white + black * ink_less_white))
+    cover = abs(np.float32(outline) * np.float32(255.0))
+    return (np.uint8(min(np.rint(grey), np.float32(255.0))),
+            np.uint8(min(np.rint(cover), np.float32(255.0))))
+
+
+@numba.njit(cache=True, nogil=True)
+def _grey_level_rows(areas: FloatArray, white: float, ink_less_white: float, tab: Image,
+                     coverage: Image) -> None:  # pragma: no cover - compiled
+    for i in range(areas.shape[1]):
+        for j in range(areas.shape[2]):
+            tab[i, j], coverage[i, j] = _grey_level(areas[0, i, j], areas[1, i, j], white,
+                                                    ink_less_white)
+
+
+@numba.njit(cache=True, nogil=True)
+def _composite_area_rows(roi: Image, areas: FloatArray, white: float, ink_less_white: float,
+                         tab_lut: NDArray[np.float32],
+                         transmit_lut: NDArray[np.float32]) -> None:  # pragma: no cover - compiled
+    for i in range(roi.shape[0]):
+        for j in range(areas.shape[2]):
+            grey, cover = _grey_level(areas[0, i, j], areas[1, i, j], white, ink_less_white)
+            _blend(roi[i], j, grey, cover, tab_lut, transmit_lut)
 
 
 @numba.njit(cache=True, nogil=True)
