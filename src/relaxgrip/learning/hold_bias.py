@@ -25,6 +25,7 @@ directory's manifest (:func:`relaxgrip.learning.store.set_hold_bias`).
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -40,30 +41,34 @@ __all__ = ["HoldBias"]
 FloatArray = NDArray[np.float64]
 
 
-def _weights(knots: FloatArray, x: float) -> tuple[int, int, float]:
+# The knots as tuples of floats: the estimator looks the table up every frame, and
+# numpy's per-call cost is most of a lookup this small.
+
+
+def _weights(knots: tuple[float, ...], x: float) -> tuple[int, int, float]:
     """The two knots around ``x`` and the second one's weight, held at the ends."""
-    if knots.size == 1 or x <= knots[0]:
+    if len(knots) == 1 or x <= knots[0]:
         return 0, 0, 0.0
     if x >= knots[-1]:
-        last = knots.size - 1
+        last = len(knots) - 1
         return last, last, 0.0
-    hi = int(np.searchsorted(knots, x, side="right"))
+    hi = bisect.bisect_right(knots, x)
     lo = hi - 1
-    return lo, hi, float((x - knots[lo]) / (knots[hi] - knots[lo]))
+    return lo, hi, (x - knots[lo]) / (knots[hi] - knots[lo])
 
 
-def _inside(knots: FloatArray, x: float) -> float:
+def _inside(knots: tuple[float, ...], x: float) -> float:
     """1 within the knots, falling linearly to 0 one end spacing beyond them.
 
     Nothing was measured there: the calibration fades to none rather than
     carrying its edge on (a single knot is a constant everywhere).
     """
-    if knots.size == 1:
+    if len(knots) == 1:
         return 1.0
     if x < knots[0]:
-        return max(0.0, 1.0 - float((knots[0] - x) / (knots[1] - knots[0])))
+        return max(0.0, 1.0 - (knots[0] - x) / (knots[1] - knots[0]))
     if x > knots[-1]:
-        return max(0.0, 1.0 - float((x - knots[-1]) / (knots[-1] - knots[-2])))
+        return max(0.0, 1.0 - (x - knots[-1]) / (knots[-1] - knots[-2]))
     return 1.0
 
 
@@ -100,7 +105,9 @@ class HoldBias:
     temps_c: FloatArray
     times_s: FloatArray
     values_n: FloatArray
-    _log_times: FloatArray = field(init=False, repr=False)
+    _knots: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]] = field(
+        init=False, repr=False, compare=False)
+    _values: list[list[list[float]]] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         forces = _axis(self.forces_n, "forces_n")
@@ -122,7 +129,9 @@ class HoldBias:
         object.__setattr__(self, "temps_c", temps)
         object.__setattr__(self, "times_s", times)
         object.__setattr__(self, "values_n", values)
-        object.__setattr__(self, "_log_times", np.log1p(times))
+        object.__setattr__(self, "_knots", (tuple(forces.tolist()), tuple(temps.tolist()),
+                                            tuple(np.log1p(times).tolist())))
+        object.__setattr__(self, "_values", values.tolist())
 
     def at(self, force_n: float, temp_c: float, hold_s: float) -> float:
         """The calibrated error at this onset force, temperature and hold time (N).
@@ -134,19 +143,20 @@ class HoldBias:
         """
         if not (math.isfinite(force_n) and math.isfinite(temp_c) and math.isfinite(hold_s)):
             return 0.0
-        fade = _inside(self.forces_n, force_n) * _inside(self.temps_c, temp_c)
+        forces, temps, log_times = self._knots
+        fade = _inside(forces, force_n) * _inside(temps, temp_c)
         if fade == 0.0:
             return 0.0
-        fi = _weights(self.forces_n, force_n)
-        ti = _weights(self.temps_c, temp_c)
-        hi = _weights(self._log_times, math.log1p(max(hold_s, 0.0)))
+        fi = _weights(forces, force_n)
+        ti = _weights(temps, temp_c)
+        hi = _weights(log_times, math.log1p(max(hold_s, 0.0)))
         total = 0.0
         for a, wa in ((fi[0], 1.0 - fi[2]), (fi[1], fi[2])):
             for b, wb in ((ti[0], 1.0 - ti[2]), (ti[1], ti[2])):
                 for c, wc in ((hi[0], 1.0 - hi[2]), (hi[1], hi[2])):
                     w = wa * wb * wc
                     if w:
-                        total += w * float(self.values_n[a, b, c])
+                        total += w * self._values[a][b][c]
         return fade * total
 
     def to_dict(self) -> dict[str, Any]:
