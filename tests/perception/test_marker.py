@@ -83,6 +83,30 @@ def test_edge_fit_removes_the_corner_bias_of_subpix() -> None:
     assert edge_err < 0.5 * subpix_err
 
 
+def test_edge_fit_declines_what_it_cannot_fit() -> None:
+    """No corners where a guess is not finite, a profile would leave the image, an edge
+    is too short for the marker's modules, an edge has no step, or the fit runs away."""
+    renderer = RgbRenderer(RIG, RgbSensorConfig(noise_dn=0.0), 0)
+    gray = to_gray(renderer.render(0, RIG.marker2cam(0.003, 0.0)))
+    (det,) = detect_markers(gray, make_detector(RIG.marker.aruco_dictionary))
+    corners = det.corners_px
+    assert refine_corners_by_edges(gray, corners) is not None
+    with_nan = corners.copy()
+    with_nan[2, 1] = np.nan
+    assert refine_corners_by_edges(gray, with_nan) is None
+    width = gray.shape[1]
+    shift_right = np.array([width - 3.5 - corners[:, 0].max(), 0.0])
+    assert refine_corners_by_edges(gray, corners - corners.min(axis=0) + 2.9) is None
+    assert refine_corners_by_edges(gray, corners + shift_right) is None
+    side = float(np.linalg.norm(corners[1] - corners[0]))
+    modules = int(side / 3.5) + 1  # each module narrower than the profile reaches
+    assert refine_corners_by_edges(gray, corners, modules=modules) is None
+    assert refine_corners_by_edges(gray, corners, modules=modules - 2) is not None
+    assert refine_corners_by_edges(np.full_like(gray, 128), corners) is None  # no step
+    # A guess 6 px off fits the edges it finds, which are more than 3 px from it.
+    assert refine_corners_by_edges(gray, corners + 6.0) is None
+
+
 @pytest.mark.parametrize("tilt_deg", [5.0, 10.0])
 def test_corners_converge_on_a_marker_facing_the_camera(tilt_deg: float) -> None:
     # Nearly square on, the region-of-interest detector places a corner up to 3 px off

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import cv2
+import numba
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
@@ -74,21 +75,13 @@ _TRAPEZOID = np.full(_OFFSETS.size, _PROFILE_STEP_PX)
 _TRAPEZOID[[0, -1]] *= 0.5
 _TRAPEZOID_SUM = float(_TRAPEZOID.sum())
 #: Columns: mean inside the marker (offsets <= -2 px), mean outside (>= 2 px), trapezoid
-#: integral: one matrix product gives all three for every profile.
+#: integral: the weights of the three moments of every profile.
 _PROFILE_MOMENTS = np.column_stack([
     (_OFFSETS <= -2.0) / np.count_nonzero(_OFFSETS <= -2.0),
     (_OFFSETS >= 2.0) / np.count_nonzero(_OFFSETS >= 2.0),
     _TRAPEZOID,
 ])
-#: Rows [1, s, offset] of every profile sample: times an edge's (origin, along, across)
-#: they give its pixel positions in one matrix product.
-_SAMPLE_DESIGN = np.column_stack([
-    np.ones(_EDGE_S.size * _OFFSETS.size),
-    np.repeat(_EDGE_S, _OFFSETS.size),
-    np.tile(_OFFSETS, _EDGE_S.size),
-])
 _EDGE_DESIGN = np.column_stack([np.ones(_EDGE_S.size), _EDGE_S])  # rows [1, s] on an edge
-_EDGE_S2 = _EDGE_S * _EDGE_S
 _NEXT = np.roll(np.eye(4), 1, axis=1)  # row k selects corner k+1
 _PREV = np.roll(np.eye(4), -1, axis=1)  # row k selects corner k-1
 _ROT90 = np.array([1.0, -1.0])
@@ -203,60 +196,139 @@ def refine_corners_by_edges(
         marker is too small, too close to the image border, or an edge
         shows no clean dark-to-light step (occluded, saturated).
     """
-    c = np.asarray(corners_px, dtype=np.float64)
-    if not np.isfinite(c).all():
-        return None
-    pts = c.tolist()
-    xs, ys = [p[0] for p in pts], [p[1] for p in pts]
+    c = np.ascontiguousarray(corners_px, dtype=np.float64)
     h, w = gray.shape
-    # Every profile sample lies within the corners' box grown by the profile's half-width.
-    if min(xs) < _PROFILE_HALF_PX or min(ys) < _PROFILE_HALF_PX or (
-        max(xs) > w - 1 - _PROFILE_HALF_PX or max(ys) > h - 1 - _PROFILE_HALF_PX
-    ):
+    min_length = max(12.0, 0.0 if modules is None else modules * (_PROFILE_HALF_PX + 0.5))
+    frame = _edge_frames(c, h, w, _PROFILE_HALF_PX, min_length)
+    if frame is None:
         return None
-    # The four edges as plain floats (numpy's per-call cost dominates arrays this small):
-    # edge k runs from corner k to k+1; its normal (dy, -dx) points out for OpenCV's
-    # clockwise corner order.
-    edges = []
-    for k in range(4):
-        ax, ay = pts[k]
-        bx, by = pts[(k + 1) % 4]
-        dx, dy = bx - ax, by - ay
-        length = math.hypot(dx, dy)
-        if length < max(12.0, 0.0 if modules is None else modules * (_PROFILE_HALF_PX + 0.5)):
-            return None
-        edges.append(((ax, ay), (dx, dy), (dy / length, -dx / length)))
-    frame = np.array(edges)  # (4, 3, 2): origin, along (full edge), across (unit normal)
-    maps = (_SAMPLE_DESIGN @ frame).astype(np.float32).reshape(4 * _EDGE_SAMPLES, -1, 2)
+    maps = _sample_maps(frame, _EDGE_S, _OFFSETS)
     prof = cv2.remap(gray, maps, None, cv2.INTER_LINEAR)  # type: ignore[call-overload]
-    inside, outside, integral = (prof @ _PROFILE_MOMENTS).T
-    contrast = outside - inside
-    good = contrast > 20.0
-    # First moment of the normalised step: for an area-sampled straight edge
-    # the area under (I - I_in) / (I_out - I_in) ends exactly at the edge.
-    area = (integral - inside * _TRAPEZOID_SUM) / np.where(good, contrast, 1.0)
-    r = (_OFFSETS[-1] - area).reshape(4, _EDGE_SAMPLES)  # edge offsets along each normal
-    weight = good.reshape(4, _EDGE_SAMPLES).astype(np.float64)
-    s0 = weight.sum(axis=1)
-    if s0.min() < _EDGE_SAMPLES // 2:
+    r = np.empty((4, _EDGE_SAMPLES))
+    weight = np.empty((4, _EDGE_SAMPLES))
+    if _edge_offsets(prof, _PROFILE_MOMENTS, _TRAPEZOID_SUM, _OFFSETS[-1], r,
+                     weight) < _EDGE_SAMPLES // 2:
         return None
     if intrinsics is not None and intrinsics.dist:
         return _refine_distorted(frame, r, weight, c, intrinsics, origin_px)
-    # Weighted least-squares line per edge in its own frame: offset = a + b * along.
-    w_r = weight * r
-    s1, s2 = weight @ _EDGE_S, weight @ _EDGE_S2
-    t0, t1 = w_r.sum(axis=1), w_r @ _EDGE_S
-    slope = ((s0 * t1 - s1 * t0) / (s0 * s2 - s1 * s1)).tolist()
-    offset = ((t0 - np.asarray(slope) * s1) / s0).tolist()
-    lines = [
-        ((ax + a * nx, ay + a * ny), (dx + b * nx, dy + b * ny))
-        for ((ax, ay), (dx, dy), (nx, ny)), a, b in zip(edges, offset, slope, strict=True)
-    ]
-    out = _intersect(lines)
-    if out is None or not all(abs(u - v) <= 3.0 for u, v in zip(np.ravel(out), np.ravel(c),
-                                                                strict=True)):
-        return None  # the fit moved a corner by more than the detector's error: distrust it
-    return out
+    out = np.empty((4, 2))
+    # The fit moved a corner by more than the detector's error, or two lines are
+    # parallel: distrust it.
+    return out if _fit_corners(frame, r, weight, _EDGE_S, c, out) else None
+
+
+# The edge fit compiled (numba): it runs once or twice on every frame, on a few hundred
+# numbers, where numpy's per-call cost was most of its time.
+
+
+@numba.njit(cache=True, nogil=True)
+def _edge_frames(corners: FloatArray, rows: int, cols: int, half_px: float,
+                 min_length: float) -> FloatArray | None:  # pragma: no cover - compiled
+    """Each edge's (origin, along (the full edge), across (the unit normal)): shape (4, 3,
+    2); None when a corner is not finite, a profile would leave the image or an edge is
+    shorter than ``min_length``.  Edge k runs from corner k to k+1; its normal (dy, -dx)
+    points out for OpenCV's clockwise corner order."""
+    for k in range(4):
+        x, y = corners[k, 0], corners[k, 1]
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return None
+        # Every profile sample lies within the corners' box grown by the half-width.
+        if x < half_px or y < half_px or x > cols - 1 - half_px or y > rows - 1 - half_px:
+            return None
+    frame = np.empty((4, 3, 2))
+    for k in range(4):
+        ax, ay = corners[k, 0], corners[k, 1]
+        dx, dy = corners[(k + 1) % 4, 0] - ax, corners[(k + 1) % 4, 1] - ay
+        length = math.hypot(dx, dy)
+        if length < min_length:
+            return None
+        frame[k, 0, 0], frame[k, 0, 1] = ax, ay
+        frame[k, 1, 0], frame[k, 1, 1] = dx, dy
+        frame[k, 2, 0], frame[k, 2, 1] = dy / length, -dx / length
+    return frame
+
+
+@numba.njit(cache=True, nogil=True)
+def _sample_maps(frame: FloatArray, along: FloatArray,
+                 offsets: FloatArray) -> NDArray[np.float32]:  # pragma: no cover - compiled
+    """Where each profile samples: row ``k S + i`` of edge k at ``along[i]``, one column
+    per offset across it, (x, y) as ``cv2.remap`` takes them."""
+    n = along.size
+    maps = np.empty((4 * n, offsets.size, 2), np.float32)
+    for k in range(4):
+        for i in range(n):
+            for j in range(offsets.size):
+                for a in range(2):
+                    maps[k * n + i, j, a] = np.float32(
+                        frame[k, 0, a] + along[i] * frame[k, 1, a] + offsets[j] * frame[k, 2, a])
+    return maps
+
+
+@numba.njit(cache=True, nogil=True)
+def _edge_offsets(prof: GrayImage, moments: FloatArray, trapezoid_sum: float,
+                  last_offset: float, r: FloatArray,
+                  weight: FloatArray) -> float:  # pragma: no cover - compiled
+    """Each profile's edge offset along its normal into ``r`` and 1 or 0 (a clean
+    dark-to-light step or not) into ``weight``, both (4, S); returns the fewest good
+    profiles of an edge."""
+    n = r.shape[1]
+    fewest = float(n)
+    for k in range(4):
+        good_count = 0.0
+        for i in range(n):
+            row = prof[k * n + i]
+            inside = outside = integral = 0.0
+            for j in range(row.size):
+                value = float(row[j])
+                inside += value * moments[j, 0]
+                outside += value * moments[j, 1]
+                integral += value * moments[j, 2]
+            contrast = outside - inside
+            good = contrast > 20.0
+            # First moment of the normalised step: for an area-sampled straight edge
+            # the area under (I - I_in) / (I_out - I_in) ends exactly at the edge.
+            area = (integral - inside * trapezoid_sum) / (contrast if good else 1.0)
+            r[k, i] = last_offset - area
+            weight[k, i] = 1.0 if good else 0.0
+            good_count += weight[k, i]
+        fewest = min(fewest, good_count)
+    return fewest
+
+
+@numba.njit(cache=True, nogil=True)
+def _fit_corners(frame: FloatArray, r: FloatArray, weight: FloatArray, along: FloatArray,
+                 guess: FloatArray, out: FloatArray) -> bool:  # pragma: no cover - compiled
+    """A weighted least-squares line per edge in its own frame (offset = a + b along),
+    corner k where line k-1 meets line k, into ``out``; False where two lines are
+    parallel or a corner moved more than 3 px from ``guess``."""
+    lines = np.empty((4, 4))  # per edge: point x, y; direction x, y
+    for k in range(4):
+        s0 = s1 = s2 = t0 = t1 = 0.0
+        for i in range(along.size):
+            wk, s = weight[k, i], along[i]
+            s0 += wk
+            s1 += wk * s
+            s2 += wk * s * s
+            t0 += wk * r[k, i]
+            t1 += wk * r[k, i] * s
+        slope = (s0 * t1 - s1 * t0) / (s0 * s2 - s1 * s1)
+        offset = (t0 - slope * s1) / s0
+        nx, ny = frame[k, 2, 0], frame[k, 2, 1]
+        lines[k, 0] = frame[k, 0, 0] + offset * nx
+        lines[k, 1] = frame[k, 0, 1] + offset * ny
+        lines[k, 2] = frame[k, 1, 0] + slope * nx
+        lines[k, 3] = frame[k, 1, 1] + slope * ny
+    for k in range(4):
+        px, py, ux, uy = lines[k - 1, 0], lines[k - 1, 1], lines[k - 1, 2], lines[k - 1, 3]
+        qx, qy, vx, vy = lines[k, 0], lines[k, 1], lines[k, 2], lines[k, 3]
+        cross = ux * vy - uy * vx
+        if abs(cross) < 1e-9 * (ux * ux + uy * uy):
+            return False
+        t = ((qx - px) * vy - (qy - py) * vx) / cross
+        out[k, 0], out[k, 1] = px + t * ux, py + t * uy
+        if abs(out[k, 0] - guess[k, 0]) > 3.0 or abs(out[k, 1] - guess[k, 1]) > 3.0:
+            return False
+    return True
 
 
 def _intersect(lines: list[tuple[tuple[float, float], tuple[float, float]]]) -> FloatArray | None:
