@@ -83,7 +83,6 @@ _PROFILE_MOMENTS = np.column_stack([
 ])
 _EDGE_DESIGN = np.column_stack([np.ones(_EDGE_S.size), _EDGE_S])  # rows [1, s] on an edge
 _NEXT = np.roll(np.eye(4), 1, axis=1)  # row k selects corner k+1
-_PREV = np.roll(np.eye(4), -1, axis=1)  # row k selects corner k-1
 _ROT90 = np.array([1.0, -1.0])
 #: Half turn about x: maps the marker frame to the one IPPE sees with the corners reversed.
 _HALF_TURN_X = np.diag([1.0, -1.0, -1.0])
@@ -318,6 +317,18 @@ def _fit_corners(frame: FloatArray, r: FloatArray, weight: FloatArray, along: Fl
         lines[k, 1] = frame[k, 0, 1] + offset * ny
         lines[k, 2] = frame[k, 1, 0] + slope * nx
         lines[k, 3] = frame[k, 1, 1] + slope * ny
+    if not _intersect(lines, out):
+        return False
+    for k in range(4):
+        if abs(out[k, 0] - guess[k, 0]) > 3.0 or abs(out[k, 1] - guess[k, 1]) > 3.0:
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _intersect(lines: FloatArray, out: FloatArray) -> bool:  # pragma: no cover - compiled
+    """Corner k where line k-1 meets line k into ``out`` (4, 2); lines (4, 4) as point
+    x, y and direction x, y.  False where two lines are parallel."""
     for k in range(4):
         px, py, ux, uy = lines[k - 1, 0], lines[k - 1, 1], lines[k - 1, 2], lines[k - 1, 3]
         qx, qy, vx, vy = lines[k, 0], lines[k, 1], lines[k, 2], lines[k, 3]
@@ -326,23 +337,7 @@ def _fit_corners(frame: FloatArray, r: FloatArray, weight: FloatArray, along: Fl
             return False
         t = ((qx - px) * vy - (qy - py) * vx) / cross
         out[k, 0], out[k, 1] = px + t * ux, py + t * uy
-        if abs(out[k, 0] - guess[k, 0]) > 3.0 or abs(out[k, 1] - guess[k, 1]) > 3.0:
-            return False
     return True
-
-
-def _intersect(lines: list[tuple[tuple[float, float], tuple[float, float]]]) -> FloatArray | None:
-    """Corner k where line k-1 meets line k; lines as (point, direction)."""
-    out = []
-    for k in range(4):
-        (px, py), (ux, uy) = lines[k - 1]
-        (qx, qy), (vx, vy) = lines[k]
-        cross = ux * vy - uy * vx
-        if abs(cross) < 1e-9 * (ux * ux + uy * uy):
-            return None
-        t = ((qx - px) * vy - (qy - py) * vx) / cross
-        out.append((px + t * ux, py + t * uy))
-    return np.array(out)
 
 
 def _refine_distorted(
@@ -378,10 +373,8 @@ def _refine_distorted(
     offset = (t0 - slope * s1) / s0
     point = c + offset[:, None] * normal
     direction = vec + slope[:, None] * normal
-    lines = [((float(p[0]), float(p[1])), (float(d[0]), float(d[1])))
-             for p, d in zip(point, direction, strict=True)]
-    fitted = _intersect(lines)
-    if fitted is None:
+    fitted = np.empty((4, 2))
+    if not _intersect(np.ascontiguousarray(np.hstack([point, direction])), fitted):
         return None
     rays = np.column_stack([(fitted - centre_px) / focal, np.ones(4)])
     out: FloatArray = intrinsics.project(rays) - shift
@@ -414,7 +407,7 @@ class MarkerPose:
     @property
     def rvec(self) -> FloatArray:
         """The rotation as a Rodrigues vector (rad), computed stably near a half turn."""
-        if not np.isfinite(self.rotation).all():
+        if not _finite(self.rotation):
             return np.full(3, np.nan)  # no pose (PoseSolver.solve)
         out: FloatArray = Rotation.from_matrix(self.rotation).as_rotvec()
         return out
