@@ -412,7 +412,7 @@ def seed_intervals(samples_by_seed: Sequence[BandSamples], level: float, resampl
     drift: list[float] = []
     floor: list[float] = []
     factors: list[tuple[float, ...]] = []
-    knots = len({float(t) for t in temps_c})
+    held = len({float(t) for t in temps_c})
     for _ in range(resamples):
         draw = BandSamples.join([samples_by_seed[i] for i in rng.integers(0, n, n)])
         try:
@@ -421,7 +421,7 @@ def seed_intervals(samples_by_seed: Sequence[BandSamples], level: float, resampl
             continue
         band.append(scales.band_scale)
         floor.append(scales.floor_n)
-        if knots >= 2:
+        if held >= 2:
             factors.append(scales.temp_factors)
         if drift_set:
             drift.append(scales.drift_scale)
@@ -432,7 +432,7 @@ def seed_intervals(samples_by_seed: Sequence[BandSamples], level: float, resampl
         lo, hi = np.percentile(values, [5.0, 95.0])
         return float(lo), float(hi)
 
-    each = [interval([f[k] for f in factors]) for k in range(knots)] if knots >= 2 else []
+    each = [interval([f[k] for f in factors]) for k in range(held)] if held >= 2 else []
     return interval(band), interval(drift), interval(floor), each
 
 
