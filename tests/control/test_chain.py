@@ -19,21 +19,24 @@ def _share() -> float:
     return marker_share(0.060, 0.080, TEMP_C, FingerParams())
 
 
-def _started(weight: float = 0.2, k_obj: float = K_OBJ) -> ClosedChain:
+def _started(weight: float = 0.2, k_obj: float = K_OBJ, contact_m: float = math.nan,
+             **params: float) -> ClosedChain:
     """A chain started on a loading of two equal fingers and the object in series."""
-    chain = ClosedChain(ChainParams(weight=weight))
+    chain = ClosedChain(ChainParams(weight=weight, **params))  # type: ignore[arg-type]
     stiffness = 1.0 / (1.0 / k_obj + 2.0 / K_FINGER)  # N per mm of travel
     marker_per_mm = _share() * stiffness / K_FINGER * 1e-3  # m of marker per mm of travel
-    chain.start(stiffness, marker_per_mm, TEMP_C)
+    chain.start(stiffness, marker_per_mm, TEMP_C, contact_m)
     return chain
 
 
 def _hold(chain: ClosedChain, creep_mm: tuple[float, float], estimate_off_n: float = 0.0,
-          lost_after_s: float = math.inf) -> list[tuple[float, float, float]]:
+          lost_after_s: float = math.inf, infrared_from_s: float = math.inf
+          ) -> list[tuple[float, float, float]]:
     """Hold 5 N while the fingers creep linearly and the motor closes by the creep.
 
     Returns (hold time, true force, blended estimate) per frame; the estimate
-    blended is the truth plus ``estimate_off_n``.
+    blended is the truth plus ``estimate_off_n``.  From ``infrared_from_s`` on,
+    an infrared frame each second reads finger 1's contact deflection.
     """
     rows = []
     for t in np.arange(0.0, 60.0, 1.0 / 30.0):
@@ -42,8 +45,10 @@ def _hold(chain: ClosedChain, creep_mm: tuple[float, float], estimate_off_n: flo
         force = 5.0 + 0.2 * t / 60.0  # and a little more
         motor += 0.2 * t / 60.0 / K_OBJ
         deflection = None if t > lost_after_s else _share() * c0 * 1e-3
+        frame = t >= infrared_from_s and round(t * 30.0) % 30 == 0
         rows.append((float(t), force, chain.blend(float(t), motor, deflection,
-                                                   force + estimate_off_n)))
+                                                   force + estimate_off_n,
+                                                   c1 * 1e-3 if frame else None)))
     return rows
 
 
@@ -120,6 +125,38 @@ def test_a_seen_contact_sets_the_marker_share_and_the_weight() -> None:
     assert inside.share == nominal.share
 
 
+def test_the_other_finger_read_in_the_infrared_frame_takes_its_creep() -> None:
+    """Finger 1 creeps 0.1 mm more than the marker's: read in the infrared frame (the
+    object seen), the chain reads the truth and takes the estimate over."""
+    chain = _started(weight=0.2, contact_m=0.080, seen_weight=0.4, ir_weight=1.0)
+    rows = _hold(chain, creep_mm=(0.3, 0.4), estimate_off_n=0.05, infrared_from_s=0.0)
+    assert chain.weight == 1.0
+    for t, force, blended in rows:
+        if t < 5.0:
+            assert blended == force + 0.05
+    t, force, blended = rows[-1]
+    # The one-marker chain would read K_OBJ * 0.1 * 55.5 / 60 = 0.065 N over (above); the
+    # infrared frames, a second apart, leave at most a second of finger 1's creep.
+    assert blended == chain.reading_n
+    assert abs(blended - force - 0.05) < K_OBJ * 0.4 * 1.5 / 60.0
+
+
+def test_with_no_infrared_reading_at_the_reference_the_chain_keeps_one_marker() -> None:
+    seen = _started(weight=0.2, contact_m=0.080, seen_weight=0.4, ir_weight=1.0)
+    late = _hold(seen, creep_mm=(0.3, 0.4), infrared_from_s=10.0)
+    assert seen.weight == 0.4
+    blind = _started(weight=0.2, contact_m=0.080, seen_weight=0.4, ir_weight=1.0)
+    assert late == _hold(blind, creep_mm=(0.3, 0.4))
+    # Nor is it read where the object was not seen, nor at weight 0 (the default).
+    for unseen in (_started(weight=0.2, ir_weight=1.0),
+                   _started(weight=0.2, contact_m=0.080, seen_weight=0.4)):
+        rows = _hold(unseen, creep_mm=(0.3, 0.4), infrared_from_s=0.0)
+        assert math.isnan(unseen._other_ref_m)
+        assert rows == _hold(_started(weight=0.2, contact_m=unseen.contact_m
+                                      if unseen.seen else math.nan, seen_weight=0.4),
+                             creep_mm=(0.3, 0.4))
+
+
 def test_no_temperature_means_no_chain() -> None:
     chain = ClosedChain()
     chain.start(0.3, 1e-4, math.nan)
@@ -128,6 +165,7 @@ def test_no_temperature_means_no_chain() -> None:
 
 @pytest.mark.parametrize("kwargs", [
     {"weight": -0.1}, {"weight": 1.5}, {"weight": math.nan}, {"seen_weight": 1.5},
+    {"ir_weight": -0.5},
     {"ref_s": 0.5, "ref_window_s": 1.0}, {"ref_window_s": 0.0},
     {"marker_m": 0.09}, {"marker_m": 0.0}, {"min_compliant_share": 1.0},
 ])

@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from relaxgrip.errors import InputError
 from relaxgrip.perception.face_bend import (
     FaceBendReader,
     FaceMidline,
@@ -121,7 +122,7 @@ def test_the_windows_are_cached_per_tenth_of_a_millimetre() -> None:
     img = _frame((4.0e-3, 4.0e-3))
     first = reader.read(img, APERTURE_M)
     again = reader.read(img, APERTURE_M + 2e-5)
-    assert len(reader._cache) == 1
+    assert len(reader._cache) == 2  # one window per finger
     assert np.array_equal(first[0].along_m, again[0].along_m)
 
 
@@ -146,8 +147,21 @@ def test_contact_deflection_refuses_what_it_cannot_fit() -> None:
     ({"along_range_m": (0.0, 0.2)}, "along the finger"),
 ])
 def test_bad_settings_are_refused(kwargs: dict[str, object], message: str) -> None:
-    with pytest.raises(ValueError, match=message):
+    with pytest.raises(InputError, match=message):
         FaceBendReader(RIG, **kwargs)  # type: ignore[arg-type]
+
+
+def test_an_unloaded_finger_is_looked_for_unbent() -> None:
+    """A rigid jaw does not bend: read with ``loaded=(0,)`` it is looked for where it is."""
+    img = _frame((8.0e-3, 0.0))
+    reader = FaceBendReader(RIG)
+    guess = _guess(8.0e-3)
+    both = reader.read(img, APERTURE_M, guess)
+    marker_only = reader.read(img, APERTURE_M, guess, loaded=(0,))
+    assert np.array_equal(both[0].bend_m, marker_only[0].bend_m)
+    # Looked for bent by 8 mm, the unbent jaw's distal rows are missed.
+    assert marker_only[1].along_m.size > both[1].along_m.size
+    assert np.abs(marker_only[1].bend_m).max() < 0.5e-3
 
 
 def test_a_camera_that_sees_no_face_reads_nothing() -> None:

@@ -9,8 +9,12 @@ object's stiffness times that compression.  So
 
 with ``m`` the encoder, ``c0`` the contact deflection of the marker's finger
 (the marker's deflection over the share of it the beam model gives at the
-marker) and ``c1`` the other finger's, taken equal to ``c0``: nothing sees
-it.  ``k_obj`` comes from the loading, where the ICFN rose by
+marker) and ``c1`` the other finger's.  Where the object was seen, ``c1`` is
+read in the infrared frame (its top face's bend,
+:mod:`relaxgrip.perception.face_bend`, fitted with the beam model at the
+object's place) and the chain's weight is ``ChainParams.ir_weight``;
+otherwise ``c1`` is taken equal to ``c0``, which nothing else sees.
+``k_obj`` comes from the loading, where the ICFN rose by
 ``s = k_obj (1 - 2 rho / g)`` per millimetre of motor travel while the
 marker moved ``rho`` (``g`` the marker's share).
 
@@ -104,6 +108,14 @@ class ChainParams:
         Below this share of the loading's travel left for the object
         (``1 - 2 rho / g``) the object's stiffness is not measurable (a
         rigid object): no chain reading.
+    ir_weight : float
+        The chain's share when the object was seen and the other finger is
+        read in the infrared frame; 0 (the default) does not read it.  Its
+        spread over seeds is its start's alone (5 N, 40 °C, seeds 4000-4035
+        in closed loop at weight 1: 0.032 against 0.055 N SD), but the force
+        ball, which stands above the faces, hides part of their distal rows,
+        so the reading misses part of finger 1's creep and the estimate runs
+        0.061 N high (docs/hold-experiments.md, session 56).
     """
 
     weight: float = 0.2
@@ -114,9 +126,10 @@ class ChainParams:
     contact_m: float = 0.080
     finger: FingerParams = field(default_factory=FingerParams)
     min_compliant_share: float = 0.1
+    ir_weight: float = 0.0
 
     def __post_init__(self) -> None:
-        for weight in (self.weight, self.seen_weight):
+        for weight in (self.weight, self.seen_weight, self.ir_weight):
             if not 0.0 <= weight <= 1.0:
                 raise ValueError(f"chain weight must be in [0, 1], got {weight}")
         if not (self.ref_s >= self.ref_window_s > 0):
@@ -147,10 +160,13 @@ class ClosedChain:
         self.share = NAN
         self.contact_m = NAN
         self.weight = NAN
+        self.seen = False
         self._sums = [0.0, 0.0, 0.0]
         self._n = 0
         self._ref: tuple[float, float, float] | None = None
         self._deflection_m = NAN
+        self._other_m = NAN
+        self._other_ref_m = NAN
         self.reading_n = NAN
 
     def start(self, stiffness_n_per_mm: float, marker_per_mm_m: float, temp_c: float,
@@ -173,6 +189,7 @@ class ClosedChain:
         self.reset()
         p = self.params
         seen = math.isfinite(contact_m) and p.marker_m < contact_m <= p.finger.length_m
+        self.seen = seen
         self.contact_m = contact_m if seen else p.contact_m
         self.weight = p.seen_weight if seen else p.weight
         if self.weight == 0.0 or not math.isfinite(temp_c):
@@ -183,7 +200,7 @@ class ClosedChain:
             self.object_stiffness_n_per_mm = stiffness_n_per_mm / compliant
 
     def blend(self, hold_s: float, motor_mm: float, deflection_m: float | None,
-              estimate_n: float) -> float:
+              estimate_n: float, other_m: float | None = None) -> float:
         """The estimate with the chain's reading blended in (N).
 
         Parameters
@@ -197,11 +214,18 @@ class ClosedChain:
             (the last one seen stands).
         estimate_n : float
             The estimate the chain starts from and is blended into (N).
+        other_m : float or None
+            The other finger's contact deflection read in an infrared frame
+            just taken (m); None between frames (the last one stands).  Used
+            when the object was seen and a reading stood when the chain
+            started.
 
         ``reading_n`` keeps this frame's chain reading (N; nan if none).
         """
         if deflection_m is not None and math.isfinite(deflection_m):
             self._deflection_m = deflection_m
+        if other_m is not None and math.isfinite(other_m):
+            self._other_m = other_m
         p = self.params
         self.reading_n = NAN
         if not (math.isfinite(self.object_stiffness_n_per_mm) and math.isfinite(estimate_n)
@@ -217,7 +241,14 @@ class ClosedChain:
                 return estimate_n
             f_ref, m_ref, x_ref = (s / self._n for s in self._sums)
             self._ref = (f_ref, m_ref, x_ref)
+            if self.seen and math.isfinite(self._other_m) and p.ir_weight > 0:
+                self._other_ref_m = self._other_m
+                self.weight = p.ir_weight
         f_ref, m_ref, x_ref = self._ref
-        fingers_mm = 2.0 * (self._deflection_m - x_ref) * 1e3 / self.share
+        marker_mm = (self._deflection_m - x_ref) * 1e3 / self.share
+        if math.isfinite(self._other_ref_m):
+            fingers_mm = marker_mm + (self._other_m - self._other_ref_m) * 1e3
+        else:
+            fingers_mm = 2.0 * marker_mm
         self.reading_n = f_ref + self.object_stiffness_n_per_mm * (motor_mm - m_ref - fingers_mm)
         return (1.0 - self.weight) * estimate_n + self.weight * self.reading_n

@@ -92,8 +92,10 @@ from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
 from relaxgrip.learning.store import ModelBundle
+from relaxgrip.perception.face_bend import contact_deflection_m
 from relaxgrip.perception.features import RcfnFeatures, finger_temperature_c, marker_pose
 from relaxgrip.perception.pipeline import Percept
+from relaxgrip.perception.thermal import ThermalFeatures
 
 __all__ = [
     "TARE_WINDOW_S",
@@ -452,6 +454,7 @@ class RelaxEstimator:
         self.f_onset_n = NAN
         self.closure_stiffness_n_per_mm = NAN
         self._k = self._tau = NAN
+        self._ir_t = NAN
 
     def update(self, percept: Percept, motor_position_mm: float) -> ForceEstimate:
         """ICFN before the hold; Eq. 10 plus the controller's added closure during it."""
@@ -503,11 +506,22 @@ class RelaxEstimator:
             calibration = self.bias.at(self.f_onset_n, self._temp_c, hold)
             force -= calibration
         deflection = None if pose is None else float(pose[0])
-        blended = self.chain.blend(hold, motor_position_mm, deflection, force)
+        blended = self.chain.blend(hold, motor_position_mm, deflection, force,
+                                   self._other_finger_m(percept.thermal))
         return ForceEstimate(blended, raw, self.f_onset_n, self._k, self._tau, hold,
                              calibration_n=calibration,
                              chain_n=(blended - force if math.isfinite(self.chain.reading_n)
                                       else NAN))
+
+    def _other_finger_m(self, thermal: ThermalFeatures | None) -> float | None:
+        """Finger 1's contact deflection in an infrared frame not read before (m), where
+        the object was seen; None otherwise (the chain keeps the last)."""
+        if (thermal is None or thermal.midlines is None or not self.chain.seen
+                or self.chain.params.ir_weight == 0.0 or thermal.t_s == self._ir_t):
+            return None
+        self._ir_t = thermal.t_s
+        return contact_deflection_m(thermal.midlines[1], self.chain.contact_m, self._temp_c,
+                                    self.chain.params.finger)
 
     def contact(self, t_s: float) -> float:
         """Tare the ICFN on the free-space frames before the contact (returns the tare, N)."""

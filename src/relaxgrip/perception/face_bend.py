@@ -28,6 +28,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from relaxgrip.errors import InputError
 from relaxgrip.physics.beam import FingerParams, beam_grid, unit_profile_m_per_n
 from relaxgrip.rig import RigGeometry, bend_profile_m
 
@@ -94,12 +95,12 @@ class FaceBendReader:
     def __init__(self, rig: RigGeometry, min_contrast_k: float = 2.0, margin_m: float = 0.003,
                  along_range_m: tuple[float, float] = ALONG_RANGE_M) -> None:
         if not (math.isfinite(min_contrast_k) and min_contrast_k > 0):
-            raise ValueError(f"least contrast must be > 0 K, got {min_contrast_k}")
+            raise InputError(f"least contrast must be > 0 K, got {min_contrast_k}")
         if not (math.isfinite(margin_m) and margin_m > 0):
-            raise ValueError(f"search margin must be > 0 m, got {margin_m}")
+            raise InputError(f"search margin must be > 0 m, got {margin_m}")
         lo, hi = along_range_m
         if not 0.0 <= lo < hi <= rig.finger.length_m:
-            raise ValueError(f"rows must lie along the finger, got {along_range_m} m")
+            raise InputError(f"rows must lie along the finger, got {along_range_m} m")
         self.rig = rig
         self.min_contrast_k = float(min_contrast_k)
         self.margin_m = float(margin_m)
@@ -117,10 +118,11 @@ class FaceBendReader:
         #: Where each pixel centre's ray meets the plane of the top faces (gripper x, y; m).
         self._x = origin[0] + t * rays[..., 0]
         self._y = origin[1] + t * rays[..., 1]
-        self._cache: dict[tuple[int, int, int], list[_Window]] = {}
+        self._cache: dict[tuple[int, int, int, int], _Window] = {}
 
     def read(self, image: NDArray[np.floating], aperture_m: float,
-             bend: tuple[float, float] | None = None) -> tuple[FaceMidline, FaceMidline]:
+             bend: tuple[float, float] | None = None,
+             loaded: tuple[int, ...] = (0, 1)) -> tuple[FaceMidline, FaceMidline]:
         """Both fingers' face midlines in one frame.
 
         Parameters
@@ -130,9 +132,11 @@ class FaceBendReader:
         aperture_m : float
             The aperture from the encoder (m).
         bend : (deflection_m, slope_rad), optional
-            The marker finger's bend at the tab: where both faces are looked
-            for (in a grasp the fingers carry equal and opposite forces).
-            None looks for them unbent.
+            The marker finger's bend at the tab: where the ``loaded`` fingers'
+            faces are looked for (in a grasp the fingers carry equal and
+            opposite forces).  None looks for them unbent.
+        loaded : tuple of int
+            The fingers the load bends; the others are looked for unbent.
 
         Returns
         -------
@@ -141,15 +145,19 @@ class FaceBendReader:
         """
         img = np.asarray(image, dtype=np.float64)
         out = []
-        for j, (rows, cols, valid) in enumerate(self._windows(aperture_m, bend)):
-            out.append(self._midline(j, img, aperture_m, rows, cols, valid))
+        for j in (0, 1):
+            window = self._window(j, aperture_m, bend if j in loaded else None)
+            out.append(self._midline(j, img, aperture_m, *window))
         return out[0], out[1]
 
-    def _windows(self, aperture_m: float,
-                 bend: tuple[float, float] | None) -> list[_Window]:
-        """Per finger: the rows searched, and each row's columns (padded, with a validity mask)."""
+    def _window(self, j: int, aperture_m: float, bend: tuple[float, float] | None) -> _Window:
+        """Finger ``j``'s rows searched, each row's columns (padded) and which are real.
+
+        Kept per finger, aperture and bend (to 0.1 mm and 1 mrad): the margin
+        covers the rounding.
+        """
         deflection, slope = (0.0, 0.0) if bend is None else bend
-        key = (round(aperture_m / _STEP_M), round(deflection / _STEP_M), round(slope * 1e3))
+        key = (j, round(aperture_m / _STEP_M), round(deflection / _STEP_M), round(slope * 1e3))
         cached = self._cache.get(key)
         if cached is not None:
             return cached
@@ -159,23 +167,21 @@ class FaceBendReader:
         x = np.nan_to_num(self._x, nan=-1.0)
         guess = bend_profile_m(np.clip(x, 0.0, rig.finger.length_m), rig.marker.position_m,
                                deflection, slope)
-        out: list[_Window] = []
-        for side in (-1.0, 1.0):
-            across = side * self._y - (0.5 * aperture_m + half + guess)
-            near = (np.abs(across) <= half + self.margin_m) & (x >= lo) & (x <= hi)
-            rows = np.flatnonzero(near.any(axis=1))
-            # Beyond where the face can be, the background the row's level is taken from.
-            first = np.maximum(near[rows].argmax(axis=1) - _PAD_PX, 0)
-            last = np.minimum(near.shape[1] - 1 - near[rows, ::-1].argmax(axis=1) + _PAD_PX,
-                              near.shape[1] - 1)
-            width = int((last - first).max()) + 1 if rows.size else 0
-            cols = first[:, None] + np.arange(width)
-            valid = cols <= last[:, None]
-            out.append(_Window(rows, np.minimum(cols, near.shape[1] - 1), valid))
+        side = -1.0 if j == 0 else 1.0
+        across = side * self._y - (0.5 * aperture_m + half + guess)
+        near = (np.abs(across) <= half + self.margin_m) & (x >= lo) & (x <= hi)
+        rows = np.flatnonzero(near.any(axis=1))
+        # Beyond where the face can be, the background the row's level is taken from.
+        first = np.maximum(near[rows].argmax(axis=1) - _PAD_PX, 0)
+        last = np.minimum(near.shape[1] - 1 - near[rows, ::-1].argmax(axis=1) + _PAD_PX,
+                          near.shape[1] - 1)
+        width = int((last - first).max()) + 1 if rows.size else 0
+        cols = first[:, None] + np.arange(width)
+        window = _Window(rows, np.minimum(cols, near.shape[1] - 1), cols <= last[:, None])
         if len(self._cache) >= _CACHE_SIZE:
             self._cache.pop(next(iter(self._cache)))
-        self._cache[key] = out
-        return out
+        self._cache[key] = window
+        return window
 
     def _midline(self, j: int, img: FloatArray, aperture_m: float, rows: NDArray[np.intp],
                  cols: NDArray[np.intp], valid: NDArray[np.bool_]) -> FaceMidline:
@@ -188,14 +194,14 @@ class FaceBendReader:
         tail = np.take_along_axis(p, n[:, None] - 1 - np.arange(3), axis=1)
         ends = np.concatenate([p[:, :3], tail], axis=1)
         base = np.median(ends, axis=1)
-        inside = np.where(valid, p, np.nan)
-        polarity = np.sign(np.nanmedian(inside, axis=1) - base)
-        q = (inside - base[:, None]) * polarity[:, None]  # the face counts up from 0
-        q = np.where(valid, q, -np.inf)
+        polarity = np.sign(np.where(valid, p, 0.0).sum(axis=1) / n - base)
+        q = (p - base[:, None]) * polarity[:, None]  # the face counts up from 0
+        q[~valid] = -np.inf
         k = np.argmax(q, axis=1)
         r = np.arange(rows.size)
         lo_k, hi_k = np.maximum(k - 1, 0), np.minimum(k + 1, n - 1)
-        peak = np.median(np.stack([q[r, lo_k], q[r, k], q[r, hi_k]]), axis=0)
+        a, b, c = q[r, lo_k], q[r, k], q[r, hi_k]
+        peak = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))  # their median
         half = 0.5 * peak
         idx = np.arange(cols.shape[1])
         below = q < half[:, None]
