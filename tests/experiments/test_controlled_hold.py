@@ -111,7 +111,9 @@ def test_the_other_finger_read_in_the_infrared_frame_takes_the_chain_over(
     shipped = run_hold("relax", duration_s=12.0, seed=4, locate_object=True)
     monkeypatch.setattr(chain, "ChainParams", partial(chain.ChainParams, ir_weight=1.0))
     read = run_hold("relax", duration_s=12.0, seed=4, locate_object=True)
-    hold_s = read.loop["t_s"] - read.loop.hold_onset_s()
+    onset = read.loop.hold_onset_s()
+    assert onset is not None
+    hold_s = read.loop["t_s"] - onset
     before = (hold_s >= 0.0) & (hold_s < 4.0)
     after = hold_s >= 6.0
     np.testing.assert_array_equal(read.loop["estimate_n"][before],

@@ -12,11 +12,12 @@ from relaxgrip.errors import InputError
 from relaxgrip.perception.face_bend import (
     FaceBendReader,
     FaceMidline,
+    clear_span_m,
     contact_deflection_m,
 )
 from relaxgrip.physics.beam import beam_grid, unit_profile_m_per_n
 from relaxgrip.twin import TwinConfig
-from relaxgrip.twin.render_ir import IrRenderer
+from relaxgrip.twin.render_ir import IrObject, IrRenderer
 from relaxgrip.twin.sensors import IrSensorConfig
 
 CFG = TwinConfig()
@@ -29,15 +30,18 @@ ROOM_C = 25.0
 
 
 def _frame(contacts_m: tuple[float, float], temp_c: float = 40.0, contact_at_m: float = 0.079,
-           netd_k: float = 0.0, aperture_m: float = APERTURE_M) -> np.ndarray:
+           netd_k: float = 0.0, aperture_m: float = APERTURE_M, samples: int = 1,
+           objects: tuple[IrObject, ...] = ()) -> np.ndarray:
     """An infrared frame of both fingers bent by the beam model's profile for a load at
     ``contact_at_m``, with deflections ``contacts_m`` there."""
     z, _ = unit_profile_m_per_n(contact_at_m, temp_c, FINGER)
     unit = z / np.interp(contact_at_m, GRID, z)
     bend = np.stack([c * unit for c in contacts_m])
-    renderer = IrRenderer(RIG, IrSensorConfig(netd_k=netd_k, max_offset_k=0.0), seed=0)
+    renderer = IrRenderer(RIG, IrSensorConfig(netd_k=netd_k, max_offset_k=0.0,
+                                              samples_per_px=samples), seed=0)
     temps = np.full((2, NODES.size), temp_c)
-    img: np.ndarray = renderer.render(0, temps, NODES, aperture_m, [], ROOM_C, (GRID, bend))
+    img: np.ndarray = renderer.render(0, temps, NODES, aperture_m, list(objects), ROOM_C,
+                                      (GRID, bend))
     return img
 
 
@@ -130,12 +134,12 @@ def test_contact_deflection_refuses_what_it_cannot_fit() -> None:
     along = np.linspace(0.02, 0.10, 20)
     z, _ = unit_profile_m_per_n(0.08, 40.0, FINGER)
     unit = np.interp(along, GRID, z / np.interp(0.08, GRID, z))
-    line = FaceMidline(along, 3e-3 * unit)
+    line = FaceMidline(along, 3e-3 * unit, np.full(along.size, 0.012))
     assert contact_deflection_m(line, 0.08, 40.0, FINGER) == pytest.approx(3e-3, rel=1e-9)
     assert math.isnan(contact_deflection_m(line, math.nan, 40.0, FINGER))
     assert math.isnan(contact_deflection_m(line, 0.2, 40.0, FINGER))  # beyond the tip
     assert math.isnan(contact_deflection_m(line, 0.08, math.nan, FINGER))
-    few = FaceMidline(along[:5], line.bend_m[:5])
+    few = FaceMidline(along[:5], line.bend_m[:5], line.width_m[:5])
     assert math.isnan(contact_deflection_m(few, 0.08, 40.0, FINGER))
 
 
@@ -170,3 +174,46 @@ def test_a_camera_that_sees_no_face_reads_nothing() -> None:
     reader = FaceBendReader(away)
     for midline in reader.read(np.full(away.ir.intrinsics.shape, ROOM_C), APERTURE_M):
         assert midline.along_m.size == 0
+
+
+@pytest.mark.parametrize(("samples", "limit_m", "slope_tol"),
+                         [(1, 0.12e-3, 0.2), (4, 0.025e-3, 0.05)])
+def test_drawn_by_pixel_area_the_creep_is_read_to_micrometres(samples: int, limit_m: float,
+                                                             slope_tol: float) -> None:
+    """Finger 1 crept in 20 µm steps: read against the truth, the reading's error from a
+    line stays within ``limit_m`` (by pixel centres an edge waits for the next centre)."""
+    reader = FaceBendReader(RIG)
+    steps = np.arange(3.8e-3, 4.21e-3, 0.02e-3)
+    read = np.array([contact_deflection_m(
+        reader.read(_frame((4.0e-3, c), samples=samples), APERTURE_M, _guess(4.0e-3))[1],
+        0.079, 40.0, FINGER) for c in steps])
+    fit = np.polyval(np.polyfit(steps, read, 1), steps)
+    assert np.abs(read - fit).max() < limit_m
+    assert np.polyfit(steps, read, 1)[0] == pytest.approx(1.0, abs=slope_tol)
+
+
+def test_the_span_ends_where_a_held_object_hides_the_face() -> None:
+    """The force ball between the fingers stands above their faces and hides the distal
+    rows' inner edges: the span the face is whole on ends before them."""
+    aperture = 0.044
+    ball = IrObject((0.079, 0.0, 0.0), 0.030, 26.0, 0.9)
+    reader = FaceBendReader(RIG)
+    clear = reader.read(_frame((4.0e-3, 4.0e-3), aperture_m=aperture, samples=4), aperture,
+                        _guess(4.0e-3))[1]
+    held = reader.read(_frame((4.0e-3, 4.0e-3), aperture_m=aperture, samples=4,
+                              objects=(ball,)), aperture, _guess(4.0e-3))[1]
+    assert clear_span_m(clear) == (0.015, 0.108)
+    lo, hi = clear_span_m(held)
+    assert lo == 0.015
+    assert 0.05 < hi < 0.08
+    # Every row in the span reads the face whole.
+    inside = (held.along_m >= lo) & (held.along_m <= hi)
+    assert np.all(held.width_m[inside] > 0.012 - 0.3e-3)
+
+
+def test_the_span_needs_rows_near_the_root_to_measure_the_face_on() -> None:
+    along = np.linspace(0.05, 0.10, 12)
+    narrow = FaceMidline(along, np.zeros(12), np.full(12, 0.008))
+    assert clear_span_m(narrow) == (0.015, 0.108)
+    one_row = FaceMidline(np.r_[0.02, along], np.zeros(13), np.r_[0.012, np.full(12, 0.0119)])
+    assert clear_span_m(one_row) == (0.015, 0.108)  # 0.1 mm narrower is within tolerance

@@ -213,3 +213,46 @@ def test_a_frame_does_not_depend_on_the_frames_rendered_before():
                                   expected)
     assert not np.array_equal(fresh.render(3, EXAMPLE_C, NODES, 0.075, [ball], AMBIENT_C),
                               fresh.render(3, EXAMPLE_C, NODES, 0.074, [ball], AMBIENT_C))
+
+
+def _bent_frame(samples: int, tip_m: float) -> np.ndarray:
+    """Both fingers at 40 °C in a 25 °C room, bent linearly to ``tip_m`` at the tip."""
+    config = IrSensorConfig(netd_k=0.0, max_offset_k=0.0, samples_per_px=samples)
+    renderer = IrRenderer(RIG, config, seed=0)
+    grid = np.linspace(0.0, RIG.finger.length_m, 23)
+    bend = tip_m * grid / RIG.finger.length_m
+    frame: np.ndarray = renderer.render(0, np.full((2, NODES.size), 40.0), NODES, 0.044, [],
+                                        25.0, (grid, np.stack([bend, bend])))
+    return frame
+
+
+def test_a_pixel_drawn_by_its_area_follows_an_outline_between_pixel_centres() -> None:
+    """Bent 20 µm further, drawn by pixel centres few pixels change; drawn by area, the
+    pixels along the outlines do."""
+    centre = [_bent_frame(1, tip) for tip in (4.00e-3, 4.02e-3)]
+    area = [_bent_frame(4, tip) for tip in (4.00e-3, 4.02e-3)]
+    changed_centre = np.count_nonzero(centre[0] != centre[1])
+    changed_area = np.count_nonzero(np.abs(area[0] - area[1]) > 1e-4)
+    assert changed_area > 5 * max(int(changed_centre), 1)
+    # Far from the outlines a pixel is its surface either way.
+    assert area[0][0, 0] == pytest.approx(centre[0][0, 0], abs=1e-4)
+    # The mean over the frame is the faces' area, which both draw alike.
+    assert float(area[0].mean()) == pytest.approx(float(centre[0].mean()), rel=2e-3)
+
+
+def test_away_from_outlines_the_area_drawing_is_the_centre_drawing() -> None:
+    """Where a pixel and its neighbours see one surface, its samples all see it too."""
+    import cv2
+
+    centre, area = _bent_frame(1, 4e-3), _bent_frame(4, 4e-3)
+    kernel = np.ones((5, 5), np.uint8)
+    uniform = (cv2.dilate(centre, kernel) - cv2.erode(centre, kernel)) < 1e-6
+    assert uniform.mean() > 0.8
+    np.testing.assert_allclose(area[uniform], centre[uniform], atol=1e-3)
+    assert not np.allclose(area[~uniform], centre[~uniform], atol=1e-3)
+
+
+@pytest.mark.parametrize("samples", [0, 9, 2.5, True])
+def test_bad_sample_counts_are_refused(samples: object) -> None:
+    with pytest.raises(InputError, match="samples_per_px"):
+        IrSensorConfig(samples_per_px=samples)  # type: ignore[arg-type]

@@ -92,7 +92,7 @@ from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
 from relaxgrip.learning.store import ModelBundle
-from relaxgrip.perception.face_bend import contact_deflection_m
+from relaxgrip.perception.face_bend import clear_span_m, contact_deflection_m
 from relaxgrip.perception.features import RcfnFeatures, finger_temperature_c, marker_pose
 from relaxgrip.perception.pipeline import Percept
 from relaxgrip.perception.thermal import ThermalFeatures
@@ -455,6 +455,7 @@ class RelaxEstimator:
         self.closure_stiffness_n_per_mm = NAN
         self._k = self._tau = NAN
         self._ir_t = NAN
+        self._ir_span: tuple[float, float] | None = None
 
     def update(self, percept: Percept, motor_position_mm: float) -> ForceEstimate:
         """ICFN before the hold; Eq. 10 plus the controller's added closure during it."""
@@ -520,8 +521,13 @@ class RelaxEstimator:
                 or self.chain.params.ir_weight == 0.0 or thermal.t_s == self._ir_t):
             return None
         self._ir_t = thermal.t_s
-        return contact_deflection_m(thermal.midlines[1], self.chain.contact_m, self._temp_c,
-                                    self.chain.params.finger)
+        midline = thermal.midlines[1]
+        if self._ir_span is None:
+            # Which rows the object leaves clear is fixed once a hold: rows read on
+            # some frames and not on others would move the fit between frames.
+            self._ir_span = clear_span_m(midline)
+        return contact_deflection_m(midline, self.chain.contact_m, self._temp_c,
+                                    self.chain.params.finger, self._ir_span)
 
     def contact(self, t_s: float) -> float:
         """Tare the ICFN on the free-space frames before the contact (returns the tare, N)."""
@@ -545,6 +551,7 @@ class RelaxEstimator:
         """
         self._onset_t = t_s
         self._onset_motor = motor_position_mm
+        self._ir_span = None
         self.closure_stiffness_n_per_mm, self._pose_per_mm = _closure_slopes(self._loading)
         self.chain.start(self.closure_stiffness_n_per_mm, float(self._pose_per_mm[0]),
                          self._loading_temp_c, contact_m)

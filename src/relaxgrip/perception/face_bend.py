@@ -34,7 +34,7 @@ from relaxgrip.rig import RigGeometry, bend_profile_m
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["ALONG_RANGE_M", "FaceBendReader", "FaceMidline", "contact_deflection_m"]
+__all__ = ["ALONG_RANGE_M", "FaceBendReader", "FaceMidline", "clear_span_m", "contact_deflection_m"]
 
 #: The span of the finger read (m from the root): near the root a row sees little bend,
 #: and beyond 108 mm the face's end runs along the row.  The distal rows carry most
@@ -60,10 +60,14 @@ class FaceMidline:
         showed both edges of the face.
     bend_m : ndarray, shape (n,)
         The finger's deflection outwards there (m).
+    width_m : ndarray, shape (n,)
+        The face's width there (m): the finger's thickness where the whole
+        face is seen, less where something in front hides part of it.
     """
 
     along_m: FloatArray
     bend_m: FloatArray
+    width_m: FloatArray
 
 
 class _Window(NamedTuple):
@@ -185,7 +189,7 @@ class FaceBendReader:
 
     def _midline(self, j: int, img: FloatArray, aperture_m: float, rows: NDArray[np.intp],
                  cols: NDArray[np.intp], valid: NDArray[np.bool_]) -> FaceMidline:
-        empty = FaceMidline(np.zeros(0), np.zeros(0))
+        empty = FaceMidline(np.zeros(0), np.zeros(0), np.zeros(0))
         if rows.size == 0 or cols.shape[1] < 8:
             return empty
         n = valid.sum(axis=1)
@@ -231,11 +235,47 @@ class FaceBendReader:
             return out
 
         x_mid = 0.5 * (lerp(xs, left, fl) + lerp(xs, right - 1, fr))
-        y_mid = 0.5 * (lerp(ys, left, fl) + lerp(ys, right - 1, fr))
+        y_left, y_right = lerp(ys, left, fl), lerp(ys, right - 1, fr)
         side = -1.0 if j == 0 else 1.0
-        bend = side * y_mid - 0.5 * aperture_m - 0.5 * self.rig.finger.thickness_m
+        thickness = self.rig.finger.thickness_m
+        bend = side * 0.5 * (y_left + y_right) - 0.5 * aperture_m - 0.5 * thickness
         good = np.isfinite(x_mid) & np.isfinite(bend)
-        return FaceMidline(x_mid[good], bend[good])
+        return FaceMidline(x_mid[good], bend[good], np.abs(y_right - y_left)[good])
+
+
+def clear_span_m(midline: FaceMidline, tolerance_m: float = 0.3e-3,
+                 along_range_m: tuple[float, float] = ALONG_RANGE_M,
+                 reference_below_m: float = 0.040) -> tuple[float, float]:
+    """The span of the finger, from the root, where the whole face is seen (m).
+
+    A held object stands above the faces between the fingers and hides part
+    of them near it (the force ball, 30 mm in radius: the rows beyond about
+    57 mm at 5 N): there the face reads narrower than it is, and its outline
+    is partly the object's, which does not move as the finger creeps.  The
+    face's own width is its median over the rows nearer the root than
+    ``reference_below_m``; the span ends before the first two rows running
+    (root to tip) that read more than ``tolerance_m`` narrower.
+
+    Returns
+    -------
+    (float, float)
+        ``along_range_m`` cut short where the face is first hidden; the whole
+        of it if no row near the root is seen to measure the width on.
+    """
+    lo, hi = along_range_m
+    order = np.argsort(midline.along_m)
+    along, width = midline.along_m[order], midline.width_m[order]
+    near_root = along < reference_below_m
+    if not near_root.any():
+        return lo, hi
+    narrow = width < float(np.median(width[near_root])) - tolerance_m
+    keep = (along >= lo) & (along <= hi)
+    along, narrow = along[keep], narrow[keep]
+    hidden = np.flatnonzero(narrow[:-1] & narrow[1:])
+    if hidden.size:
+        first = int(hidden[0])
+        hi = lo if first == 0 else 0.5 * (along[first] + along[first - 1])
+    return lo, hi
 
 
 def contact_deflection_m(midline: FaceMidline, contact_m: float, temp_c: float,

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -166,6 +166,18 @@ class IrRenderer:
         self._hit_cache: tuple[
             tuple[object, ...], list[_FaceHits], list[_SphereHits | None]
         ] | None = None
+        #: With several samples a pixel: the same camera with that many pixels a side
+        #: more, whose pixel centres are the samples (its scene only is drawn).
+        self._fine: IrRenderer | None = None
+        k = config.samples_per_px
+        if k > 1:
+            intr = self.intrinsics
+            fine = replace(intr, width_px=intr.width_px * k, height_px=intr.height_px * k,
+                           fx_px=intr.fx_px * k, fy_px=intr.fy_px * k,
+                           cx_px=k * intr.cx_px + 0.5 * (k - 1),
+                           cy_px=k * intr.cy_px + 0.5 * (k - 1))
+            self._fine = IrRenderer(replace(rig, ir=replace(rig.ir, intrinsics=fine)),
+                                    replace(config, samples_per_px=1), seed, unit)
 
     @property
     def offset_k(self) -> float:
@@ -219,16 +231,13 @@ class IrRenderer:
         cfg = self.config
 
         h, w = self.intrinsics.shape
-        background = float(_radiance(ambient, cfg.background_emissivity, ambient))
-        img = np.full((h, w), background, dtype=np.float32)
-        faces, spheres = self._hits(aperture, objects, bend)
-        for j, (rows, cols, seen, along) in enumerate(faces):
-            field = np.interp(along, nodes, temps[j])
-            img[rows, cols][seen] = _radiance(field, cfg.finger_emissivity, ambient)
-        for obj, hit in zip(objects, spheres, strict=True):
-            if hit is not None:
-                rows, cols, seen = hit
-                img[rows, cols][seen] = np.float32(_radiance(obj.temp_c, obj.emissivity, ambient))
+        if self._fine is None:
+            img = self._scene_radiance(temps, nodes, aperture, objects, ambient, bend)
+        else:
+            # The mean radiance over each pixel's area: its samples averaged.
+            fine = self._fine._scene_radiance(temps, nodes, aperture, objects, ambient, bend)
+            img = np.asarray(cv2.resize(fine, (w, h), interpolation=cv2.INTER_AREA),
+                             dtype=np.float32)
 
         if cfg.psf_sigma_px > 0:
             cv2.GaussianBlur(
@@ -244,6 +253,25 @@ class IrRenderer:
             oy, ox = (int(v) for v in rng.integers(0, _NOISE_PAD, size=2))
             out += np.float32(cfg.netd_k) * bank[b, oy : oy + h, ox : ox + w]
         return out
+
+    def _scene_radiance(self, temps: FloatArray, nodes: FloatArray, aperture_m: float,
+                        objects: Sequence[IrObject], ambient_c: float,
+                        bend: tuple[FloatArray, FloatArray] | None) -> NDArray[np.float32]:
+        """The signal ``T_app^4`` (K^4) each pixel's centre ray meets: before the optics."""
+        cfg = self.config
+        h, w = self.intrinsics.shape
+        background = float(_radiance(ambient_c, cfg.background_emissivity, ambient_c))
+        img = np.full((h, w), background, dtype=np.float32)
+        faces, spheres = self._hits(aperture_m, objects, bend)
+        for j, (rows, cols, seen, along) in enumerate(faces):
+            field = np.interp(along, nodes, temps[j])
+            img[rows, cols][seen] = _radiance(field, cfg.finger_emissivity, ambient_c)
+        for obj, hit in zip(objects, spheres, strict=True):
+            if hit is not None:
+                rows, cols, seen = hit
+                img[rows, cols][seen] = np.float32(_radiance(obj.temp_c, obj.emissivity,
+                                                             ambient_c))
+        return img
 
     def _check_fingers(
         self, finger_temps_c: ArrayLike, node_positions_m: ArrayLike

@@ -97,6 +97,13 @@ class IrSensorConfig:
         read where the load bends the fingers (``RigGeometry.ir_follow_bend``).
         Drawn unbent, the distal beams lie inside a held ball's silhouette and
         read the ball, a cue no real camera gives (twin v4 and before).
+    samples_per_px : int
+        Each pixel is the mean radiance over ``samples_per_px`` squared rays
+        spread across its area, as a microbolometer integrates its pixel; 1
+        (twin v6) casts one ray through its centre, so that an outline moves
+        in the image only when it crosses a pixel centre.  Read in the frame,
+        a finger's bend is then placed to 0.038 mm SD at 1 sample and
+        0.0053 mm at 4 (noise-free frames, the amplitude stepped by 10 µm).
     """
 
     netd_k: float = 0.05
@@ -105,10 +112,15 @@ class IrSensorConfig:
     background_emissivity: float = 0.95
     psf_sigma_px: float = 0.7
     draw_bend: bool = True
+    samples_per_px: int = 1
 
     def __post_init__(self) -> None:
         if not all(0 <= v < math.inf for v in (self.netd_k, self.max_offset_k, self.psf_sigma_px)):
             raise InputError("NETD, offset and blur must be finite and >= 0")
+        if (isinstance(self.samples_per_px, bool) or not isinstance(self.samples_per_px, int)
+                or not 1 <= self.samples_per_px <= 8):
+            raise InputError(f"samples_per_px must be an integer in 1-8, got "
+                             f"{self.samples_per_px!r}")
         for name in ("finger_emissivity", "background_emissivity"):
             if not 0.0 < getattr(self, name) <= 1.0:
                 raise InputError(f"{name} must be in (0, 1], got {getattr(self, name)}")
