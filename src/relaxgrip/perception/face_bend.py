@@ -195,9 +195,9 @@ class FaceBendReader:
         n = valid.sum(axis=1)
         p = img[rows[:, None], cols]
         # The background: the window's three pixels at each end (its margin).
-        tail = np.take_along_axis(p, n[:, None] - 1 - np.arange(3), axis=1)
-        ends = np.concatenate([p[:, :3], tail], axis=1)
-        base = np.median(ends, axis=1)
+        last3 = n[:, None] - 1 - np.arange(3)
+        base = np.median(np.concatenate([p[:, :3], np.take_along_axis(p, last3, axis=1)],
+                                        axis=1), axis=1)
         polarity = np.sign(np.where(valid, p, 0.0).sum(axis=1) / n - base)
         q = (p - base[:, None]) * polarity[:, None]  # the face counts up from 0
         q[~valid] = -np.inf
@@ -212,10 +212,8 @@ class FaceBendReader:
         left = np.where(below & (idx < k[:, None]), idx, -1).max(axis=1)
         right = np.where(below & (idx > k[:, None]), idx, cols.shape[1]).min(axis=1)
         # The face must lie wholly inside the window: its ends are background.
-        inner = np.maximum(q[:, :3].max(axis=1), (np.take_along_axis(q, n[:, None] - 1
-                                                                   - np.arange(3), axis=1)
-                                                  .max(axis=1)))
-        ok = (peak >= self.min_contrast_k) & (left >= 0) & (right < n) & (inner < 0.25 * peak)
+        ends = np.maximum(q[:, :3].max(axis=1), np.take_along_axis(q, last3, axis=1).max(axis=1))
+        ok = (peak >= self.min_contrast_k) & (left >= 0) & (right < n) & (ends < 0.25 * peak)
         if not ok.any():
             return empty
         r, left, right, half = r[ok], left[ok], right[ok], half[ok]
