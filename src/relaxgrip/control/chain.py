@@ -110,12 +110,13 @@ class ChainParams:
         rigid object): no chain reading.
     ir_weight : float
         The chain's share when the object was seen and the other finger is
-        read in the infrared frame; 0 (the default) does not read it.  Its
-        spread over seeds is its start's alone (5 N, 40 °C, seeds 4000-4035
-        in closed loop at weight 1: 0.032 against 0.055 N SD), but the force
-        ball, which stands above the faces, hides part of their distal rows,
-        so the reading misses part of finger 1's creep and the estimate runs
-        0.061 N high (docs/hold-experiments.md, session 56).
+        read in the infrared frame; 0 (the default) does not read it.  On the
+        twin with its infrared pixels drawn by their area
+        (``IrSensorConfig.samples_per_px=4``) and the object located, weight
+        1 held 5 N, 40 °C at 0.0371 N on seeds 4000-4035 (0.0434 N without),
+        the spread over seeds 0.042 against 0.055 N.  Drawn by pixel centre
+        (twin v6) an outline moves only as it crosses a pixel centre, and
+        the reading is too coarse (docs/hold-experiments.md, session 56).
     """
 
     weight: float = 0.2
