@@ -13,7 +13,7 @@ from relaxgrip.perception.face_bend import (
     FaceBendReader,
     FaceMidline,
     clear_span_m,
-    contact_deflection_m,
+    fit_contact_deflection_m,
 )
 from relaxgrip.physics.beam import beam_grid, unit_profile_m_per_n
 from relaxgrip.twin import TwinConfig
@@ -72,7 +72,7 @@ def test_the_contact_deflection_of_each_finger_and_its_change() -> None:
 
     def read(contacts: tuple[float, float]) -> list[float]:
         faces = reader.read(_frame(contacts), aperture, _guess(contacts[0]))
-        return [contact_deflection_m(m, 0.079, 40.0, FINGER) for m in faces]
+        return [fit_contact_deflection_m(m, 0.079, 40.0, FINGER) for m in faces]
 
     before = read((4.0e-3, 3.5e-3))
     assert before == pytest.approx([4.0e-3, 3.5e-3], rel=0.06)
@@ -91,14 +91,14 @@ def test_the_marker_s_bend_guides_the_search_to_strongly_bent_faces() -> None:
     guided = reader.read(img, APERTURE_M, guess)[1]
     assert guided.along_m.max() > 0.10
     assert guided.along_m.size > blind.along_m.size
-    assert contact_deflection_m(guided, 0.079, 40.0, FINGER) == pytest.approx(contact, rel=0.06)
+    assert fit_contact_deflection_m(guided, 0.079, 40.0, FINGER) == pytest.approx(contact, rel=0.06)
 
 
 def test_noise_leaves_the_reading_within_a_few_micrometres_of_the_noise_free_one() -> None:
     reader = FaceBendReader(RIG)
-    clean = [contact_deflection_m(m, 0.079, 40.0, FINGER)
+    clean = [fit_contact_deflection_m(m, 0.079, 40.0, FINGER)
              for m in reader.read(_frame((4.0e-3, 4.0e-3)), APERTURE_M, _guess(4.0e-3))]
-    noisy = [contact_deflection_m(m, 0.079, 40.0, FINGER)
+    noisy = [fit_contact_deflection_m(m, 0.079, 40.0, FINGER)
              for m in reader.read(_frame((4.0e-3, 4.0e-3), netd_k=0.05), APERTURE_M,
                                   _guess(4.0e-3))]
     assert noisy == pytest.approx(clean, abs=0.01e-3)
@@ -110,7 +110,7 @@ def test_a_face_colder_than_the_room_is_read_too() -> None:
                         _guess(4.0e-3, 10.0))
     for midline in faces:
         assert midline.along_m.size >= 25
-        assert contact_deflection_m(midline, 0.079, 10.0, FINGER) == pytest.approx(4.0e-3,
+        assert fit_contact_deflection_m(midline, 0.079, 10.0, FINGER) == pytest.approx(4.0e-3,
                                                                                      rel=0.06)
 
 
@@ -118,7 +118,7 @@ def test_a_finger_at_the_room_s_temperature_shows_no_outline() -> None:
     reader = FaceBendReader(RIG)
     for midline in reader.read(_frame((4.0e-3, 4.0e-3), temp_c=ROOM_C), APERTURE_M):
         assert midline.along_m.size == 0
-        assert math.isnan(contact_deflection_m(midline, 0.079, ROOM_C, FINGER))
+        assert math.isnan(fit_contact_deflection_m(midline, 0.079, ROOM_C, FINGER))
 
 
 def test_the_windows_are_cached_per_tenth_of_a_millimetre() -> None:
@@ -135,12 +135,12 @@ def test_contact_deflection_refuses_what_it_cannot_fit() -> None:
     z, _ = unit_profile_m_per_n(0.08, 40.0, FINGER)
     unit = np.interp(along, GRID, z / np.interp(0.08, GRID, z))
     line = FaceMidline(along, 3e-3 * unit, np.full(along.size, 0.012))
-    assert contact_deflection_m(line, 0.08, 40.0, FINGER) == pytest.approx(3e-3, rel=1e-9)
-    assert math.isnan(contact_deflection_m(line, math.nan, 40.0, FINGER))
-    assert math.isnan(contact_deflection_m(line, 0.2, 40.0, FINGER))  # beyond the tip
-    assert math.isnan(contact_deflection_m(line, 0.08, math.nan, FINGER))
+    assert fit_contact_deflection_m(line, 0.08, 40.0, FINGER) == pytest.approx(3e-3, rel=1e-9)
+    assert math.isnan(fit_contact_deflection_m(line, math.nan, 40.0, FINGER))
+    assert math.isnan(fit_contact_deflection_m(line, 0.2, 40.0, FINGER))  # beyond the tip
+    assert math.isnan(fit_contact_deflection_m(line, 0.08, math.nan, FINGER))
     few = FaceMidline(along[:5], line.bend_m[:5], line.width_m[:5])
-    assert math.isnan(contact_deflection_m(few, 0.08, 40.0, FINGER))
+    assert math.isnan(fit_contact_deflection_m(few, 0.08, 40.0, FINGER))
 
 
 @pytest.mark.parametrize(("kwargs", "message"), [
@@ -184,7 +184,7 @@ def test_drawn_by_pixel_area_the_creep_is_read_to_micrometres(samples: int, limi
     line stays within ``limit_m`` (by pixel centres an edge waits for the next centre)."""
     reader = FaceBendReader(RIG)
     steps = np.arange(3.8e-3, 4.21e-3, 0.02e-3)
-    read = np.array([contact_deflection_m(
+    read = np.array([fit_contact_deflection_m(
         reader.read(_frame((4.0e-3, c), samples=samples), APERTURE_M, _guess(4.0e-3))[1],
         0.079, 40.0, FINGER) for c in steps])
     fit = np.polyval(np.polyfit(steps, read, 1), steps)

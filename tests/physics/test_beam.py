@@ -13,6 +13,7 @@ from relaxgrip.physics.beam import (
     contact_deflection_m,
     deflection_area_m2,
     deflection_profile_m,
+    deflection_share,
     local_stiffness_n_per_m,
     unit_profile_m_per_n,
 )
@@ -93,3 +94,12 @@ def test_params_validate():
         FingerParams(length_m=0.0)
     with pytest.raises(ValueError, match="outside"):
         unit_profile_m_per_n(0.2, 25.0, replace(UNIFORM, length_m=0.11))
+
+
+def test_the_deflection_share_is_the_profile_over_its_value_at_the_contact() -> None:
+    finger = FingerParams()
+    x = beam_grid(finger)
+    profile = deflection_profile_m(5.0, 0.08, 40.0, finger)
+    share = deflection_share(x, 0.08, 40.0, finger)
+    np.testing.assert_allclose(share, profile / np.interp(0.08, x, profile), rtol=1e-12)
+    assert float(deflection_share(0.08, 0.08, 40.0, finger)) == 1.0

@@ -49,9 +49,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import numpy as np
-
-from relaxgrip.physics.beam import FingerParams, beam_grid, unit_profile_m_per_n
+from relaxgrip.physics.beam import FingerParams, deflection_share
 
 __all__ = ["ChainParams", "ClosedChain", "marker_share"]
 
@@ -71,9 +69,7 @@ def marker_share(marker_m: float, contact_m: float, temp_c: float,
     finger : FingerParams
         Finger constants.
     """
-    z, _ = unit_profile_m_per_n(contact_m, temp_c, finger)
-    x = beam_grid(finger)
-    return float(np.interp(marker_m, x, z) / np.interp(contact_m, x, z))
+    return float(deflection_share(marker_m, contact_m, temp_c, finger))
 
 
 @dataclass(frozen=True)

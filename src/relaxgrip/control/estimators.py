@@ -92,7 +92,7 @@ from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
 from relaxgrip.learning.store import ModelBundle
-from relaxgrip.perception.face_bend import clear_span_m, contact_deflection_m
+from relaxgrip.perception.face_bend import clear_span_m, fit_contact_deflection_m
 from relaxgrip.perception.features import RcfnFeatures, finger_temperature_c, marker_pose
 from relaxgrip.perception.pipeline import Percept
 from relaxgrip.perception.thermal import ThermalFeatures
@@ -526,7 +526,7 @@ class RelaxEstimator:
             # Which rows the object leaves clear is fixed once a hold: rows read on
             # some frames and not on others would move the fit between frames.
             self._ir_span = clear_span_m(midline)
-        return contact_deflection_m(midline, self.chain.contact_m, self._temp_c,
+        return fit_contact_deflection_m(midline, self.chain.contact_m, self._temp_c,
                                     self.chain.params.finger, self._ir_span)
 
     def contact(self, t_s: float) -> float:

@@ -15,7 +15,7 @@ and its distance outwards from where the unbent centre line lies at the
 current aperture is the bend there.  A frame gives one such point per row,
 from the root to the tip.
 
-:func:`contact_deflection_m` fits the beam model's deflection profile to them:
+:func:`fit_contact_deflection_m` fits the beam model's deflection profile to them:
 the deflection at the contact, for a contact position and temperature.
 """
 
@@ -29,12 +29,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
-from relaxgrip.physics.beam import FingerParams, beam_grid, unit_profile_m_per_n
+from relaxgrip.physics.beam import FingerParams, deflection_share
 from relaxgrip.rig import RigGeometry, bend_profile_m
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["ALONG_RANGE_M", "FaceBendReader", "FaceMidline", "clear_span_m", "contact_deflection_m"]
+__all__ = [
+    "ALONG_RANGE_M", "FaceBendReader", "FaceMidline", "clear_span_m", "fit_contact_deflection_m",
+]
 
 #: The span of the finger read (m from the root): near the root a row sees little bend,
 #: and beyond 108 mm the face's end runs along the row.  The distal rows carry most
@@ -276,7 +278,7 @@ def clear_span_m(midline: FaceMidline, tolerance_m: float = 0.3e-3,
     return lo, hi
 
 
-def contact_deflection_m(midline: FaceMidline, contact_m: float, temp_c: float,
+def fit_contact_deflection_m(midline: FaceMidline, contact_m: float, temp_c: float,
                          finger: FingerParams, along_range_m: tuple[float, float] = ALONG_RANGE_M,
                          min_rows: int = 8) -> float:
     """The deflection at the contact that best explains a face midline (m).
@@ -313,7 +315,5 @@ def contact_deflection_m(midline: FaceMidline, contact_m: float, temp_c: float,
     keep = (midline.along_m >= lo) & (midline.along_m <= hi)
     if int(keep.sum()) < min_rows:
         return math.nan
-    z, _ = unit_profile_m_per_n(contact_m, temp_c, finger)
-    grid = beam_grid(finger)
-    shape = np.interp(midline.along_m[keep], grid, z / np.interp(contact_m, grid, z))
+    shape = deflection_share(midline.along_m[keep], contact_m, temp_c, finger)
     return float(shape @ midline.bend_m[keep] / (shape @ shape))

@@ -39,6 +39,7 @@ __all__ = [
     "contact_deflection_m",
     "deflection_area_m2",
     "deflection_profile_m",
+    "deflection_share",
     "local_stiffness_n_per_m",
     "stiffening_factor",
     "unit_profile_m_per_n",
@@ -239,6 +240,37 @@ def deflection_profile_m(
     c_a = float(np.interp(contact_m, beam_grid(finger), z_unit))
     z_a = float(contact_deflection_m(force_n, c_a, finger))
     return z_unit * (z_a / c_a)
+
+
+def deflection_share(along_m: ArrayLike, contact_m: float, temp_c: ArrayLike,
+                     finger: FingerParams) -> FloatArray:
+    """The deflection at ``along_m`` per unit of deflection at the contact.
+
+    The shape of the bent finger, whatever the load: what a marker at
+    ``along_m`` shows of the contact's deflection, or the profile a face's
+    bend is fitted with.
+
+    Parameters
+    ----------
+    along_m : array_like
+        Positions along the finger (m from the root).
+    contact_m : float
+        Contact position ``a`` (m).
+    temp_c : array_like
+        Temperature (°C), scalar or on the grid.
+    finger : FingerParams
+        Finger constants.
+
+    Returns
+    -------
+    ndarray
+        Shaped like ``along_m``: 1 at the contact.
+    """
+    z, _ = unit_profile_m_per_n(contact_m, temp_c, finger)
+    x = beam_grid(finger)
+    out: FloatArray = np.interp(np.asarray(along_m, dtype=np.float64), x, z) / np.interp(
+        contact_m, x, z)
+    return out
 
 
 def local_stiffness_n_per_m(
