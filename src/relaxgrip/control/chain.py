@@ -106,13 +106,14 @@ class ChainParams:
         rigid object): no chain reading.
     ir_weight : float
         The chain's share when the object was seen and the other finger is
-        read in the infrared frame; 0 (the default) does not read it.  On the
-        twin with its infrared pixels drawn by their area
-        (``IrSensorConfig.samples_per_px=4``) and the object located, weight
-        1 held 5 N, 40 °C at 0.0371 N on seeds 4000-4035 (0.0434 N without),
-        the spread over seeds 0.042 against 0.055 N.  Drawn by pixel centre
-        (twin v6) an outline moves only as it crosses a pixel centre, and
-        the reading is too coarse (docs/hold-experiments.md, session 56).
+        read in the infrared frame (1, the default: the reading replaces the
+        marker's guess of the other finger's creep); 0 does not read it.  On
+        the twin (v7, its infrared pixels drawn by their area) with the
+        object located, weight 1 held 5 N, 40 °C at 0.0371 N on seeds
+        4000-4035 (0.0434 N without), the spread over seeds 0.042 against
+        0.055 N.  Drawn by pixel centre (twin v6) an outline moves only as it
+        crosses a pixel centre, and the reading is too coarse
+        (docs/hold-experiments.md, session 56).
     """
 
     weight: float = 0.2
@@ -123,7 +124,7 @@ class ChainParams:
     contact_m: float = 0.080
     finger: FingerParams = field(default_factory=FingerParams)
     min_compliant_share: float = 0.1
-    ir_weight: float = 0.0
+    ir_weight: float = 1.0
 
     def __post_init__(self) -> None:
         for weight in (self.weight, self.seen_weight, self.ir_weight):

@@ -376,7 +376,7 @@ def run_hold(
     disturbance: Profile | None = None,
     observer: ObserverModel | None = None,
     budget: bool = False,
-    locate_object: bool = False,
+    locate_object: bool = True,
 ) -> HoldResult:
     """Close on the force ball to ``target_n`` at ``temp_c`` and hold it for ``duration_s``.
 
@@ -414,10 +414,11 @@ def run_hold(
         :meth:`HoldResult.error_budget` (``relax`` on the twin backend only).
     locate_object : bool
         Have perception find the object (its catalogue width and colour) while
-        the motor settles before the hold, and the closed chain take its
-        marker share from where it sits (beyond the paper, not the default:
-        at 5 N, 40 °C it held better, across the grid neither better nor
-        worse; README, section Control).
+        the motor settles before the hold, the closed chain take its marker
+        share from where it sits and read the other finger in the infrared
+        frame there (beyond the paper; ``ChainParams.ir_weight``).  False:
+        the operator does not say what is grasped, and the chain guesses the
+        other finger from the marker's.
 
     Returns
     -------

@@ -17,10 +17,11 @@ from relaxgrip.validate import check_positive, check_temp_c
 __all__ = ["SAME_RUNS_AS", "TWIN_VERSION", "MotorParams", "ScatterParams", "TwinConfig"]
 
 #: Bumped whenever the twin's behaviour changes; every result records it.
-TWIN_VERSION = "relaxgrip-twin-v6"
+TWIN_VERSION = "relaxgrip-twin-v7"
 #: Earlier versions whose runs this one repeats bit for bit (for a calibration made on them
-#: to be added to).  None for v6, whose RGB camera draws the marker tab as the exact area of
-#: each pixel (``RgbSensorConfig.drawing``): every frame of the marker changed.
+#: to be added to).  None for v7, whose infrared camera draws a pixel an outline crosses as
+#: the mean over its area (``IrSensorConfig.samples_per_px``): the fingers' outlines in every
+#: infrared frame changed.
 SAME_RUNS_AS: tuple[str, ...] = ()
 
 

@@ -11,16 +11,19 @@ face is a rectangle whose plane maps to the image by a homography, so each
 pixel gets the exact position along the finger it sees and the temperature
 the thermal nodes give there (no stair steps, however foreshortened the face);
 an object is a sphere, which also gives its exact silhouette.  A depth buffer
-decides which surface a pixel sees, so near things cover far ones.  Then the
-optics blur the radiance, and the sensor adds its fixed offset and its
-per-pixel noise.
+decides which surface a pixel sees, so near things cover far ones.  A
+microbolometer pixel integrates over its area: where an outline may cross a
+pixel (it or a neighbour sees another surface), ``samples_per_px`` squared
+rays spread over its area are cast, and the pixel is their mean, so an
+outline moves the image however little it moves.  Then the optics blur the
+radiance, and the sensor adds its fixed offset and its per-pixel noise.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -129,6 +132,23 @@ class _SphereHits(NamedTuple):
     seen: NDArray[np.bool_]
 
 
+class _FaceFrame(NamedTuple):
+    """A finger's top face in the camera frame: its root, and unit steps along and across."""
+
+    origin: FloatArray
+    e_along: FloatArray
+    e_across: FloatArray
+
+
+class _Samples(NamedTuple):
+    """The pixels an outline may cross, ``mixed``, and what each of their samples meets:
+    per face its mask and where along it (m), per object its mask (``(n, k * k)``)."""
+
+    mixed: NDArray[np.bool_]
+    faces: list[tuple[NDArray[np.bool_], FloatArray]]
+    spheres: list[NDArray[np.bool_]]
+
+
 class IrRenderer:
     """Renders the frames of the infrared camera on the gripper base.
 
@@ -164,20 +184,19 @@ class IrRenderer:
         self._ray_x = np.ascontiguousarray(normalized[..., 0])
         self._ray_y = np.ascontiguousarray(normalized[..., 1])
         self._hit_cache: tuple[
-            tuple[object, ...], list[_FaceHits], list[_SphereHits | None]
+            tuple[object, ...], list[_FaceHits], list[_SphereHits | None], _Samples | None
         ] | None = None
-        #: With several samples a pixel: the same camera with that many pixels a side
-        #: more, whose pixel centres are the samples (its scene only is drawn).
-        self._fine: IrRenderer | None = None
+        #: With several samples a pixel: the directions of the ``k * k`` rays spread
+        #: over each pixel's area, ``(H, W, k * k)``, cast only near outlines.
+        self._sample_ray_x: FloatArray | None = None
+        self._sample_ray_y: FloatArray | None = None
         k = config.samples_per_px
         if k > 1:
-            intr = self.intrinsics
-            fine = replace(intr, width_px=intr.width_px * k, height_px=intr.height_px * k,
-                           fx_px=intr.fx_px * k, fy_px=intr.fy_px * k,
-                           cx_px=k * intr.cx_px + 0.5 * (k - 1),
-                           cy_px=k * intr.cy_px + 0.5 * (k - 1))
-            self._fine = IrRenderer(replace(rig, ir=replace(rig.ir, intrinsics=fine)),
-                                    replace(config, samples_per_px=1), seed, unit)
+            offsets = (np.arange(k) + 0.5) / k - 0.5
+            sub = np.stack(np.meshgrid(offsets, offsets), axis=-1).reshape(-1, 2)  # (k*k, 2)
+            samples = self.intrinsics.normalized(grid[:, :, None, :] + sub)
+            self._sample_ray_x = np.ascontiguousarray(samples[..., 0])
+            self._sample_ray_y = np.ascontiguousarray(samples[..., 1])
 
     @property
     def offset_k(self) -> float:
@@ -231,13 +250,7 @@ class IrRenderer:
         cfg = self.config
 
         h, w = self.intrinsics.shape
-        if self._fine is None:
-            img = self._scene_radiance(temps, nodes, aperture, objects, ambient, bend)
-        else:
-            # The mean radiance over each pixel's area: its samples averaged.
-            fine = self._fine._scene_radiance(temps, nodes, aperture, objects, ambient, bend)
-            img = np.asarray(cv2.resize(fine, (w, h), interpolation=cv2.INTER_AREA),
-                             dtype=np.float32)
+        img = self._scene_radiance(temps, nodes, aperture, objects, ambient, bend)
 
         if cfg.psf_sigma_px > 0:
             cv2.GaussianBlur(
@@ -257,12 +270,17 @@ class IrRenderer:
     def _scene_radiance(self, temps: FloatArray, nodes: FloatArray, aperture_m: float,
                         objects: Sequence[IrObject], ambient_c: float,
                         bend: tuple[FloatArray, FloatArray] | None) -> NDArray[np.float32]:
-        """The signal ``T_app^4`` (K^4) each pixel's centre ray meets: before the optics."""
+        """The signal ``T_app^4`` (K^4) of each pixel, before the optics.
+
+        A pixel is what its centre ray meets; with several samples a pixel,
+        one that an outline may cross (it or a neighbour sees another
+        surface) is the mean of its samples.
+        """
         cfg = self.config
         h, w = self.intrinsics.shape
         background = float(_radiance(ambient_c, cfg.background_emissivity, ambient_c))
         img = np.full((h, w), background, dtype=np.float32)
-        faces, spheres = self._hits(aperture_m, objects, bend)
+        faces, spheres, sampled = self._hits(aperture_m, objects, bend)
         for j, (rows, cols, seen, along) in enumerate(faces):
             field = np.interp(along, nodes, temps[j])
             img[rows, cols][seen] = _radiance(field, cfg.finger_emissivity, ambient_c)
@@ -271,6 +289,15 @@ class IrRenderer:
                 rows, cols, seen = hit
                 img[rows, cols][seen] = np.float32(_radiance(obj.temp_c, obj.emissivity,
                                                              ambient_c))
+        if sampled is not None:
+            mixed, face_samples, sphere_samples = sampled
+            signal = np.full(face_samples[0][0].shape, background)
+            for j, (seen, along) in enumerate(face_samples):
+                signal[seen] = _radiance(np.interp(along, nodes, temps[j]),
+                                         cfg.finger_emissivity, ambient_c)
+            for obj, seen in zip(objects, sphere_samples, strict=True):
+                signal[seen] = _radiance(obj.temp_c, obj.emissivity, ambient_c)
+            img[mixed] = signal.mean(axis=1)
         return img
 
     def _check_fingers(
@@ -309,8 +336,8 @@ class IrRenderer:
     def _hits(
         self, aperture_m: float, objects: Sequence[IrObject],
         bend: tuple[FloatArray, FloatArray] | None = None,
-    ) -> tuple[list[_FaceHits], list[_SphereHits | None]]:
-        """The pixels that see each finger's face and each object, nearest surface first.
+    ) -> tuple[list[_FaceHits], list[_SphereHits | None], _Samples | None]:
+        """What each pixel's centre ray meets, nearest surface first, and the samples.
 
         The geometry moves only with the aperture, the bend and the objects,
         which a hold keeps nearly still for minutes: the ray cast of the last
@@ -319,43 +346,58 @@ class IrRenderer:
         bend_key = None if bend is None else (bend[0].tobytes(), np.asarray(bend[1]).tobytes())
         key = (aperture_m, tuple((o.center_gripper_m, o.radius_m) for o in objects), bend_key)
         if self._hit_cache is not None and self._hit_cache[0] == key:
-            return self._hit_cache[1], self._hit_cache[2]
+            return self._hit_cache[1:]
+        bends = [None if bend is None else (bend[0], np.asarray(bend[1])[j]) for j in (0, 1)]
+        frames = [self._face_frame(j, aperture_m) for j in (0, 1)]
+        centres = [self._sphere_centre(o) for o in objects]
         h, w = self.intrinsics.shape
         depth = np.full((h, w), np.inf)
-        faces = [self._cast_face(depth, j, aperture_m,
-                                 None if bend is None else (bend[0], np.asarray(bend[1])[j]))
-                 for j in (0, 1)]
-        spheres = [self._cast_sphere(depth, o) for o in objects]
-        self._hit_cache = (key, faces, spheres)
-        return faces, spheres
+        faces = [self._cast_face(depth, frames[j], bends[j]) for j in (0, 1)]
+        spheres = [None if c is None else self._cast_sphere(depth, c, o.radius_m)
+                   for c, o in zip(centres, objects, strict=True)]
+        sampled = None
+        if self._sample_ray_x is not None and self._sample_ray_y is not None:
+            # Which surface each pixel centre sees: 0 the room, 1 and 2 the faces, then
+            # the objects.  A pixel whose neighbourhood sees one surface lies inside it.
+            labels = np.zeros((h, w), np.uint16)
+            for j, hit in enumerate(faces):
+                labels[hit.rows, hit.cols][hit.seen] = 1 + j
+            for i, s_hit in enumerate(spheres):
+                if s_hit is not None:
+                    labels[s_hit.rows, s_hit.cols][s_hit.seen] = min(3 + i, 65535)
+            kernel = np.ones((3, 3), np.uint8)
+            mixed = cv2.dilate(labels, kernel) != cv2.erode(labels, kernel)
+            rx, ry = self._sample_ray_x[mixed], self._sample_ray_y[mixed]
+            sample_depth = np.full(rx.shape, np.inf)
+            face_samples = [self._face_rays(frames[j], rx, ry, sample_depth, bends[j])
+                            for j in (0, 1)]
+            sphere_samples = [np.zeros(rx.shape, bool) if c is None
+                              else self._sphere_rays(c, o.radius_m, rx, ry, sample_depth)
+                              for c, o in zip(centres, objects, strict=True)]
+            sampled = _Samples(mixed, face_samples, sphere_samples)
+        self._hit_cache = (key, faces, spheres, sampled)
+        return faces, spheres, sampled
 
-    def _cast_face(self, depth: FloatArray, j: int, aperture_m: float,
-                   bend: tuple[FloatArray, FloatArray] | None = None) -> _FaceHits:
-        """Ray cast finger ``j``'s top face where it is nearest; mark its depth in ``depth``.
+    def _face_frame(self, j: int, aperture_m: float) -> _FaceFrame:
+        """Finger ``j``'s top face in the camera: its root, and one metre along and across."""
+        ref = transform_points(
+            self._gripper2cam,
+            self.rig.top_points_gripper(j, aperture_m, [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]),
+        )
+        return _FaceFrame(ref[0], ref[1] - ref[0], ref[2] - ref[0])
+
+    def _face_rays(self, face: _FaceFrame, rx: FloatArray, ry: FloatArray, depth: FloatArray,
+                   bend: tuple[FloatArray, FloatArray] | None) -> tuple[NDArray[np.bool_],
+                                                                         FloatArray]:
+        """The rays ``(rx, ry, 1)`` that meet the face nearer than ``depth`` (marked there),
+        and where along it (m).
 
         The face stays in its plane as the finger bends (the bend is across it): bent,
         it is the band ``|across - bend(along)| <= half`` of the plane.
         """
         finger = self.rig.finger
-        half = 0.5 * finger.thickness_m
-        low, high = (0.0, 0.0) if bend is None else (min(0.0, float(bend[1].min())),
-                                                      max(0.0, float(bend[1].max())))
-        # The face's frame in the camera: origin at the root, unit vectors along and across.
-        ref = transform_points(
-            self._gripper2cam,
-            self.rig.top_points_gripper(j, aperture_m, [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]),
-        )
-        origin, e_along, e_across = ref[0], ref[1] - ref[0], ref[2] - ref[0]
+        origin, e_along, e_across = face
         normal = np.cross(e_along, e_across)
-        corners = origin + np.array(
-            [a * finger.length_m * e_along + c * e_across
-             for a in (0, 1) for c in (low - half, high + half)]
-        )
-        rows, cols = self._window(corners)
-        rx, ry = self._ray_x[rows, cols], self._ray_y[rows, cols]
-        nothing = _FaceHits(rows, cols, np.zeros(rx.shape, bool), np.empty(0))
-        if rx.size == 0:
-            return nothing
         # The ray t (x, y, 1) meets the plane n . (p - o) = 0 at t = n . o / n . (x, y, 1);
         # t is the depth.
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -366,26 +408,62 @@ class IrRenderer:
         )
         if bend is not None:
             across = across - np.interp(along, bend[0], bend[1])
-        sub_depth = depth[rows, cols]
         seen = (
             (t > _NEAR_M)
             & (along >= 0.0)
             & (along <= finger.length_m)
-            & (np.abs(across) <= half)
-            & (t < sub_depth)
+            & (np.abs(across) <= 0.5 * finger.thickness_m)
+            & (t < depth)
         )
-        if not np.any(seen):
-            return nothing
-        sub_depth[seen] = t[seen]
-        return _FaceHits(rows, cols, seen, along[seen])
+        depth[seen] = t[seen]
+        return seen, along[seen]
 
-    def _cast_sphere(self, depth: FloatArray, obj: IrObject) -> _SphereHits | None:
-        """Ray cast an object (a sphere) where it is nearest; mark its depth in ``depth``."""
+    def _cast_face(self, depth: FloatArray, face: _FaceFrame,
+                   bend: tuple[FloatArray, FloatArray] | None = None) -> _FaceHits:
+        """Ray cast a finger's top face through the pixel centres where it is nearest;
+        mark its depth in ``depth``."""
+        finger = self.rig.finger
+        half = 0.5 * finger.thickness_m
+        low, high = (0.0, 0.0) if bend is None else (min(0.0, float(bend[1].min())),
+                                                      max(0.0, float(bend[1].max())))
+        origin, e_along, e_across = face
+        corners = origin + np.array(
+            [a * finger.length_m * e_along + c * e_across
+             for a in (0, 1) for c in (low - half, high + half)]
+        )
+        rows, cols = self._window(corners)
+        rx, ry = self._ray_x[rows, cols], self._ray_y[rows, cols]
+        if rx.size == 0:
+            return _FaceHits(rows, cols, np.zeros(rx.shape, bool), np.empty(0))
+        seen, along = self._face_rays(face, rx, ry, depth[rows, cols], bend)
+        return _FaceHits(rows, cols, seen, along)
+
+    def _sphere_centre(self, obj: IrObject) -> FloatArray | None:
+        """An object's centre in the camera; None if it is around the lens or behind it."""
         centre = transform_points(self._gripper2cam, np.asarray(obj.center_gripper_m))
         r = obj.radius_m
-        dist2 = float(centre @ centre)
-        if dist2 <= r * r or centre[2] + r <= _NEAR_M:
-            return None  # around the lens or behind it: nothing sensible to draw
+        if float(centre @ centre) <= r * r or centre[2] + r <= _NEAR_M:
+            return None  # nothing sensible to draw
+        return centre
+
+    def _sphere_rays(self, centre: FloatArray, r: float, rx: FloatArray, ry: FloatArray,
+                     depth: FloatArray) -> NDArray[np.bool_]:
+        """The rays ``(rx, ry, 1)`` that meet the sphere nearer than ``depth`` (marked there)."""
+        # |t d - c|^2 = r^2 with d = (x, y, 1): a t^2 - 2 b t + (|c|^2 - r^2) = 0; near root.
+        a = rx * rx + ry * ry + 1.0
+        b = centre[0] * rx + centre[1] * ry + centre[2]
+        disc = b * b - a * (float(centre @ centre) - r * r)
+        hit = disc >= 0.0
+        t = np.full(rx.shape, np.inf)
+        t[hit] = (b[hit] - np.sqrt(disc[hit])) / a[hit]
+        seen: NDArray[np.bool_] = hit & (t > _NEAR_M) & (t < depth)
+        depth[seen] = t[seen]
+        return seen
+
+    def _cast_sphere(self, depth: FloatArray, centre: FloatArray, r: float
+                     ) -> _SphereHits | None:
+        """Ray cast an object (a sphere) through the pixel centres where it is nearest;
+        mark its depth in ``depth``."""
         # The sphere's image lies within that of its bounding cube.
         cube = centre + r * np.array(
             [[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=np.float64
@@ -394,18 +472,9 @@ class IrRenderer:
         rx, ry = self._ray_x[rows, cols], self._ray_y[rows, cols]
         if rx.size == 0:
             return None
-        # |t d - c|^2 = r^2 with d = (x, y, 1): a t^2 - 2 b t + (|c|^2 - r^2) = 0; near root.
-        a = rx * rx + ry * ry + 1.0
-        b = centre[0] * rx + centre[1] * ry + centre[2]
-        disc = b * b - a * (dist2 - r * r)
-        hit = disc >= 0.0
-        t = np.full(rx.shape, np.inf)
-        t[hit] = (b[hit] - np.sqrt(disc[hit])) / a[hit]
-        sub_depth = depth[rows, cols]
-        seen = hit & (t > _NEAR_M) & (t < sub_depth)
+        seen = self._sphere_rays(centre, r, rx, ry, depth[rows, cols])
         if not np.any(seen):
             return None
-        sub_depth[seen] = t[seen]
         return _SphereHits(rows, cols, seen)
 
 

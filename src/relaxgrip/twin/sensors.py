@@ -99,11 +99,14 @@ class IrSensorConfig:
         read the ball, a cue no real camera gives (twin v4 and before).
     samples_per_px : int
         Each pixel is the mean radiance over ``samples_per_px`` squared rays
-        spread across its area, as a microbolometer integrates its pixel; 1
-        (twin v6) casts one ray through its centre, so that an outline moves
-        in the image only when it crosses a pixel centre.  Read in the frame,
-        a finger's bend is then placed to 0.038 mm SD at 1 sample and
-        0.0053 mm at 4 (noise-free frames, the amplitude stepped by 10 µm).
+        spread across its area, as a microbolometer integrates its pixel
+        (twin v7: 4); 1 (twin v6) casts one ray through its centre, so that
+        an outline moves in the image only when it crosses a pixel centre.
+        Read in the frame, a finger's bend is then placed to 0.038 mm SD at
+        1 sample and 0.0053 mm at 4 (noise-free frames, the amplitude stepped
+        by 10 µm).  Only the pixels an outline may cross are sampled (inside
+        a surface the mean is its centre's to 0.0015 K): a frame takes about
+        3 ms at 4 against 1.3 ms at 1.
     """
 
     netd_k: float = 0.05
@@ -112,7 +115,7 @@ class IrSensorConfig:
     background_emissivity: float = 0.95
     psf_sigma_px: float = 0.7
     draw_bend: bool = True
-    samples_per_px: int = 1
+    samples_per_px: int = 4
 
     def __post_init__(self) -> None:
         if not all(0 <= v < math.inf for v in (self.netd_k, self.max_offset_k, self.psf_sigma_px)):
