@@ -147,9 +147,9 @@ def test_with_no_infrared_reading_at_the_reference_the_chain_keeps_one_marker() 
     assert seen.weight == 0.4
     blind = _started(weight=0.2, contact_m=0.080, seen_weight=0.4, ir_weight=1.0)
     assert late == _hold(blind, creep_mm=(0.3, 0.4))
-    # Nor is it read where the object was not seen, nor at weight 0 (the default).
+    # Nor is it read where the object was not seen, nor at weight 0.
     for unseen in (_started(weight=0.2, ir_weight=1.0),
-                   _started(weight=0.2, contact_m=0.080, seen_weight=0.4)):
+                   _started(weight=0.2, contact_m=0.080, seen_weight=0.4, ir_weight=0.0)):
         rows = _hold(unseen, creep_mm=(0.3, 0.4), infrared_from_s=0.0)
         assert math.isnan(unseen._other_ref_m)
         assert rows == _hold(_started(weight=0.2, contact_m=unseen.contact_m

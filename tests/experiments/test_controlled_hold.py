@@ -101,16 +101,16 @@ def test_a_ramp_from_the_holds_values_moves_nothing_at_the_onset() -> None:
 
 def test_the_other_finger_read_in_the_infrared_frame_takes_the_chain_over(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    """With the object located and ``ChainParams.ir_weight`` 1, the estimate from 5 s of
-    the hold on is the chain's reading with finger 1 read in the infrared frames; before,
-    and with the default weight 0, it is the shipped one."""
+    """By default (the object located, ``ChainParams.ir_weight`` 1) the estimate from 5 s
+    of the hold on is the chain's reading with finger 1 read in the infrared frames;
+    before, and with weight 0, it is the one-marker chain's."""
     from functools import partial
 
     from relaxgrip.control import chain
 
-    shipped = run_hold("relax", duration_s=12.0, seed=4, locate_object=True)
-    monkeypatch.setattr(chain, "ChainParams", partial(chain.ChainParams, ir_weight=1.0))
-    read = run_hold("relax", duration_s=12.0, seed=4, locate_object=True)
+    read = run_hold("relax", duration_s=12.0, seed=4)
+    monkeypatch.setattr(chain, "ChainParams", partial(chain.ChainParams, ir_weight=0.0))
+    shipped = run_hold("relax", duration_s=12.0, seed=4)
     onset = read.loop.hold_onset_s()
     assert onset is not None
     hold_s = read.loop["t_s"] - onset

@@ -48,13 +48,11 @@ def test_a_recorded_hold_is_the_loops_hold(png_relax_hold: tuple[Path, HoldResul
     np.testing.assert_array_equal(hold.t_s[:n], loop.t_s)
     np.testing.assert_array_equal(hold.estimate_n[:n], loop.estimate_n)
     np.testing.assert_array_equal(hold.truth_n[:n], loop.truth_n)
-    chain = np.nan_to_num(loop.series("chain_n"))
-    assert np.count_nonzero(chain) > 60
-    np.testing.assert_array_equal(hold.chain_n[:n], chain)
+    assert np.count_nonzero(np.isfinite(loop.series("chain_n"))) > 60
     np.testing.assert_array_equal(hold.f_onset_n[:n], loop.series("f_onset_n"))
     assert 39.0 < np.mean(hold.temps_c) < 42.0
     row = hold.row(8.0)
-    assert row == {**hold_row(loop.t_s, loop.estimate_n, chain, loop.truth_n,
+    assert row == {**hold_row(loop.t_s, loop.estimate_n, loop.truth_n,
                               loop.series("f_onset_n"), hold.temps_c, 5.0, 8.0),
                    "recording": path.name}
     assert row["mae_n"] == loop.metrics()["mae_n"]

@@ -50,18 +50,20 @@ again).
   per-frame ICFN read the hold onset 0.07-0.21 N low on average for four
   of five training seeds at 5 N (0.43-0.76 N at 8 N).  The baselines keep the
   paper's per-frame ICFN.
-* With a calibrated model directory (``relaxgrip calibrate-hold``,
-  :mod:`relaxgrip.learning.hold_bias`), ``relax`` takes off its estimate the
-  mean error that closed-loop holds against the force ball measured at its
-  ``F_inst``, finger temperature and hold time, so the controller holds the
-  force those holds had, not the one its estimate reads.  What is left is
-  each run's own offset: mostly the relaxing share of the finger without the
-  marker, which the marker does not see (the closed chain reads part of it).
 * From 5 s of the hold on, ``relax`` blends the closed chain's reading into
-  its (calibrated) estimate with weight 0.2 (:mod:`relaxgrip.control.chain`):
-  the motor's travel less both fingers' deflection, through the object's
-  stiffness measured on the loading.  Its error is the fingers' difference
-  in creep, nearly independent of Eq. 10's.
+  its estimate (:mod:`relaxgrip.control.chain`): the motor's travel less both
+  fingers' deflection, through the object's stiffness measured on the
+  loading.  Where the object was located, the other finger's deflection is
+  read in the infrared frame and the reading is the estimate (weight 1);
+  otherwise it is guessed from the marker's finger and blended in at 0.2
+  (0.4 with the object's place seen).  Its error is the fingers' creep that
+  the reading misses, nearly independent of Eq. 10's.
+* With a calibrated model directory (``relaxgrip calibrate-hold``,
+  :mod:`relaxgrip.learning.hold_bias`), ``relax`` takes off that estimate
+  the mean error that closed-loop holds against the force ball measured at
+  its ``F_inst``, finger temperature and hold time, so the controller holds
+  the force those holds had, not the one its estimate reads.  What is left
+  is each run's own offset.
 * ``observer`` (:mod:`relaxgrip.control.observer`): Prony-series branch
   states in reduced time, driven by the measured deflection and temperature,
   for any displacement history and temperature path; started from ``relax``'s
@@ -502,17 +504,18 @@ class RelaxEstimator:
             return ForceEstimate(NAN, raw, self.f_onset_n, hold_s=hold)
         relaxed = self._k * -math.expm1(-hold / self._tau)  # Eq. 10
         force = self.f_onset_n - relaxed + added
-        calibration = NAN
-        if self.bias is not None:
-            calibration = self.bias.at(self.f_onset_n, self._temp_c, hold)
-            force -= calibration
         deflection = None if pose is None else float(pose[0])
         blended = self.chain.blend(hold, motor_position_mm, deflection, force,
                                    self._other_finger_m(percept.thermal))
+        chain = blended - force if math.isfinite(self.chain.reading_n) else NAN
+        # The calibration corrects what the controller is given: Eq. 10 with the
+        # chain's reading blended in.
+        calibration = NAN
+        if self.bias is not None:
+            calibration = self.bias.at(self.f_onset_n, self._temp_c, hold)
+            blended -= calibration
         return ForceEstimate(blended, raw, self.f_onset_n, self._k, self._tau, hold,
-                             calibration_n=calibration,
-                             chain_n=(blended - force if math.isfinite(self.chain.reading_n)
-                                      else NAN))
+                             calibration_n=calibration, chain_n=chain)
 
     def _other_finger_m(self, thermal: ThermalFeatures | None) -> float | None:
         """Finger 1's contact deflection in an infrared frame not read before (m), where

@@ -106,7 +106,7 @@ class _TemperatureTap:
                 self.temps_c.append(value)
 
 
-def hold_row(t_s: FloatArray, estimate_n: FloatArray, chain_n: FloatArray, truth_n: FloatArray,
+def hold_row(t_s: FloatArray, estimate_n: FloatArray, truth_n: FloatArray,
              f_onset_n: FloatArray, temps_c: Sequence[float], target_n: float,
              duration_s: float) -> dict[str, Any]:
     """One uncalibrated hold as a calibration stores it, from its series since the onset.
@@ -116,11 +116,9 @@ def hold_row(t_s: FloatArray, estimate_n: FloatArray, chain_n: FloatArray, truth
     t_s : ndarray
         Time since the hold's onset of each period (s); periods past
         ``duration_s`` are left out.
-    estimate_n, chain_n : ndarray
-        The uncalibrated estimate, and what the closed chain added to it (0
-        where nothing): the table corrects Eq. 10, and the chain's reading is
-        blended into the corrected estimate after it, so what it added is not
-        Eq. 10's error.
+    estimate_n : ndarray
+        The uncalibrated estimate, the closed chain's reading blended in: the
+        table corrects what the controller is given.
     truth_n : ndarray
         The true force (N; nan where there is no reference).
     f_onset_n : ndarray
@@ -142,7 +140,7 @@ def hold_row(t_s: FloatArray, estimate_n: FloatArray, chain_n: FloatArray, truth
     """
     keep = (t_s >= 0.0) & (t_s <= duration_s + 1e-9)
     t, est, truth = t_s[keep], estimate_n[keep], truth_n[keep]
-    err = est - chain_n[keep] - truth
+    err = est - truth
     bins = []
     for lo, hi in time_bins(duration_s):
         rows = (t >= lo) & (t <= hi) & np.isfinite(err)
@@ -167,8 +165,8 @@ def _one(args: tuple[float, float, int, float, ModelBundle]) -> dict[str, Any]:
     target_n, temp_c, seed, duration_s, models = args
     tap = _TemperatureTap()
     hold = run_hold("relax", target_n, duration_s, temp_c, seed, models, recorder=tap)
-    row = hold_row(hold.t_s, hold.estimate_n, np.nan_to_num(hold.series("chain_n")),
-                   hold.truth_n, hold.series("f_onset_n"), tap.temps_c, target_n, duration_s)
+    row = hold_row(hold.t_s, hold.estimate_n, hold.truth_n, hold.series("f_onset_n"),
+                   tap.temps_c, target_n, duration_s)
     return {"seed": seed, **row}
 
 

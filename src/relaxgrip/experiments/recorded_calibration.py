@@ -88,9 +88,6 @@ class RecordedHold:
         Time since the hold's onset of each period from the onset on (s).
     estimate_n : ndarray
         The replayed estimate (N).
-    chain_n : ndarray
-        What the closed chain added to it (N, 0 where nothing): the
-        calibration corrects Eq. 10, and the chain is blended in after it.
     truth_n : ndarray
         The force reference (N; nan in a period without one).
     f_onset_n : ndarray
@@ -112,7 +109,6 @@ class RecordedHold:
     length_s: float
     t_s: FloatArray
     estimate_n: FloatArray
-    chain_n: FloatArray
     truth_n: FloatArray
     f_onset_n: FloatArray
     temps_c: list[float]
@@ -134,7 +130,7 @@ class RecordedHold:
             No force reference over the hold's steady state.
         """
         try:
-            row = hold_row(self.t_s, self.estimate_n, self.chain_n, self.truth_n,
+            row = hold_row(self.t_s, self.estimate_n, self.truth_n,
                            self.f_onset_n, self.temps_c, self.target_n, duration_s)
         except InputError as exc:
             raise InputError(f"{self.path}: {exc}") from None
@@ -209,7 +205,6 @@ def recorded_hold(path: Path, models: ModelBundle, estimator: str = "relax",
                 continue
             _check_constant(path, period.messages, target_n, temp_c, period.t_s - onset_s)
             rows.append((period.t_s - onset_s, estimate.force_n,
-                         estimate.chain_n if math.isfinite(estimate.chain_n) else 0.0,
                          truth_force_n(period.messages), estimate.f_onset_n,
                          estimate.band_lo_n, estimate.band_hi_n, estimate.band_drift_n,
                          _reading_c(period.messages)))
@@ -229,11 +224,11 @@ def recorded_hold(path: Path, models: ModelBundle, estimator: str = "relax",
     if reached < length - MIN_BIN_S:
         raise InputError(f"{path}: the hold was recorded for {reached:.1f} s of its "
                          f"{length:.4g} s")
-    if not np.isfinite(cols[:, 3]).any():
+    if not np.isfinite(cols[:, 2]).any():
         raise InputError(f"{path}: no force reference (the twin's truth or a force sensor's "
                          "/relaxgrip/force_ref) in the hold")
-    t, force, chain, truth, f_onset, lo, hi, drift, read_c = cols.T
-    return RecordedHold(path, target_n, temp_c, float(length), t, force, chain, truth,
+    t, force, truth, f_onset, lo, hi, drift, read_c = cols.T
+    return RecordedHold(path, target_n, temp_c, float(length), t, force, truth,
                         f_onset, temps, lo, hi, drift, read_c)
 
 
