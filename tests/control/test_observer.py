@@ -211,8 +211,15 @@ def _scaled_shares(model: ObserverModel, share: float) -> ObserverModel:
     return ObserverModel.from_arrays(arrays, model.get_params())
 
 
+class _ChainStub:
+    reads_other = False
+
+
 class _RelaxStub:
     f_onset_n = 5.0
+
+    def __init__(self) -> None:
+        self.chain = _ChainStub()
 
     def reset(self) -> None:
         pass
@@ -233,6 +240,7 @@ def _stubbed(model: ObserverModel) -> ObserverEstimator:
     est.share_fit_deflection_rel, est.share_fit_settle_s = 0.02, 5.0
     est.share_fit_deflection_floor_m = 10e-6
     est.anchor_window_s = (10.0, 2.0)
+    est.chain_weight = 1.0
     est.reset()
     return est
 
@@ -425,6 +433,54 @@ def test_after_the_fit_its_offset_and_calibration_carry_in_proportion_to_the_for
     assert forces[0] == pytest.approx(last_estimate, abs=0.01)  # no jump when it takes over
 
 
+@pytest.mark.parametrize("weight", [1.0, 0.5, 0.0])
+def test_after_the_fit_the_chain_that_reads_both_fingers_takes_its_weight(
+        weight: float) -> None:
+    """Where relax's chain reads the other finger in the infrared frame, after the fit (a
+    new target at 20 s) the estimate is ``chain_weight`` of relax's and the rest the
+    observer's own; while the fit runs it is relax's either way."""
+    from relaxgrip.control.estimators import ForceEstimate
+
+    def run(reads_other: bool) -> list[tuple[bool, float, float]]:
+        est = _stubbed(_model())
+        est.chain_weight = weight
+        assert est.relax is not None
+        est.relax.chain.reads_other = reads_other  # type: ignore[attr-defined]
+        rows = []
+        for t in np.arange(0.0, 40.0, 1.0 / 30.0):
+            d = 1e-3 * (1.0 - 0.4 * min(max(t - 20.5, 0.0), 1.0))
+            est.advance(float(t), d, 40.0)
+            u = est.unit_force_m()
+            relax = 4.9 - 0.01 * float(t)  # relax's reading, the chain's blended in
+            motor = 100.0 if t < 20.0 else 100.0 - 2.0 * min(t - 20.0, 1.0)
+            got = est._with_share(ForceEstimate(relax, math.nan, chain_n=0.1), math.nan,
+                                  float(t), u, motor, d)
+            rows.append((est._fitting, got.force_n, relax))
+        return rows
+
+    own, read = run(False), run(True)
+    assert [r[0] for r in own] == [r[0] for r in read]
+    fitting = np.array([r[0] for r in read])
+    assert fitting[:300].all()
+    assert not fitting[-300:].any()
+    own_f = np.array([r[1] for r in own])
+    read_f = np.array([r[1] for r in read])
+    relax_f = np.array([r[2] for r in read])
+    np.testing.assert_array_equal(read_f[fitting], own_f[fitting])
+    np.testing.assert_allclose(read_f[~fitting],
+                               own_f[~fitting] + weight * (relax_f[~fitting] - own_f[~fitting]),
+                               atol=1e-12)
+    assert weight == 0.0 or np.abs(read_f[-1] - own_f[-1]) > 0.05
+
+
+def test_a_chain_weight_out_of_range_is_refused() -> None:
+    from relaxgrip.learning.training import load_default_models
+
+    bundle = load_default_models()
+    with pytest.raises(ValueError, match="chain's weight"):
+        ObserverEstimator(bundle.icfn, _model(), chain_weight=1.5)
+
+
 def test_band_widens_after_the_fit_by_what_a_share_error_would_move_the_estimate() -> None:
     """Spread 0.1 of the relaxing share: after the fit ends (a new target at 20 s) and a
     40 -> 55 °C ramp relaxes the branches, the band grows by z_0.975 times the drift
@@ -593,12 +649,13 @@ def test_in_a_hot_hold_the_band_widens_by_its_factor_there() -> None:
 def test_in_a_hold_the_push_ends_the_share_fit_when_it_moves_the_marker() -> None:
     """Through the whole loop: the frames' marker pose reaches the share fit, which ends
     (the observer's ``chain_n`` stops) within a tenth of a second of a 2 N push at 12 s,
-    where the motor alone would end it 0.17 s after."""
+    where the motor alone would end it 0.17 s after.  (The object is not located: where
+    it is, the chain reads both fingers and stays in the estimate after the fit.)"""
     from relaxgrip.experiments.controlled_hold import run_hold
     from relaxgrip.experiments.profiles import parse_disturbance
 
     hold = run_hold("observer", 5.0, 20.0, 40.0, seed=2014,
-                    disturbance=parse_disturbance("push:2:12"))
+                    disturbance=parse_disturbance("push:2:12"), locate_object=False)
     fitting = hold.t_s[np.isfinite(hold.series("chain_n"))]
     assert fitting.min() == pytest.approx(5.0, abs=0.05)  # the chain's reading starts at 5 s
     assert 12.0 < fitting.max() < 12.1

@@ -167,6 +167,11 @@ class ClosedChain:
         self._other_ref_m = NAN
         self.reading_n = NAN
 
+    @property
+    def reads_other(self) -> bool:
+        """Whether the other finger is read in the infrared frame (from the reference on)."""
+        return math.isfinite(self._other_ref_m)
+
     def start(self, stiffness_n_per_mm: float, marker_per_mm_m: float, temp_c: float,
               contact_m: float = NAN) -> None:
         """The hold starts: the object's stiffness from the loading's slopes.

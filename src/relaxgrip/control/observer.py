@@ -145,6 +145,12 @@ class ObserverEstimator:
     unrelaxed : UnrelaxedIcfn, optional
         Read the force from the loading history, as ``relax`` does
         (:class:`relaxgrip.control.estimators.IcfnEstimator`).
+    chain_weight : float
+        After the share fit, where ``relax``'s closed chain reads the other
+        finger in the infrared frame (the object located), the estimate is
+        this share of ``relax``'s (the chain's reading: the motor's travel
+        less both fingers' measured deflections, which holds through any
+        temperature path and displacement) and the rest the observer's.
     hold_bias : HoldBias, optional
         ``relax``'s calibrated closed-loop error (at ``F_inst``, the
         temperature as read and the hold time), taken off the observer's
@@ -169,7 +175,7 @@ class ObserverEstimator:
                  share_bounds: tuple[float, float] = (0.5, 1.5),
                  anchor_window_s: tuple[float, float] = (10.0, 2.0),
                  unrelaxed: UnrelaxedIcfn | None = None,
-                 hold_bias: HoldBias | None = None) -> None:
+                 hold_bias: HoldBias | None = None, chain_weight: float = 1.0) -> None:
         if not (share_fit_s >= 0 and share_fit_temp_k > 0 and share_fit_motor_mm_s > 0
                 and share_fit_deflection_rel > 0 and share_fit_deflection_floor_m >= 0
                 and share_fit_settle_s >= 0):
@@ -183,6 +189,9 @@ class ObserverEstimator:
         if not anchor_window_s[0] > anchor_window_s[1] >= 0:
             raise ValueError("the share fit's anchor window must start before it ends, got "
                              f"{anchor_window_s[0]} s to {anchor_window_s[1]} s before")
+        if not 0.0 <= chain_weight <= 1.0:
+            raise ValueError(f"the chain's weight must be in [0, 1], got {chain_weight}")
+        self.chain_weight = chain_weight
         self.model = model
         self.provenance: dict[str, Any] = {}
         self.history = LoadingHistory(model, CONTACT_DEFLECTION_M)
@@ -403,6 +412,11 @@ class ObserverEstimator:
             est += self._offset_n * ratio
             calibration = self._calibration_n * ratio
         est -= calibration
+        follows = (not fitting and self.chain_weight > 0.0 and self.relax.chain.reads_other
+                   and math.isfinite(relax.force_n))
+        if follows:
+            # Both fingers measured: the chain's reading needs no relaxation model.
+            est += self.chain_weight * (relax.force_n - est)
         drift = 0.0
         if math.isfinite(self._r_end):
             # What the branches relax after the fit carries the run's share spread.
@@ -413,7 +427,7 @@ class ObserverEstimator:
                              band_lo_n=est - half, band_hi_n=est + half, band_drift_n=drift,
                              calibration_n=(calibration if math.isfinite(relax.calibration_n)
                                             else NAN),
-                             chain_n=relax.chain_n if fitting else NAN)
+                             chain_n=relax.chain_n if fitting or follows else NAN)
 
     def contact(self, t_s: float) -> float:
         """Tare the ICFN on the free-space frames before the contact (returns the tare, N)."""
