@@ -445,7 +445,7 @@ def test_after_the_fit_the_chain_that_reads_both_fingers_takes_its_weight(
         est = _stubbed(_model())
         est.chain_weight = weight
         assert est.relax is not None
-        est.relax.chain.reads_other = reads_other  # type: ignore[attr-defined]
+        est.relax.chain.reads_other = reads_other  # type: ignore[misc]
         rows = []
         for t in np.arange(0.0, 40.0, 1.0 / 30.0):
             d = 1e-3 * (1.0 - 0.4 * min(max(t - 20.5, 0.0), 1.0))
