@@ -173,3 +173,31 @@ def test_bad_parameters_are_refused(kwargs: dict[str, float]) -> None:
     with pytest.raises(ValueError, match=r"chain|marker|compliant"):
         ChainParams(**kwargs)  # type: ignore[arg-type]
 
+
+
+def test_the_markers_share_follows_the_fingers_temperature() -> None:
+    """Through a 40 -> 55 °C ramp the finger stiffens towards its tip relative to its root
+    differently: the marker's share of the contact deflection is read at the temperature
+    as read, and the marker finger's deflection with it; half a kelvin does not move it."""
+    finger = FingerParams()
+    chain = _started(weight=1.0, contact_m=0.080, seen_weight=1.0)
+    assert chain.share == pytest.approx(marker_share(0.060, 0.080, TEMP_C, finger))
+    c0 = 5.0 / K_FINGER  # mm, the contact deflection the marker shows at 40 °C
+    marker_m = chain.share * c0 * 1e-3
+    for t in np.arange(0.0, 6.0, 1.0 / 30.0):
+        chain.blend(float(t), 100.0, marker_m, 5.0, None, TEMP_C)
+    at_40 = chain.reading_n
+    chain.blend(6.0, 100.0, marker_m, 5.0, None, TEMP_C + 0.4)
+    assert chain.reading_n == pytest.approx(at_40, abs=1e-12)
+    chain.blend(6.1, 100.0, marker_m, 5.0, None, 55.0)
+    hot = marker_share(0.060, 0.080, 55.0, finger)
+    assert chain.share == pytest.approx(hot)
+    assert hot > marker_share(0.060, 0.080, TEMP_C, finger)
+    # The marker unmoved now shows less contact deflection: both fingers gave back that
+    # much (finger 1 taken equal), and the object carries it.
+    given_back_mm = 2.0 * (c0 - marker_m * 1e3 / hot)
+    assert chain.reading_n - at_40 == pytest.approx(
+        chain.object_stiffness_n_per_mm * given_back_mm, rel=1e-9)
+    # nan keeps the share of the last reading.
+    chain.blend(6.2, 100.0, marker_m, 5.0, None, math.nan)
+    assert chain.share == pytest.approx(hot)

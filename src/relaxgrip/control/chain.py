@@ -72,6 +72,10 @@ def marker_share(marker_m: float, contact_m: float, temp_c: float,
     return float(deflection_share(marker_m, contact_m, temp_c, finger))
 
 
+#: The marker's share is computed anew when the finger's temperature has moved this far (K).
+_SHARE_STEP_K = 0.5
+
+
 @dataclass(frozen=True)
 class ChainParams:
     """How the chain's reading is formed and blended.
@@ -162,6 +166,7 @@ class ClosedChain:
         self._sums = [0.0, 0.0, 0.0]
         self._n = 0
         self._ref: tuple[float, float, float] | None = None
+        self._share_temp_c = NAN
         self._deflection_m = NAN
         self._other_m = NAN
         self._other_ref_m = NAN
@@ -198,12 +203,14 @@ class ClosedChain:
         if self.weight == 0.0 or not math.isfinite(temp_c):
             return
         self.share = marker_share(p.marker_m, self.contact_m, temp_c, p.finger)
+        self._share_temp_c = temp_c
         compliant = 1.0 - 2.0 * marker_per_mm_m * 1e3 / self.share
         if compliant >= p.min_compliant_share and stiffness_n_per_mm > 0:
             self.object_stiffness_n_per_mm = stiffness_n_per_mm / compliant
 
     def blend(self, hold_s: float, motor_mm: float, deflection_m: float | None,
-              estimate_n: float, other_m: float | None = None) -> float:
+              estimate_n: float, other_m: float | None = None,
+              temp_c: float = NAN) -> float:
         """The estimate with the chain's reading blended in (N).
 
         Parameters
@@ -222,6 +229,11 @@ class ClosedChain:
             just taken (m); None between frames (the last one stands).  Used
             when the object was seen and a reading stood when the chain
             started.
+        temp_c : float
+            The finger's temperature as now read (°C; nan: the last stands).
+            The marker's share of the contact deflection follows it (0.625 at
+            40 °C, 0.633 at 55 °C for a contact at 79.5 mm): through a ramp
+            the finger's stiffness changes along it.
 
         ``reading_n`` keeps this frame's chain reading (N; nan if none).
         """
@@ -231,6 +243,10 @@ class ClosedChain:
             self._other_m = other_m
         p = self.params
         self.reading_n = NAN
+        if (math.isfinite(temp_c) and math.isfinite(self.share)
+                and abs(temp_c - self._share_temp_c) >= _SHARE_STEP_K):
+            self.share = marker_share(p.marker_m, self.contact_m, temp_c, p.finger)
+            self._share_temp_c = temp_c
         if not (math.isfinite(self.object_stiffness_n_per_mm) and math.isfinite(estimate_n)
                 and math.isfinite(self._deflection_m)):
             return estimate_n
@@ -243,12 +259,13 @@ class ClosedChain:
             if hold_s < p.ref_s or self._n == 0:
                 return estimate_n
             f_ref, m_ref, x_ref = (s / self._n for s in self._sums)
-            self._ref = (f_ref, m_ref, x_ref)
+            # The marker finger's contact deflection at the reference (mm).
+            self._ref = (f_ref, m_ref, x_ref * 1e3 / self.share)
             if self.seen and math.isfinite(self._other_m) and p.ir_weight > 0:
                 self._other_ref_m = self._other_m
                 self.weight = p.ir_weight
-        f_ref, m_ref, x_ref = self._ref
-        marker_mm = (self._deflection_m - x_ref) * 1e3 / self.share
+        f_ref, m_ref, c_ref = self._ref
+        marker_mm = self._deflection_m * 1e3 / self.share - c_ref
         if math.isfinite(self._other_ref_m):
             fingers_mm = marker_mm + (self._other_m - self._other_ref_m) * 1e3
         else:

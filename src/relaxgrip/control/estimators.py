@@ -506,7 +506,7 @@ class RelaxEstimator:
         force = self.f_onset_n - relaxed + added
         deflection = None if pose is None else float(pose[0])
         blended = self.chain.blend(hold, motor_position_mm, deflection, force,
-                                   self._other_finger_m(percept.thermal))
+                                   self._other_finger_m(percept.thermal), temp)
         chain = blended - force if math.isfinite(self.chain.reading_n) else NAN
         # The calibration corrects what the controller is given: Eq. 10 with the
         # chain's reading blended in.
