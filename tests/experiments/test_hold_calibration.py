@@ -149,11 +149,11 @@ def test_calibration_keeps_each_conditions_mean_error_and_smooths_them(
     assert len(result.kernels) == len(bins)
     first = result.holds["5N 40C"][0]
     assert first["seed"] == 1000
-    # Eq. 10's error: what the closed chain's reading added is taken out (it is
-    # blended into the corrected estimate after the table).
+    # The error of the estimate the controller is given, the closed chain's reading in it
+    # (with the other finger read in the infrared frame, the whole estimate from 5 s on).
     chain = plain_hold.series("chain_n")
     assert np.isfinite(chain).any()
-    err = plain_hold.estimate_n - np.nan_to_num(chain) - plain_hold.truth_n
+    err = plain_hold.estimate_n - plain_hold.truth_n
     for k, (lo, hi) in enumerate(bins):
         rows = (plain_hold.t_s >= lo) & (plain_hold.t_s <= hi) & np.isfinite(err)
         assert first["bins_n"][k] == pytest.approx(float(np.mean(err[rows])))

@@ -215,7 +215,7 @@ def recorded_hold(path: Path, models: ModelBundle, estimator: str = "relax",
     if onsets != 1:
         raise InputError(f"{path}: {onsets} holds in the recording; calibrating takes one hold "
                          "per recording" if onsets else f"{path}: the recording has no hold")
-    cols = np.array(rows, dtype=np.float64).reshape(-1, 9)
+    cols = np.array(rows, dtype=np.float64).reshape(-1, 8)
     after = cols[:, 0] >= 0.0
     cols = cols[after]
     reached = float(cols[-1, 0]) if cols.size else 0.0
