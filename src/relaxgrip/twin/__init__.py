@@ -1,6 +1,7 @@
 """The digital twin: a stepped, seeded world built from :mod:`relaxgrip.physics`."""
 
 from relaxgrip.twin.config import (
+    MODELS_FROM,
     SAME_RUNS_AS,
     TWIN_VERSION,
     MotorParams,
@@ -12,6 +13,7 @@ from relaxgrip.twin.twin import GripperTwin, TwinMaterial
 
 __all__ = [
     "CATALOGUE",
+    "MODELS_FROM",
     "SAME_RUNS_AS",
     "TWIN_VERSION",
     "GripperTwin",

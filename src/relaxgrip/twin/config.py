@@ -14,7 +14,7 @@ from relaxgrip.twin.objects import ObjectSpec, get_object
 from relaxgrip.twin.sensors import ForceSensorConfig, IrSensorConfig, RgbSensorConfig, SceneObject
 from relaxgrip.validate import check_positive, check_temp_c
 
-__all__ = ["SAME_RUNS_AS", "TWIN_VERSION", "MotorParams", "ScatterParams", "TwinConfig"]
+__all__ = ["MODELS_FROM", "SAME_RUNS_AS", "TWIN_VERSION", "MotorParams", "ScatterParams", "TwinConfig"]
 
 #: Bumped whenever the twin's behaviour changes; every result records it.
 TWIN_VERSION = "relaxgrip-twin-v7"
@@ -23,6 +23,12 @@ TWIN_VERSION = "relaxgrip-twin-v7"
 #: the mean over its area (``IrSensorConfig.samples_per_px``): the fingers' outlines in every
 #: infrared frame changed.
 SAME_RUNS_AS: tuple[str, ...] = ()
+#: Earlier versions whose trained models this one ships with: their frames differ from this
+#: one's only along the infrared outlines.  v6 -> v7, on 400 ICFN samples of one dataset
+#: built on both: the infrared features by 0.03-0.15 K SD (the distal beams most), the
+#: shipped ICFN's force by +0.003 ± 0.030 N, its MAE 0.133 -> 0.136 N.  Retraining on
+#: this twin takes that back (docs/hold-experiments.md, session 57).
+MODELS_FROM: tuple[str, ...] = ("relaxgrip-twin-v6",)
 
 
 @dataclass(frozen=True)
