@@ -14,7 +14,8 @@ from relaxgrip.twin.objects import ObjectSpec, get_object
 from relaxgrip.twin.sensors import ForceSensorConfig, IrSensorConfig, RgbSensorConfig, SceneObject
 from relaxgrip.validate import check_positive, check_temp_c
 
-__all__ = ["MODELS_FROM", "SAME_RUNS_AS", "TWIN_VERSION", "MotorParams", "ScatterParams", "TwinConfig"]
+__all__ = ["MODELS_FROM", "SAME_RUNS_AS", "TWIN_VERSION", "MotorParams", "ScatterParams",
+           "TwinConfig"]
 
 #: Bumped whenever the twin's behaviour changes; every result records it.
 TWIN_VERSION = "relaxgrip-twin-v7"
