@@ -112,12 +112,13 @@ class ChainParams:
         The chain's share when the object was seen and the other finger is
         read in the infrared frame (1, the default: the reading replaces the
         marker's guess of the other finger's creep); 0 does not read it.  On
-        the twin (v7, its infrared pixels drawn by their area) with the
-        object located, weight 1 held 5 N, 40 °C at 0.0371 N on seeds
-        4000-4035 (0.0434 N without), the spread over seeds 0.042 against
-        0.055 N.  Drawn by pixel centre (twin v6) an outline moves only as it
-        crosses a pixel centre, and the reading is too coarse
-        (docs/hold-experiments.md, session 56).
+        twin v7 (its infrared pixels drawn by their area), the object
+        located and the calibration measured so, 5 N, 40 °C held 0.0300 N
+        on seeds 4000-4023 and 0.0375 N on 3000-3035 (v6, one marker:
+        0.0445 and 0.0503 N), the estimate's spread over seeds 0.035 N.
+        Drawn by pixel centre (twin v6) an outline moves only as it crosses
+        a pixel centre, and the reading is too coarse
+        (docs/hold-experiments.md, sessions 56 and 57).
     """
 
     weight: float = 0.2
