@@ -34,6 +34,10 @@ from relaxgrip.learning.observer import (
 )
 from tests.clitools import assert_refused_unchanged, run_main
 
+#: A drift scale for the tests that need the band's drift part: session 55's.  The shipped
+#: one is 0 since the observer keeps the chain's reading after its share fit.
+DRIFT_SCALE = 0.040
+
 
 @pytest.fixture(scope="module")
 def short_hold() -> HoldResult:
@@ -44,11 +48,10 @@ def test_samples_do_not_depend_on_the_scales_the_observer_held_with(
         short_hold: HoldResult) -> None:
     """The same seed with the band's parts at other scales: the same samples (the loop is
     unchanged: the band is only reported), and the coverage of the recorded band is the
-    samples' at the scales it had.  A short ramp, so that both parts are there (the
-    shipped drift scale is 0 since the observer keeps the chain's reading: session 55's
-    0.040 here)."""
+    samples' at the scales it had.  A short ramp, so that both parts are there (with
+    :data:`DRIFT_SCALE`)."""
     model = load_default_observer()
-    model.drift_scale = 0.040
+    model.drift_scale = DRIFT_SCALE
     wide = load_default_observer()
     wide.band_scale = 2.0 * model.band_scale
     wide.drift_scale = 3.0 * model.drift_scale
@@ -75,7 +78,7 @@ def test_the_drift_part_is_recorded_once_the_share_fit_ends() -> None:
     floor and the ICFN's onset error."""
     model = load_default_observer()
     model.band_floor_n = 0.03
-    model.drift_scale = 0.040  # session 55's; the shipped one is 0
+    model.drift_scale = DRIFT_SCALE
     model.band_temps_c, model.band_temp_factors = (), ()  # the ramp heats: 1 throughout
     hold = scenario_hold("observer", "ramp", seed=1, duration_s=40.0, observer=model)
     drift, hold_s = hold.series("band_drift_n"), hold.series("hold_s")
