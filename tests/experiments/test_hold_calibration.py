@@ -18,11 +18,14 @@ from relaxgrip.experiments.hold_calibration import (
     calibrate_hold,
     calibration_from_holds,
     calibration_record,
+    drift_line,
     hidden_note,
+    hold_drift_windows,
+    icfn_drift_n,
     smooth_bias,
     time_bins,
 )
-from relaxgrip.learning.hold_bias import HoldBias
+from relaxgrip.learning.hold_bias import HoldBias, IcfnDrift
 from relaxgrip.learning.store import ModelBundle, load_models
 from relaxgrip.learning.training import default_models_dir, load_default_models
 from relaxgrip.twin import TWIN_VERSION
@@ -102,6 +105,76 @@ def test_the_lookup_follows_the_onset_force_and_the_hold_time(uncalibrated: Mode
     assert np.ptp(expected) > 0.1
 
 
+def test_the_drift_line_is_taken_off_from_the_end_of_its_window(uncalibrated: ModelBundle,
+                                                                 plain_hold: HoldResult) -> None:
+    """Before the drift is read only the table's value is taken off; from then on the line's
+    too, on the drift the calibration would read of the same hold."""
+    early, late = hold_drift_windows(DURATION_S)
+    assert late[1] == pytest.approx(100.0 * DURATION_S / 280.0)
+    line = IcfnDrift(np.array([5.0]), np.array([40.0]), early, late, np.full((1, 1), 0.05),
+                     np.full((1, 1), 0.5))
+    bias = HoldBias(np.array([5.0]), np.array([40.0]), np.array([1.0]), np.full((1, 1, 1), 0.01),
+                    line)
+    hold = run_hold("relax", 5.0, DURATION_S, 40.0, seed=1000,
+                    models=replace(uncalibrated, hold_bias=bias))
+    # Until the drift is read the hold is the uncalibrated one held 0.01 N lower: its
+    # ICFN drifts alike.
+    drift = icfn_drift_n(hold.t_s, hold.series("icfn_n"), DURATION_S)
+    assert drift == pytest.approx(icfn_drift_n(plain_hold.t_s, plain_hold.series("icfn_n"),
+                                               DURATION_S), abs=0.02)
+    calibration = hold.series("calibration_n")
+    before = (hold.t_s > 0.1) & (hold.t_s < late[1] - 1e-6)
+    after = hold.t_s >= late[1]
+    assert np.all(calibration[before] == pytest.approx(0.01))
+    np.testing.assert_allclose(calibration[after], 0.01 + 0.5 * (drift - 0.05), rtol=1e-9)
+    assert abs(drift - 0.05) > 0.01  # the line did take something off
+
+
+def test_a_drift_line_recovers_its_slope_and_says_what_it_does_not_know() -> None:
+    drifts = np.array([0.1, 0.2, 0.3, 0.4])
+    exact = drift_line(drifts, 0.02 + 0.5 * (drifts - 0.25))
+    assert exact["slope"] == pytest.approx(0.5)
+    assert exact["slope_se"] == pytest.approx(0.0, abs=1e-9)
+    assert exact["r"] == pytest.approx(1.0)
+    assert exact["mean_n"] == pytest.approx(0.25)
+    two = drift_line(drifts[:2], np.array([0.0, 0.1]))
+    assert two["slope"] == pytest.approx(1.0)
+    assert two["slope_se"] == 10.0
+    flat = drift_line(np.full(4, 0.3), np.array([0.0, 0.1, 0.0, 0.1]))
+    assert flat["slope"] == 0.0
+    assert flat["slope_se"] == 10.0
+    assert np.isnan(flat["r"])
+
+
+def test_calibration_fits_the_drift_line_and_leaves_it_out_without_drifts() -> None:
+    """Holds whose error follows their drift at 0.5 N/N about a mean drift of 0.06 F: the
+    table's line has that slope and mean at the conditions; a hold without a drift (one
+    stored before the line) leaves the line out."""
+    rng = np.random.default_rng(3)
+    holds = {}
+    for force in (3.0, 5.0):
+        rows = []
+        for seed in range(12):
+            drift = 0.06 * force + rng.normal(0.0, 0.05)
+            error = 0.02 + 0.5 * (drift - 0.06 * force) + rng.normal(0.0, 0.005)
+            rows.append({**_row(seed, [error] * 3), "f_inst_n": force, "icfn_drift_n": drift})
+        holds[f"{force:g}N 40C"] = rows
+    result = calibration_from_holds([3.0, 5.0], [40.0], list(range(12)), 4.0, holds)
+    line = result.bias.drift
+    assert line is not None
+    for i, force in ((0, 3.0), (2, 5.0)):
+        assert line.slope[i, 0] == pytest.approx(0.5, abs=0.05)
+        assert line.mean_n[i, 0] == pytest.approx(0.06 * force, abs=0.03)
+    assert line.late_s == hold_drift_windows(4.0)[1]
+    fit = json.loads(json.dumps(result.record()))["icfn_drift"]
+    assert fit["conditions"]["5N 40C"]["holds"] == 12
+    assert fit["conditions"]["5N 40C"]["r"] > 0.9
+    del holds["3N 40C"][0]["icfn_drift_n"]
+    result = calibration_from_holds([3.0, 5.0], [40.0], list(range(12)), 4.0, holds)
+    assert result.bias.drift is None
+    assert result.record()["icfn_drift"] is None
+
+
 def test_the_observer_takes_the_calibration_off_and_fits_its_share_without_it(
         uncalibrated: ModelBundle) -> None:
     """The share is fitted to Eq. 10's relaxation: a calibration does not move it (fitted
@@ -166,6 +239,11 @@ def test_calibration_keeps_each_conditions_mean_error_and_smooths_them(
     raw = np.array([[np.mean([r["bins_n"][k] for r in result.holds[name]])
                      for k in range(len(bins))] for name in ("3N 40C", "5N 40C")])
     assert np.all(np.abs(bias.values_n[[0, 2], 0]) <= np.abs(raw).max() + 1e-9)
+    # Each hold's ICFN drift, as the estimator would read it.
+    assert first["icfn_drift_n"] == pytest.approx(
+        icfn_drift_n(plain_hold.t_s, plain_hold.series("icfn_n"), DURATION_S))
+    assert bias.drift is not None
+    assert set(result.drift_fit["conditions"]) == {"3N 40C", "5N 40C"}
     summary = result.summary()["5N 40C"]
     assert summary["est_error_mean_n"] == pytest.approx(np.mean(
         [r["est_error_mean_n"] for r in result.holds["5N 40C"]]))

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from relaxgrip.errors import InputError
-from relaxgrip.learning.hold_bias import HoldBias
+from relaxgrip.learning.hold_bias import HoldBias, IcfnDrift, drift_windows
 from relaxgrip.learning.store import ModelFileError, load_models, save_models, set_hold_bias
 from relaxgrip.learning.training import default_models_dir
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
@@ -74,6 +74,65 @@ def test_the_dict_form_round_trips_and_names_what_is_missing() -> None:
     assert again.at(3.3, 44.0, 5.0) == bias.at(3.3, 44.0, 5.0)
     with pytest.raises(InputError, match="missing times_s"):
         HoldBias.from_dict({k: v for k, v in bias.to_dict().items() if k != "times_s"})
+
+
+def drift() -> IcfnDrift:
+    """A line whose slope is 0.5 at 5 N and 0.1 at 1 N, about a mean drift of 0.1 F N."""
+    forces, temps = np.array([1.0, 5.0]), np.array([30.0, 50.0])
+    return IcfnDrift(forces, temps, (1.0, 4.0), (95.0, 100.0),
+                     np.repeat(0.1 * forces[:, None], 2, axis=1),
+                     np.repeat(0.1 * forces[:, None], 2, axis=1))
+
+
+def test_the_drift_line_reads_a_run_against_the_calibration_mean() -> None:
+    line = drift()
+    assert line.at(5.0, 40.0, 0.5) == 0.0  # the calibration holds' mean drift
+    assert line.at(5.0, 40.0, 0.7) == pytest.approx(0.5 * 0.2)
+    assert line.at(3.0, 30.0, 0.1) == pytest.approx(0.3 * (0.1 - 0.3))  # linear between knots
+    # Beyond the grid the slope fades (4 N, 20 K end spacings); the mean is held.
+    assert line.at(7.0, 40.0, 0.7) == pytest.approx(0.5 * 0.5 * 0.2)
+    assert line.at(5.0, 60.0, 0.7) == pytest.approx(0.5 * 0.5 * 0.2)
+    assert line.at(9.0, 40.0, 0.7) == 0.0
+    for bad in ((math.nan, 40.0, 0.5), (5.0, math.nan, 0.5), (5.0, 40.0, math.nan)):
+        assert line.at(*bad) == 0.0
+
+
+def test_the_drift_windows_scale_with_a_short_hold() -> None:
+    assert drift_windows(100.0) == ((1.0, 4.0), (95.0, 100.0))
+    early, late = drift_windows(5.0, 0.05)
+    assert early == pytest.approx((0.05, 0.2))
+    assert late == pytest.approx((4.75, 5.0))
+    early, late = drift_windows(0.3571, 1.0 / 280.0)  # three frames at least
+    assert early[1] - early[0] == pytest.approx(0.1)
+    assert late[1] - late[0] == pytest.approx(0.1)
+
+
+def test_a_bias_with_its_drift_round_trips_and_one_without_it_still_loads() -> None:
+    bias = HoldBias(*(getattr(grid(), k) for k in ("forces_n", "temps_c", "times_s",
+                                                     "values_n")), drift())
+    again = HoldBias.from_dict(json.loads(json.dumps(bias.to_dict())))
+    assert again.drift is not None
+    assert again.drift.at(3.3, 44.0, 0.9) == bias.drift.at(3.3, 44.0, 0.9)  # type: ignore[union-attr]
+    assert again.drift.late_s == (95.0, 100.0)
+    assert HoldBias.from_dict(grid().to_dict()).drift is None
+
+
+@pytest.mark.parametrize(("change", "match"), [
+    ({"slope": [[0.1]]}, "slope must have shape"),
+    ({"mean_n": [[0.1, math.nan], [0.5, 0.5]]}, "mean_n has a value that is not finite"),
+    ({"slope": [[0.1, 0.1], [0.5, 3.0]]}, "beyond ±2 N per N"),
+    ({"early_s": [4.0, 1.0]}, "early_s must be a window"),
+    ({"late_s": [2.0, 100.0]}, "starts before its early one"),
+    ({"late_s": [95.0]}, "late_s must be two numbers"),
+    ({"early_s": ["a", "b"]}, "numbers"),
+])
+def test_a_drift_line_that_is_not_one_is_refused(change: dict[str, object], match: str) -> None:
+    entry = {**grid().to_dict(), "icfn_drift": {**drift().to_dict(), **change}}
+    with pytest.raises(InputError, match=match):
+        HoldBias.from_dict(entry)
+    with pytest.raises(InputError, match="icfn_drift lacks slope"):
+        HoldBias.from_dict({**grid().to_dict(), "icfn_drift": {
+            k: v for k, v in drift().to_dict().items() if k != "slope"}})
 
 
 def sha(path: Path) -> str:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import shutil
 from pathlib import Path
 
@@ -50,11 +51,14 @@ def test_a_recorded_hold_is_the_loops_hold(png_relax_hold: tuple[Path, HoldResul
     np.testing.assert_array_equal(hold.truth_n[:n], loop.truth_n)
     assert np.count_nonzero(np.isfinite(loop.series("chain_n"))) > 60
     np.testing.assert_array_equal(hold.f_onset_n[:n], loop.series("f_onset_n"))
+    np.testing.assert_array_equal(hold.icfn_n[:n], loop.series("icfn_n"))
     assert 39.0 < np.mean(hold.temps_c) < 42.0
     row = hold.row(8.0)
     assert row == {**hold_row(loop.t_s, loop.estimate_n, loop.truth_n,
-                              loop.series("f_onset_n"), hold.temps_c, 5.0, 8.0),
+                              loop.series("f_onset_n"), hold.temps_c, 5.0, 8.0,
+                              loop.series("icfn_n")),
                    "recording": path.name}
+    assert math.isfinite(row["icfn_drift_n"])
     assert row["mae_n"] == loop.metrics()["mae_n"]
     assert row["est_error_mean_n"] == loop.metrics()["est_error_mean_n"]
 

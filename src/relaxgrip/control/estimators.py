@@ -89,7 +89,7 @@ from relaxgrip.learning.history import (
     features_deflection_m,
     features_temp_c,
 )
-from relaxgrip.learning.hold_bias import HoldBias
+from relaxgrip.learning.hold_bias import HoldBias, IcfnDrift
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
@@ -408,8 +408,11 @@ class RelaxEstimator:
     bias : HoldBias, optional
         The closed-loop error ``relaxgrip calibrate-hold`` measured with
         these models: during the hold it is taken off the estimate, looked
-        up at ``F_inst``, the fingers' temperature as read and the hold time.
-        Without it the estimate is Eq. 10's alone.
+        up at ``F_inst``, the fingers' temperature as read and the hold time;
+        with its :class:`~relaxgrip.learning.hold_bias.IcfnDrift`, the run's own
+        share of it too, from the end of the drift's late window on (read
+        from the per-frame ICFN over the hold).  Without it the estimate is
+        Eq. 10's alone.
     chain : ChainParams, optional
         The closed chain's reading blended into the (calibrated) Eq. 10
         estimate during the hold (:mod:`relaxgrip.control.chain`); the
@@ -458,6 +461,7 @@ class RelaxEstimator:
         self._k = self._tau = NAN
         self._ir_t = NAN
         self._ir_span: tuple[float, float] | None = None
+        self._forget_drift()
 
     def update(self, percept: Percept, motor_position_mm: float) -> ForceEstimate:
         """ICFN before the hold; Eq. 10 plus the controller's added closure during it."""
@@ -484,6 +488,9 @@ class RelaxEstimator:
             shift = self._pose_per_mm * (motor_position_mm - self._onset_motor)
             self.features.observe(t, pose - shift, self._onset_motor)
         hold = t - self._onset_t
+        drift = None if self.bias is None else self.bias.drift
+        if drift is not None and not self._drift_read:
+            self._observe_drift(drift, hold, raw)
         added = self.closure_stiffness_n_per_mm * (motor_position_mm - self._onset_motor)
         if hold <= self.onset_window_s and math.isfinite(raw):
             # F_inst is the mean of the per-frame estimates over the first moments of the
@@ -513,9 +520,36 @@ class RelaxEstimator:
         calibration = NAN
         if self.bias is not None:
             calibration = self.bias.at(self.f_onset_n, self._temp_c, hold)
+            if drift is not None and self._drift_read:
+                calibration += drift.at(self.f_onset_n, self._temp_c, self.drift_n)
             blended -= calibration
         return ForceEstimate(blended, raw, self.f_onset_n, self._k, self._tau, hold,
                              calibration_n=calibration, chain_n=chain)
+
+    def _forget_drift(self) -> None:
+        """A new hold: no ICFN drift read yet (:attr:`drift_n`, N)."""
+        self._drift_sums = [0.0, 0.0]
+        self._drift_counts = [0, 0]
+        self.drift_n = NAN
+        self._drift_read = False
+
+    def _observe_drift(self, drift: IcfnDrift, hold: float, raw: float) -> None:
+        """Add a frame's ICFN reading to the drift's windows; read the drift after the late one.
+
+        :attr:`drift_n` stays nan if a window held no reading (the marker lost
+        throughout it): the run's share is then not corrected.
+        """
+        if math.isfinite(raw):
+            for i, (lo, hi) in enumerate((drift.early_s, drift.late_s)):
+                if lo - 1e-9 <= hold <= hi + 1e-9:
+                    self._drift_sums[i] += raw
+                    self._drift_counts[i] += 1
+        if hold >= drift.late_s[1] - 1e-9:
+            self._drift_read = True
+            if min(self._drift_counts) > 0:
+                early, late = (total / n for total, n in zip(self._drift_sums,
+                                                            self._drift_counts, strict=True))
+                self.drift_n = late - early
 
     def _other_finger_m(self, thermal: ThermalFeatures | None) -> float | None:
         """Finger 1's contact deflection in an infrared frame not read before (m), where
@@ -555,6 +589,7 @@ class RelaxEstimator:
         self._onset_t = t_s
         self._onset_motor = motor_position_mm
         self._ir_span = None
+        self._forget_drift()
         self.closure_stiffness_n_per_mm, self._pose_per_mm = _closure_slopes(self._loading)
         self.chain.start(self.closure_stiffness_n_per_mm, float(self._pose_per_mm[0]),
                          self._loading_temp_c, contact_m)

@@ -47,7 +47,6 @@ from numpy.typing import NDArray
 from relaxgrip.control import check_target_n
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.controlled_hold import (
-    CONTROL_RATE_HZ,
     PAPER_DURATION_S,
     HoldResult,
     check_hold_duration_s,
@@ -56,6 +55,7 @@ from relaxgrip.experiments.controlled_hold import (
     run_hold,
     steady_window_s,
 )
+from relaxgrip.learning.hold_bias import drift_windows
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.validate import check_seeds
 
@@ -83,13 +83,6 @@ _SHARES = {"finger_0": "relax_scale_0", "finger_1": "relax_scale_1"}
 #: creep); the motor's travel since the onset; Eq. 10's ``K`` and ``tau``; and
 #: what the closed chain's reading adds.
 PERCEPTS = ("f_onset_n", "icfn_drift_n", "motor_travel_mm", "k_n", "tau_s", "chain_n")
-#: The percepts' averaging window before their time, and the drift's reference
-#: (s into a hold of :data:`PAPER_DURATION_S` or longer; a shorter hold's scaled with it).
-_PERCEPT_WINDOW_S = 5.0
-_DRIFT_FROM_S = (1.0, 4.0)
-#: The least either window spans (s): three frames at the loop's rate (scaled from 280 s,
-#: a 1 s hold's would span 18 ms and 11 ms, and hold no frame).
-_MIN_PERCEPT_WINDOW_S = 3.0 / CONTROL_RATE_HZ
 
 
 def percept_at_s(duration_s: float) -> float:
@@ -105,13 +98,14 @@ def percept_at_s(duration_s: float) -> float:
 def hold_percepts(hold: HoldResult, at_s: float | None = None) -> dict[str, float]:
     """:data:`PERCEPTS` of one hold, read ``at_s`` into it (default :func:`percept_at_s`).
 
-    Means over the :data:`_PERCEPT_WINDOW_S` before that time, the drift from
-    :data:`_DRIFT_FROM_S`; in a hold shorter than the paper's both shrink with
-    it, as the read time does, so that they stay apart (a 14 s hold: the
-    drift from 0.05-0.2 s, read over 4.75-5 s), to no less than
-    :data:`_MIN_PERCEPT_WINDOW_S` (a 1 s hold: from 0.0036-0.1036 s, over
-    0.2571-0.3571 s).  NaN where the estimator had no value there
-    (``chain_n`` without a chain blended in).
+    Means over the ICFN drift's late window before that time (the 5 s
+    before it), the drift from its early one (1-4 s after the onset), as
+    ``relax`` reads it (:func:`relaxgrip.learning.hold_bias.drift_windows`);
+    in a hold shorter than the paper's both shrink with it, as the read
+    time does, so that they stay apart (a 14 s hold: the drift from
+    0.05-0.2 s, read over 4.75-5 s), to no less than three frames (a 1 s
+    hold: from 0.0036-0.1036 s, over 0.2571-0.3571 s).  NaN where the
+    estimator had no value there (``chain_n`` without a chain blended in).
     """
     at = percept_at_s(hold.duration_s) if at_s is None else min(at_s, hold.duration_s)
     scale = min(1.0, hold.duration_s / PAPER_DURATION_S)
@@ -122,9 +116,7 @@ def hold_percepts(hold: HoldResult, at_s: float | None = None) -> dict[str, floa
         values = values[np.isfinite(values)]
         return float(values.mean()) if values.size else float("nan")
 
-    lo = at - max(_PERCEPT_WINDOW_S * scale, _MIN_PERCEPT_WINDOW_S)
-    drift_lo = _DRIFT_FROM_S[0] * scale
-    drift_from = (drift_lo, max(_DRIFT_FROM_S[1] * scale, drift_lo + _MIN_PERCEPT_WINDOW_S))
+    drift_from, (lo, _) = drift_windows(at, scale)
     f_onset = hold.series("f_onset_n")
     f_onset = f_onset[np.isfinite(f_onset)]
     motor = hold.series("motor_mm")

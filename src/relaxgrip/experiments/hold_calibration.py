@@ -40,7 +40,7 @@ from relaxgrip.experiments.controlled_hold import (
     run_hold,
     steady_window_s,
 )
-from relaxgrip.learning.hold_bias import HoldBias
+from relaxgrip.learning.hold_bias import MAX_DRIFT_SLOPE, HoldBias, IcfnDrift, drift_windows
 from relaxgrip.learning.store import HOLD_BIAS_KEY, ModelBundle, model_checksums
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.perception.features import finger_temperature_c
@@ -51,8 +51,8 @@ from relaxgrip.validate import check_seeds
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TARGETS_N", "DEFAULT_TEMPS_C", "MIN_BIN_S", "MIN_SE_N",
            "RECORDINGS_SOURCE", "TIME_EDGES_S",
            "HoldCalibration", "calibrate_hold", "calibration_from_holds", "calibration_record",
-           "condition_name", "hidden_note", "hold_row", "smooth_bias",
-           "time_bins"]
+           "condition_name", "drift_line", "hidden_note", "hold_drift_windows", "hold_row",
+           "icfn_drift_n", "smooth_bias", "time_bins"]
 
 FloatArray = NDArray[np.float64]
 
@@ -106,9 +106,32 @@ class _TemperatureTap:
                 self.temps_c.append(value)
 
 
+def hold_drift_windows(duration_s: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The ICFN drift's windows in a hold of ``duration_s`` (s since the onset).
+
+    Read at the steady state's start (100 s of a 280 s hold), from which the
+    correction counts in full (:func:`relaxgrip.learning.hold_bias.drift_windows`).
+    """
+    return drift_windows(steady_window_s(duration_s)[0],
+                         min(1.0, duration_s / PAPER_DURATION_S))
+
+
+def icfn_drift_n(t_s: FloatArray, icfn_n: FloatArray, duration_s: float) -> float:
+    """A hold's ICFN drift as the estimator reads it (N; nan where a window has no reading).
+
+    ``t_s`` is the time since the onset, ``icfn_n`` the per-frame ICFN.
+    """
+    means = []
+    for lo, hi in hold_drift_windows(duration_s):
+        values = icfn_n[(t_s >= lo - 1e-9) & (t_s <= hi + 1e-9)]
+        values = values[np.isfinite(values)]
+        means.append(float(values.mean()) if values.size else math.nan)
+    return means[1] - means[0]
+
+
 def hold_row(t_s: FloatArray, estimate_n: FloatArray, truth_n: FloatArray,
              f_onset_n: FloatArray, temps_c: Sequence[float], target_n: float,
-             duration_s: float) -> dict[str, Any]:
+             duration_s: float, icfn_n: FloatArray | None = None) -> dict[str, Any]:
     """One uncalibrated hold as a calibration stores it, from its series since the onset.
 
     Parameters
@@ -125,13 +148,16 @@ def hold_row(t_s: FloatArray, estimate_n: FloatArray, truth_n: FloatArray,
         The estimator's ``F_inst`` (nan before it has one).
     temps_c : sequence of float
         The finger temperature the estimator read through the hold.
+    icfn_n : ndarray, optional
+        The per-frame ICFN, for its drift (:func:`icfn_drift_n`).
 
     Returns
     -------
     dict
         The mean of estimate − truth per time bin (``bins_n``), the last
-        ``F_inst`` and the mean temperature as read, and over the steady state
-        the MAE of the truth from the target and the mean estimate error.
+        ``F_inst`` and the mean temperature as read, over the steady state
+        the MAE of the truth from the target and the mean estimate error,
+        and with ``icfn_n`` the ICFN's drift (``icfn_drift_n``).
 
     Raises
     ------
@@ -154,10 +180,13 @@ def hold_row(t_s: FloatArray, estimate_n: FloatArray, truth_n: FloatArray,
     est_err = est_err[np.isfinite(est_err)]
     onset = f_onset_n[keep]
     onset = onset[np.isfinite(onset)]
-    return {"bins_n": bins, "f_inst_n": float(onset[-1]) if onset.size else math.nan,
-            "temp_c": float(np.mean(temps_c)) if len(temps_c) else math.nan,
-            "mae_n": float(np.mean(np.abs(truth[window] - target_n))),
-            "est_error_mean_n": float(np.mean(est_err)) if est_err.size else math.nan}
+    row = {"bins_n": bins, "f_inst_n": float(onset[-1]) if onset.size else math.nan,
+           "temp_c": float(np.mean(temps_c)) if len(temps_c) else math.nan,
+           "mae_n": float(np.mean(np.abs(truth[window] - target_n))),
+           "est_error_mean_n": float(np.mean(est_err)) if est_err.size else math.nan}
+    if icfn_n is not None:
+        row["icfn_drift_n"] = icfn_drift_n(t, icfn_n[keep], duration_s)
+    return row
 
 
 def _one(args: tuple[float, float, int, float, ModelBundle]) -> dict[str, Any]:
@@ -166,7 +195,7 @@ def _one(args: tuple[float, float, int, float, ModelBundle]) -> dict[str, Any]:
     tap = _TemperatureTap()
     hold = run_hold("relax", target_n, duration_s, temp_c, seed, models, recorder=tap)
     row = hold_row(hold.t_s, hold.estimate_n, hold.truth_n, hold.series("f_onset_n"),
-                   tap.temps_c, target_n, duration_s)
+                   tap.temps_c, target_n, duration_s, hold.series("icfn_n"))
     return {"seed": seed, **row}
 
 
@@ -190,6 +219,11 @@ class HoldCalibration:
         over the steady state.
     kernels : list of str
         Per time bin, the Gaussian process :func:`smooth_bias` fitted.
+    drift_fit : dict
+        The line in the ICFN's drift (:class:`~relaxgrip.learning.hold_bias.IcfnDrift`):
+        its windows (``early_s``, ``late_s``), the kernels smoothing its mean
+        and slope, and per condition :func:`drift_line`; empty when the holds
+        did not read it.
     twin_version : str
         The twin the holds ran on, or :data:`RECORDINGS_SOURCE` for recorded
         holds (:mod:`relaxgrip.experiments.recorded_calibration`).
@@ -202,6 +236,7 @@ class HoldCalibration:
     duration_s: float
     holds: dict[str, list[dict[str, Any]]]
     kernels: list[str] = field(default_factory=list)
+    drift_fit: dict[str, Any] = field(default_factory=dict)
     twin_version: str = TWIN_VERSION
 
     def summary(self) -> dict[str, dict[str, float]]:
@@ -284,11 +319,14 @@ class HoldCalibration:
             "method": f"mean of estimate - true force of {holds} per target, "
                       "temperature and time bin, smoothed over force and temperature by "
                       "Gaussian-process regression with each mean's standard error as its "
-                      "noise (relaxgrip calibrate-hold)",
+                      "noise (relaxgrip calibrate-hold); and per condition the line of each "
+                      "hold's steady-state error over its per-frame ICFN's drift by the steady "
+                      "state's start, its mean drift and slope smoothed the same way",
             "kernels": self.kernels,
             "targets_n": self.targets_n, "temps_c": self.temps_c, "seeds": self.seeds,
             "duration_s": self.duration_s, "time_bins_s": time_bins(self.duration_s),
             "twin_version": self.twin_version, "summary": self.summary(), "holds": self.holds,
+            "icfn_drift": self.drift_fit or None,
         })
 
 
@@ -600,5 +638,74 @@ def calibration_from_holds(targets: list[float], temps: list[float], seeds: list
         values[:, :, k], kernel = smooth_bias(points, means[:, :, k].ravel(),
                                               ses[:, :, k].ravel(), at_f, at_t)
         kernels.append(kernel)
-    bias = HoldBias(at_f, at_t, np.array([_bin_centre(lo, hi) for lo, hi in bins]), values)
-    return HoldCalibration(bias, targets, temps, seeds, duration_s, holds, kernels)
+    drift, drift_fit = _fit_drift(targets, temps, holds, points, at_f, at_t, duration_s)
+    bias = HoldBias(at_f, at_t, np.array([_bin_centre(lo, hi) for lo, hi in bins]), values,
+                    drift)
+    return HoldCalibration(bias, targets, temps, seeds, duration_s, holds, kernels, drift_fit)
+
+
+#: The standard error a slope on fewer than three holds, or on drifts all alike,
+#: is given: no slope at all is established there.
+_UNKNOWN_SLOPE_SE = 10.0
+
+
+def drift_line(drifts: FloatArray, errors: FloatArray) -> dict[str, float]:
+    """One condition's least-squares line of steady-state error over ICFN drift.
+
+    Returns
+    -------
+    dict
+        ``holds``; the drifts' mean ``mean_n`` and its standard error
+        ``mean_se_n`` (N); the ``slope`` (N per N), its standard error
+        ``slope_se`` (:data:`_UNKNOWN_SLOPE_SE` on fewer than three holds or
+        no spread in the drift) and the correlation ``r`` (nan without spread).
+    """
+    n = drifts.size
+    mean = float(drifts.mean())
+    dx, dy = drifts - mean, errors - errors.mean()
+    sxx, syy = float(dx @ dx), float(dy @ dy)
+    mean_se = math.sqrt(sxx / (n - 1) / n) if n > 1 else math.nan
+    if sxx <= 1e-12:
+        return {"holds": n, "mean_n": mean, "mean_se_n": mean_se, "slope": 0.0,
+                "slope_se": _UNKNOWN_SLOPE_SE, "r": math.nan}
+    slope = float(dx @ dy) / sxx
+    r = float(dx @ dy) / math.sqrt(sxx * syy) if syy > 0 else math.nan
+    slope_se = _UNKNOWN_SLOPE_SE
+    if n > 2:
+        residual = max(syy - slope * slope * sxx, 0.0)
+        slope_se = min(math.sqrt(residual / (n - 2) / sxx), _UNKNOWN_SLOPE_SE)
+    return {"holds": n, "mean_n": mean, "mean_se_n": mean_se, "slope": slope,
+            "slope_se": slope_se, "r": r}
+
+
+def _fit_drift(targets: list[float], temps: list[float], holds: Mapping[str, list[dict[str, Any]]],
+               points: FloatArray, at_f: FloatArray, at_t: FloatArray, duration_s: float
+               ) -> tuple[IcfnDrift | None, dict[str, Any]]:
+    """The line in the ICFN's drift per condition, smoothed as the means are (:func:`smooth_bias`).
+
+    None (and an empty record) unless every hold read its drift: holds
+    recorded without it, or added to a calibration from before it.
+    """
+    lines = {}
+    for target in targets:
+        for temp in temps:
+            name = condition_name(target, temp)
+            rows = holds[name]
+            drifts = np.array([r.get("icfn_drift_n", math.nan) for r in rows], dtype=np.float64)
+            errors = np.array([r["est_error_mean_n"] for r in rows], dtype=np.float64)
+            if not (np.all(np.isfinite(drifts)) and np.all(np.isfinite(errors))):
+                return None, {}
+            lines[name] = drift_line(drifts, errors)
+    fits = list(lines.values())
+    tables = {}
+    kernels = {}
+    for key, se_key in (("mean_n", "mean_se_n"), ("slope", "slope_se")):
+        tables[key], kernels[key] = smooth_bias(
+            points, np.array([f[key] for f in fits]),
+            np.nan_to_num(np.array([f[se_key] for f in fits]), nan=_UNKNOWN_SLOPE_SE),
+            at_f, at_t)
+    early, late = hold_drift_windows(duration_s)
+    drift = IcfnDrift(at_f, at_t, early, late, tables["mean_n"],
+                      np.clip(tables["slope"], -MAX_DRIFT_SLOPE, MAX_DRIFT_SLOPE))
+    return drift, {"early_s": list(early), "late_s": list(late), "kernels": kernels,
+                   "conditions": lines}

@@ -101,6 +101,8 @@ class RecordedHold:
         The temperature loop's reading of the fingers, their mean (°C; nan
         where none was recorded): the twin's holds place the band's samples
         by it (:meth:`relaxgrip.experiments.band_calibration.BandSamples.of`).
+    icfn_n : ndarray
+        The per-frame ICFN as replayed (N), for its drift.
     """
 
     path: Path
@@ -116,6 +118,7 @@ class RecordedHold:
     band_hi_n: FloatArray
     band_drift_n: FloatArray
     ir_temp_c: FloatArray
+    icfn_n: FloatArray
 
     def within(self, duration_s: float) -> NDArray[np.bool_]:
         """The periods of the hold's first ``duration_s`` (from its onset on)."""
@@ -131,7 +134,7 @@ class RecordedHold:
         """
         try:
             row = hold_row(self.t_s, self.estimate_n, self.truth_n,
-                           self.f_onset_n, self.temps_c, self.target_n, duration_s)
+                           self.f_onset_n, self.temps_c, self.target_n, duration_s, self.icfn_n)
         except InputError as exc:
             raise InputError(f"{self.path}: {exc}") from None
         return {**row, "recording": self.path.name}
@@ -207,7 +210,7 @@ def recorded_hold(path: Path, models: ModelBundle, estimator: str = "relax",
             rows.append((period.t_s - onset_s, estimate.force_n,
                          truth_force_n(period.messages), estimate.f_onset_n,
                          estimate.band_lo_n, estimate.band_hi_n, estimate.band_drift_n,
-                         _reading_c(period.messages)))
+                         _reading_c(period.messages), estimate.f_icfn_n))
             if math.isfinite(estimate.hold_s) and percept.thermal is not None:
                 value = finger_temperature_c(percept.thermal)
                 if math.isfinite(value):
@@ -215,7 +218,7 @@ def recorded_hold(path: Path, models: ModelBundle, estimator: str = "relax",
     if onsets != 1:
         raise InputError(f"{path}: {onsets} holds in the recording; calibrating takes one hold "
                          "per recording" if onsets else f"{path}: the recording has no hold")
-    cols = np.array(rows, dtype=np.float64).reshape(-1, 8)
+    cols = np.array(rows, dtype=np.float64).reshape(-1, 9)
     after = cols[:, 0] >= 0.0
     cols = cols[after]
     reached = float(cols[-1, 0]) if cols.size else 0.0
@@ -227,9 +230,9 @@ def recorded_hold(path: Path, models: ModelBundle, estimator: str = "relax",
     if not np.isfinite(cols[:, 2]).any():
         raise InputError(f"{path}: no force reference (the twin's truth or a force sensor's "
                          "/relaxgrip/force_ref) in the hold")
-    t, force, truth, f_onset, lo, hi, drift, read_c = cols.T
+    t, force, truth, f_onset, lo, hi, drift, read_c, icfn = cols.T
     return RecordedHold(path, target_n, temp_c, float(length), t, force, truth,
-                        f_onset, temps, lo, hi, drift, read_c)
+                        f_onset, temps, lo, hi, drift, read_c, icfn)
 
 
 def _reading_c(messages: dict[str, Any]) -> float:

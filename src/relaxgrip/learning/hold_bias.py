@@ -21,6 +21,15 @@ so the controller holds the force the calibration holds measured, not the
 force the estimate read.  ``relaxgrip calibrate-hold`` measures it
 (:mod:`relaxgrip.experiments.hold_calibration`) and stores it in the model
 directory's manifest (:func:`relaxgrip.learning.store.set_hold_bias`).
+
+What is left from run to run is mostly the marker finger's own relaxing
+share, which the twin draws per run and Eq. 10 does not see; the per-frame
+ICFN reads it, as its drift since the hold's first seconds (on twin v7,
+5 N: correlation 0.98 at 40 °C and 0.92 at 55 °C with that share over seeds
+0-23; ``relaxgrip budget``).  :class:`IcfnDrift` is the line the calibration
+holds fit through their steady-state error against that drift, per onset
+force and temperature: read once, at the steady state's start
+(:func:`drift_windows`), and taken off from then on, it is causal.
 """
 
 from __future__ import annotations
@@ -36,7 +45,8 @@ from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
 
-__all__ = ["HoldBias"]
+__all__ = ["DRIFT_EARLY_S", "DRIFT_LATE_S", "MIN_DRIFT_WINDOW_S", "HoldBias", "IcfnDrift",
+           "drift_windows"]
 
 FloatArray = NDArray[np.float64]
 
@@ -72,6 +82,171 @@ def _inside(knots: tuple[float, ...], x: float) -> float:
     return 1.0
 
 
+def _bilinear(values: list[list[float]], forces: tuple[float, ...], temps: tuple[float, ...],
+              force_n: float, temp_c: float) -> float:
+    """``values`` on the force × temperature knots at one point, faded beyond them."""
+    fade = _inside(forces, force_n) * _inside(temps, temp_c)
+    if fade == 0.0:
+        return 0.0
+    fi = _weights(forces, force_n)
+    ti = _weights(temps, temp_c)
+    total = 0.0
+    for a, wa in ((fi[0], 1.0 - fi[2]), (fi[1], fi[2])):
+        for b, wb in ((ti[0], 1.0 - ti[2]), (ti[1], ti[2])):
+            if wa * wb:
+                total += wa * wb * values[a][b]
+    return fade * total
+
+
+#: The ICFN's drift, in a hold of 280 s or longer: its per-frame mean over the
+#: :data:`DRIFT_LATE_S` before the read time less its mean over :data:`DRIFT_EARLY_S`
+#: after the onset (s).  A shorter hold's windows shrink with it, to no less than
+#: :data:`MIN_DRIFT_WINDOW_S` (three frames at the camera's 30 Hz).
+DRIFT_EARLY_S = (1.0, 4.0)
+DRIFT_LATE_S = 5.0
+MIN_DRIFT_WINDOW_S = 0.1
+
+
+def drift_windows(read_s: float, scale: float = 1.0
+                  ) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The early and late windows of the ICFN's drift read at ``read_s`` (s since the onset).
+
+    ``scale`` is the hold's length over 280 s (at most 1): a 14 s hold
+    (scale 0.05, read at 5 s) takes 0.05-0.2 s and 4.75-5 s.
+    """
+    early_lo = DRIFT_EARLY_S[0] * scale
+    early = (early_lo, max(DRIFT_EARLY_S[1] * scale, early_lo + MIN_DRIFT_WINDOW_S))
+    late = (read_s - max(DRIFT_LATE_S * scale, MIN_DRIFT_WINDOW_S), read_s)
+    return early, late
+
+
+@dataclass(frozen=True, eq=False)
+class IcfnDrift:
+    """A line in the ICFN's drift for what the calibration's mean leaves (N per N).
+
+    From the end of :attr:`late_s` on, the estimator takes off
+    ``slope · (drift − mean_n)`` at its onset force and temperature, the
+    drift being its own per-frame ICFN's mean over :attr:`late_s` less that
+    over :attr:`early_s`: a run whose marker finger relaxes more than the
+    calibration holds' did reads a larger drift, and Eq. 10 under-reads it.
+
+    Attributes
+    ----------
+    forces_n, temps_c : ndarray
+        The grid, as :class:`HoldBias`'s (N, °C).
+    early_s, late_s : tuple of float
+        The drift's windows since the onset (s); the correction starts at
+        the end of ``late_s``.
+    mean_n : ndarray, shape (forces, temps)
+        The calibration holds' mean drift (N).
+    slope : ndarray, shape (forces, temps)
+        The steady state's mean estimate error per N of drift above that mean.
+    """
+
+    forces_n: FloatArray
+    temps_c: FloatArray
+    early_s: tuple[float, float]
+    late_s: tuple[float, float]
+    mean_n: FloatArray
+    slope: FloatArray
+    _knots: tuple[tuple[float, ...], tuple[float, ...]] = field(
+        init=False, repr=False, compare=False)
+    _tables: tuple[list[list[float]], list[list[float]]] = field(
+        init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        forces = _axis(self.forces_n, "icfn_drift forces_n")
+        temps = _axis(self.temps_c, "icfn_drift temps_c")
+        windows = []
+        for name, window in (("early_s", self.early_s), ("late_s", self.late_s)):
+            try:
+                lo, hi = (float(v) for v in window)
+            except (TypeError, ValueError):
+                raise InputError(f"hold bias: icfn_drift {name} must be two numbers") from None
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
+                raise InputError(f"hold bias: icfn_drift {name} must be a window 0 <= from < "
+                                 f"to (s), got {[lo, hi]}")
+            windows.append((lo, hi))
+        if windows[1][0] < windows[0][1]:
+            raise InputError(f"hold bias: icfn_drift's late window {list(windows[1])} starts "
+                             f"before its early one {list(windows[0])} ends")
+        tables = []
+        for name in ("mean_n", "slope"):
+            table = np.asarray(getattr(self, name), dtype=np.float64)
+            if table.shape != (forces.size, temps.size):
+                raise InputError(f"hold bias: icfn_drift {name} must have shape "
+                                 f"{(forces.size, temps.size)}, got {table.shape}")
+            if not np.all(np.isfinite(table)):
+                raise InputError(f"hold bias: icfn_drift {name} has a value that is not finite")
+            object.__setattr__(self, name, table)
+            tables.append(table.tolist())
+        if np.abs(self.slope).max() > MAX_DRIFT_SLOPE:
+            raise InputError(f"hold bias: icfn_drift slope has {np.abs(self.slope).max():g}, "
+                             f"beyond ±{MAX_DRIFT_SLOPE:g} N per N of drift")
+        object.__setattr__(self, "forces_n", forces)
+        object.__setattr__(self, "temps_c", temps)
+        object.__setattr__(self, "early_s", windows[0])
+        object.__setattr__(self, "late_s", windows[1])
+        object.__setattr__(self, "_knots", (tuple(forces.tolist()), tuple(temps.tolist())))
+        object.__setattr__(self, "_tables", (tables[0], tables[1]))
+
+    def at(self, force_n: float, temp_c: float, drift_n: float) -> float:
+        """The correction for a run that read ``drift_n`` at this onset force and temperature (N).
+
+        Linear between knots, fading beyond them as :meth:`HoldBias.at`; 0
+        when an argument is not finite.
+        """
+        if not (math.isfinite(force_n) and math.isfinite(temp_c) and math.isfinite(drift_n)):
+            return 0.0
+        forces, temps = self._knots
+        mean_table, slope_table = self._tables
+        slope = _bilinear(slope_table, forces, temps, force_n, temp_c)
+        if slope == 0.0:
+            return 0.0
+        # The mean unfaded: beyond the grid the slope fades, the drift's reference does not.
+        mean = _bilinear(mean_table, forces, temps, min(max(force_n, forces[0]), forces[-1]),
+                         min(max(temp_c, temps[0]), temps[-1]))
+        return slope * (drift_n - mean)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The manifest's form (plain lists)."""
+        return {"forces_n": self.forces_n.tolist(), "temps_c": self.temps_c.tolist(),
+                "early_s": list(self.early_s), "late_s": list(self.late_s),
+                "mean_n": self.mean_n.tolist(), "slope": self.slope.tolist()}
+
+    @classmethod
+    def from_dict(cls, entry: Mapping[str, Any]) -> IcfnDrift:
+        """Read :meth:`to_dict`'s form.
+
+        Raises
+        ------
+        InputError
+            A key missing, or values that are not numbers of the right shapes.
+        """
+        keys = ("forces_n", "temps_c", "early_s", "late_s", "mean_n", "slope")
+        if not isinstance(entry, Mapping):
+            raise InputError("hold bias: icfn_drift must be an object")
+        missing = [k for k in keys if k not in entry]
+        if missing:
+            raise InputError(f"hold bias: icfn_drift lacks {', '.join(missing)}")
+        try:
+            arrays = {k: np.asarray(entry[k], dtype=np.float64) for k in keys}
+        except (TypeError, ValueError):
+            raise InputError("hold bias: icfn_drift's values must be numbers") from None
+        for name in ("early_s", "late_s"):
+            if arrays[name].shape != (2,):
+                raise InputError(f"hold bias: icfn_drift {name} must be two numbers")
+        early = (float(arrays["early_s"][0]), float(arrays["early_s"][1]))
+        late = (float(arrays["late_s"][0]), float(arrays["late_s"][1]))
+        return cls(arrays["forces_n"], arrays["temps_c"], early, late, arrays["mean_n"],
+                   arrays["slope"])
+
+
+#: The largest drift slope a table may hold (N of error per N of drift): the
+#: marker finger is one of two, so a run's error is about half its extra drift.
+MAX_DRIFT_SLOPE = 2.0
+
+
 def _axis(values: Sequence[float] | FloatArray, name: str) -> FloatArray:
     out = np.asarray(values, dtype=np.float64)
     if out.ndim != 1 or out.size == 0:
@@ -99,12 +274,17 @@ class HoldBias:
         interpolated on ``log(1 + t)``.
     values_n : ndarray, shape (forces, temps, times)
         The mean estimate error at each knot (N).
+    drift : IcfnDrift, optional
+        What is left of each run's error, read from its ICFN's drift; None
+        when the calibration did not measure it (one before it did, or one
+        on holds without the per-frame ICFN).
     """
 
     forces_n: FloatArray
     temps_c: FloatArray
     times_s: FloatArray
     values_n: FloatArray
+    drift: IcfnDrift | None = None
     _knots: tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]] = field(
         init=False, repr=False, compare=False)
     _values: list[list[list[float]]] = field(init=False, repr=False, compare=False)
@@ -161,12 +341,16 @@ class HoldBias:
 
     def to_dict(self) -> dict[str, Any]:
         """The manifest's form (plain lists)."""
-        return {"forces_n": self.forces_n.tolist(), "temps_c": self.temps_c.tolist(),
-                "times_s": self.times_s.tolist(), "values_n": self.values_n.tolist()}
+        out: dict[str, Any] = {
+            "forces_n": self.forces_n.tolist(), "temps_c": self.temps_c.tolist(),
+            "times_s": self.times_s.tolist(), "values_n": self.values_n.tolist()}
+        if self.drift is not None:
+            out["icfn_drift"] = self.drift.to_dict()
+        return out
 
     @classmethod
     def from_dict(cls, entry: Mapping[str, Any]) -> HoldBias:
-        """Read :meth:`to_dict`'s form.
+        """Read :meth:`to_dict`'s form (``icfn_drift`` optional).
 
         Raises
         ------
@@ -182,4 +366,6 @@ class HoldBias:
                     for k in ("forces_n", "temps_c", "times_s")]
         except (TypeError, ValueError):
             raise InputError("hold bias: the grid and its values must be numbers") from None
-        return cls(axes[0], axes[1], axes[2], values)
+        drift = entry.get("icfn_drift")
+        return cls(axes[0], axes[1], axes[2], values,
+                   None if drift is None else IcfnDrift.from_dict(drift))
