@@ -108,8 +108,8 @@ def test_the_drift_windows_scale_with_a_short_hold() -> None:
 
 
 def test_a_bias_with_its_drift_round_trips_and_one_without_it_still_loads() -> None:
-    bias = HoldBias(*(getattr(grid(), k) for k in ("forces_n", "temps_c", "times_s",
-                                                     "values_n")), drift())
+    plain = grid()
+    bias = HoldBias(plain.forces_n, plain.temps_c, plain.times_s, plain.values_n, drift())
     again = HoldBias.from_dict(json.loads(json.dumps(bias.to_dict())))
     assert again.drift is not None
     assert again.drift.at(3.3, 44.0, 0.9) == bias.drift.at(3.3, 44.0, 0.9)  # type: ignore[union-attr]
