@@ -405,6 +405,7 @@ def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: py
     code, out, _ = run_main([*args, "--dry-run"], monkeypatch, capsys)
     assert code == 0, out
     assert "measured (not written)" in out
+    assert "10.00" in out  # the slope's SE, the line in the ICFN's drift: two holds, no slope known
     before = load_models(directory).hold_bias
     code, out, _ = run_main([*args, "--json"], monkeypatch, capsys)
     assert code == 0
@@ -414,6 +415,9 @@ def test_cli_calibrates_and_hold_uses_the_result(tmp_path: Path, monkeypatch: py
     assert bias is not None
     assert bias.to_dict() == record["bias"]
     assert before is None or before.to_dict() != bias.to_dict()
+    # Two holds a condition establish no slope: the line takes next to nothing off.
+    assert bias.drift is not None
+    assert np.abs(bias.drift.slope).max() < 0.01
     code, out, _ = run_main(["hold", "--models", directory, "--duration-s", "6", "--json",
                              "--budget"], monkeypatch, capsys)
     assert code == 0

@@ -506,20 +506,30 @@ def calibrate_hold_command(
         return
     if models_note is not None:
         err_console.print(f"note: {models_note}", markup=False, highlight=False, soft_wrap=True)
+    lines = result.drift_fit.get("conditions", {})
     table = Table(title="relax, estimate − true force over the steady state, uncalibrated "
-                        "(the last column: the held force's MAE from the target)")
-    for column in ("target (N)", "temperature (°C)", "holds", "mean (N)", "SE (N)",
-                   "true − target: MAE (N)"):
+                        "(the last columns: its line in the ICFN's drift, slope ± SE and "
+                        "correlation, and the held force's MAE from the target)")
+    columns = ["target (N)", "temperature (°C)", "holds", "mean (N)", "SE (N)"]
+    if lines:
+        columns += ["drift slope (N/N)", "r"]
+    for column in (*columns, "true − target: MAE (N)"):
         table.add_column(column, justify="right")
     summary = result.summary()
     for target in result.targets_n:
         for temp in result.temps_c:
             name = condition_name(target, temp)
             row = summary[name]
-            table.add_row(f"{target:g}", f"{temp:g}", str(len(result.holds[name])),
-                          f"{row['est_error_mean_n']:+.3f}", f"{row['se_n']:.3f}",
-                          f"{row['mae_n']:.3f}")
+            cells = [f"{target:g}", f"{temp:g}", str(len(result.holds[name])),
+                     f"{row['est_error_mean_n']:+.3f}", f"{row['se_n']:.3f}"]
+            if lines:
+                line = lines[name]
+                cells += [f"{line['slope']:+.2f} ± {line['slope_se']:.2f}", f"{line['r']:+.2f}"]
+            table.add_row(*cells, f"{row['mae_n']:.3f}")
     console.print(table)
+    if not lines:
+        console.print("no line in the ICFN's drift: some holds did not read it (holds stored "
+                      "before it, or recorded without the per-frame ICFN)")
     verb = "measured (not written)" if dry_run else f"written to {models}"
     added = f" added to {sum(map(len, result.holds.values())) - count}" if add else ""
     kind = f"recorded holds of {result.duration_s:g} s" if recordings is not None else "holds"
