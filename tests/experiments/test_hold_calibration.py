@@ -166,6 +166,7 @@ def test_calibration_fits_the_drift_line_and_leaves_it_out_without_drifts() -> N
         assert line.slope[i, 0] == pytest.approx(0.5, abs=0.05)
         assert line.mean_n[i, 0] == pytest.approx(0.06 * force, abs=0.03)
     assert line.late_s == hold_drift_windows(4.0)[1]
+    assert "ICFN's drift" in result.record()["method"]
     fit = json.loads(json.dumps(result.record()))["icfn_drift"]
     assert fit["conditions"]["5N 40C"]["holds"] == 12
     assert fit["conditions"]["5N 40C"]["r"] > 0.9
@@ -173,6 +174,7 @@ def test_calibration_fits_the_drift_line_and_leaves_it_out_without_drifts() -> N
     result = calibration_from_holds([3.0, 5.0], [40.0], list(range(12)), 4.0, holds)
     assert result.bias.drift is None
     assert result.record()["icfn_drift"] is None
+    assert "drift" not in result.record()["method"]
 
 
 def test_the_observer_takes_the_calibration_off_and_fits_its_share_without_it(

@@ -319,9 +319,10 @@ class HoldCalibration:
             "method": f"mean of estimate - true force of {holds} per target, "
                       "temperature and time bin, smoothed over force and temperature by "
                       "Gaussian-process regression with each mean's standard error as its "
-                      "noise (relaxgrip calibrate-hold); and per condition the line of each "
-                      "hold's steady-state error over its per-frame ICFN's drift by the steady "
-                      "state's start, its mean drift and slope smoothed the same way",
+                      "noise (relaxgrip calibrate-hold)"
+                      + ("; and per condition the line of each hold's steady-state error over "
+                         "its per-frame ICFN's drift by the steady state's start, its mean "
+                         "drift and slope smoothed the same way" if self.drift_fit else ""),
             "kernels": self.kernels,
             "targets_n": self.targets_n, "temps_c": self.temps_c, "seeds": self.seeds,
             "duration_s": self.duration_s, "time_bins_s": time_bins(self.duration_s),
