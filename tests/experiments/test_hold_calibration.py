@@ -119,9 +119,10 @@ def test_the_drift_line_is_taken_off_from_the_end_of_its_window(uncalibrated: Mo
                     models=replace(uncalibrated, hold_bias=bias))
     # Until the drift is read the hold is the uncalibrated one held 0.01 N lower: its
     # ICFN drifts alike.
-    drift = icfn_drift_n(hold.t_s, hold.series("icfn_n"), DURATION_S)
+    windows = hold_drift_windows(DURATION_S)
+    drift = icfn_drift_n(hold.t_s, hold.series("icfn_n"), windows)
     assert drift == pytest.approx(icfn_drift_n(plain_hold.t_s, plain_hold.series("icfn_n"),
-                                               DURATION_S), abs=0.02)
+                                               windows), abs=0.02)
     calibration = hold.series("calibration_n")
     before = (hold.t_s > 0.1) & (hold.t_s < late[1] - 1e-6)
     after = hold.t_s >= late[1]
@@ -243,7 +244,8 @@ def test_calibration_keeps_each_conditions_mean_error_and_smooths_them(
     assert np.all(np.abs(bias.values_n[[0, 2], 0]) <= np.abs(raw).max() + 1e-9)
     # Each hold's ICFN drift, as the estimator would read it.
     assert first["icfn_drift_n"] == pytest.approx(
-        icfn_drift_n(plain_hold.t_s, plain_hold.series("icfn_n"), DURATION_S))
+        icfn_drift_n(plain_hold.t_s, plain_hold.series("icfn_n"),
+                     hold_drift_windows(DURATION_S)))
     assert bias.drift is not None
     assert set(result.drift_fit["conditions"]) == {"3N 40C", "5N 40C"}
     summary = result.summary()["5N 40C"]

@@ -55,6 +55,7 @@ from relaxgrip.experiments.controlled_hold import (
     run_hold,
     steady_window_s,
 )
+from relaxgrip.experiments.hold_calibration import icfn_drift_n
 from relaxgrip.learning.hold_bias import drift_windows
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.validate import check_seeds
@@ -116,13 +117,14 @@ def hold_percepts(hold: HoldResult, at_s: float | None = None) -> dict[str, floa
         values = values[np.isfinite(values)]
         return float(values.mean()) if values.size else float("nan")
 
-    drift_from, (lo, _) = drift_windows(at, scale)
+    windows = drift_windows(at, scale)
+    lo = windows[1][0]
     f_onset = hold.series("f_onset_n")
     f_onset = f_onset[np.isfinite(f_onset)]
     motor = hold.series("motor_mm")
     return {
         "f_onset_n": float(f_onset[-1]) if f_onset.size else float("nan"),
-        "icfn_drift_n": mean("icfn_n", lo, at) - mean("icfn_n", *drift_from),
+        "icfn_drift_n": icfn_drift_n(t, hold.series("icfn_n"), windows),
         "motor_travel_mm": mean("motor_mm", lo, at) - float(motor[0]),
         "k_n": mean("k_n", lo, at),
         "tau_s": mean("tau_s", lo, at),

@@ -116,13 +116,16 @@ def hold_drift_windows(duration_s: float) -> tuple[tuple[float, float], tuple[fl
                          min(1.0, duration_s / PAPER_DURATION_S))
 
 
-def icfn_drift_n(t_s: FloatArray, icfn_n: FloatArray, duration_s: float) -> float:
+def icfn_drift_n(t_s: FloatArray, icfn_n: FloatArray,
+                 windows: tuple[tuple[float, float], tuple[float, float]]) -> float:
     """A hold's ICFN drift as the estimator reads it (N; nan where a window has no reading).
 
-    ``t_s`` is the time since the onset, ``icfn_n`` the per-frame ICFN.
+    ``t_s`` is the time since the onset, ``icfn_n`` the per-frame ICFN,
+    ``windows`` the early and late ones (:func:`hold_drift_windows` for a
+    calibration hold).
     """
     means = []
-    for lo, hi in hold_drift_windows(duration_s):
+    for lo, hi in windows:
         values = icfn_n[(t_s >= lo - 1e-9) & (t_s <= hi + 1e-9)]
         values = values[np.isfinite(values)]
         means.append(float(values.mean()) if values.size else math.nan)
@@ -185,7 +188,7 @@ def hold_row(t_s: FloatArray, estimate_n: FloatArray, truth_n: FloatArray,
            "mae_n": float(np.mean(np.abs(truth[window] - target_n))),
            "est_error_mean_n": float(np.mean(est_err)) if est_err.size else math.nan}
     if icfn_n is not None:
-        row["icfn_drift_n"] = icfn_drift_n(t, icfn_n[keep], duration_s)
+        row["icfn_drift_n"] = icfn_drift_n(t, icfn_n[keep], hold_drift_windows(duration_s))
     return row
 
 

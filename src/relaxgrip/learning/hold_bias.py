@@ -106,6 +106,10 @@ DRIFT_EARLY_S = (1.0, 4.0)
 DRIFT_LATE_S = 5.0
 MIN_DRIFT_WINDOW_S = 0.1
 
+#: The largest drift slope a table may hold (N of error per N of drift): the
+#: marker finger is one of two, so a run's error is about half its extra drift.
+MAX_DRIFT_SLOPE = 2.0
+
 
 def drift_windows(read_s: float, scale: float = 1.0
                   ) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -240,11 +244,6 @@ class IcfnDrift:
         late = (float(arrays["late_s"][0]), float(arrays["late_s"][1]))
         return cls(arrays["forces_n"], arrays["temps_c"], early, late, arrays["mean_n"],
                    arrays["slope"])
-
-
-#: The largest drift slope a table may hold (N of error per N of drift): the
-#: marker finger is one of two, so a run's error is about half its extra drift.
-MAX_DRIFT_SLOPE = 2.0
 
 
 def _axis(values: Sequence[float] | FloatArray, name: str) -> FloatArray:
