@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import numpy as np
 import typer
 from rich.table import Table
+from rich.text import Text
 
 from relaxgrip.cli._app import app, console, emit_json, err_console, float_option, int_option
 from relaxgrip.errors import InputError
@@ -136,12 +137,12 @@ def make_board(
         check_writable(path, InputError)
     width_mm, height_mm = write_sheet(pdf, png, board, marker, paper, dpi)
     console.print(f"wrote {pdf} and {png} ({paper}, {width_mm:.0f} x {height_mm:.0f} mm; PNG at "
-                  f"{dpi} dpi)", highlight=False, soft_wrap=True)
-    console.print(f"board: {board.describe()}", highlight=False)
+                  f"{dpi} dpi)", highlight=False, markup=False, soft_wrap=True)
+    console.print(f"board: {board.describe()}", highlight=False, markup=False)
     console.print(f"finger marker: DICT_{marker.dictionary} id {marker.marker_id}, "
-                  f"{marker.size_m * 1e3:g} mm", highlight=False)
+                  f"{marker.size_m * 1e3:g} mm", highlight=False, markup=False)
     console.print(f"print at 100 %, measure a square, then: relaxgrip calibrate-camera DIR "
-                  f"{sheet_options(board)}", highlight=False, soft_wrap=True)
+                  f"{sheet_options(board)}", highlight=False, markup=False, soft_wrap=True)
 
 
 # -- calibrate-camera ---------------------------------------------------------------------
@@ -345,7 +346,7 @@ def _print_calibration(result: CameraCalibration, missing: list[str]) -> None:
     worst = 3.0 * float(np.median([v.rms_px for v in result.views]))
     for v in result.views:
         flag = " !" if v.rms_px > worst else ""
-        table.add_row(v.name, str(v.n_corners), str(v.n_dropped), f"{v.rms_px:.3f}{flag}",
+        table.add_row(Text(v.name), str(v.n_corners), str(v.n_dropped), f"{v.rms_px:.3f}{flag}",
                       f"{v.tilt_deg:.0f}", f"{v.distance_m * 1e3:.0f}")
     console.print(table)
     intr = result.intrinsics
@@ -363,7 +364,7 @@ def _print_calibration(result: CameraCalibration, missing: list[str]) -> None:
         lines.append(f"no board in {len(missing)} image(s): {', '.join(missing[:8])}"
                      f"{', ...' if len(missing) > 8 else ''}")
     for line in lines:
-        console.print(line, highlight=False, soft_wrap=True)
+        console.print(line, highlight=False, markup=False, soft_wrap=True)
 
 
 @app.command("calibrate-camera", rich_help_panel=PANEL)
@@ -419,7 +420,7 @@ def calibrate_camera_command(
         raise InputError(f"--dist-model must be one of {', '.join(DIST_MODELS)}, got {model!r}")
     if not 3 <= min_views <= MAX_IMAGES:
         raise InputError(f"--min-views must be 3 to {MAX_IMAGES}, got {min_views}")
-    if not min_views <= views_wanted <= MAX_IMAGES:
+    if live and not min_views <= views_wanted <= MAX_IMAGES:
         raise InputError(f"--views must be --min-views ({min_views}) to {MAX_IMAGES}, "
                          f"got {views_wanted}")
     if not (math.isfinite(max_s) and 1.0 <= max_s <= 3600.0):
@@ -488,11 +489,11 @@ def calibrate_camera_command(
     _print_calibration(result, missing)
     if write:
         console.print(f"wrote fx_px, fy_px, cx_px, cy_px and dist into [rgb] of {rig}",
-                      highlight=False, soft_wrap=True)
+                      highlight=False, markup=False, soft_wrap=True)
         if removed:
             console.print("removed [zero_pose]: it was measured through the old intrinsics; "
                           f"measure it again: relaxgrip zero-pose --rig {rig} --write",
-                          highlight=False, soft_wrap=True)
+                          highlight=False, markup=False, soft_wrap=True)
 
 
 def _write_intrinsics(rig: Path, text: str, result: CameraCalibration) -> bool:
@@ -539,7 +540,7 @@ def _print_zero_pose(zero: ZeroPose) -> None:
         f"{d['offset_from_mounts_mm']:.2f} mm from where the rig file's mounts put the marker",
     ]
     for line in lines:
-        console.print(line, highlight=False, soft_wrap=True)
+        console.print(line, highlight=False, markup=False, soft_wrap=True)
 
 
 @app.command("zero-pose", rich_help_panel=PANEL)
@@ -600,4 +601,5 @@ def zero_pose_command(
         return
     _print_zero_pose(zero)
     if write:
-        console.print(f"wrote [zero_pose] into {rig}", highlight=False, soft_wrap=True)
+        console.print(f"wrote [zero_pose] into {rig}", highlight=False, markup=False,
+                      soft_wrap=True)
