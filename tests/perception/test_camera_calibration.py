@@ -1,4 +1,4 @@
-"""Camera calibration: known intrinsics recovered from twin views; poor view sets refused by name."""
+"""Camera calibration: known intrinsics recovered from twin views; poor views refused by name."""
 
 from __future__ import annotations
 
@@ -58,7 +58,8 @@ def _views(poses: list[np.ndarray], noise_px: float = 0.05, seed: int = 0) -> li
     views = []
     for k, pose in enumerate(poses):
         px = renderer.corners_px(pose)
-        inside = (px[:, 0] > 2) & (px[:, 0] < SIZE[0] - 3) & (px[:, 1] > 2) & (px[:, 1] < SIZE[1] - 3)
+        inside = ((px[:, 0] > 2) & (px[:, 0] < SIZE[0] - 3)
+                  & (px[:, 1] > 2) & (px[:, 1] < SIZE[1] - 3))
         ids = np.flatnonzero(inside)
         views.append(BoardView(f"v{k}", px[ids] + rng.normal(0.0, noise_px, (ids.size, 2)), ids))
     return views
@@ -78,9 +79,12 @@ def test_synthetic_corners_calibrate_exactly() -> None:
         assert getattr(got, f"{name}_px") == pytest.approx(getattr(TRUTH, f"{name}_px"),
                                                            rel=rel)
     assert result.rms_px == pytest.approx(0.05 * math.sqrt(2), rel=0.25)
-    assert len(result.views) == 20 and result.coverage > 0.6
+    assert len(result.views) == 20
+    assert result.coverage > 0.6
     d = result.to_dict()
-    assert d["fx_px"] == got.fx_px and len(d["dist"]) == 5 and len(d["views"]) == 20
+    assert d["fx_px"] == got.fx_px
+    assert len(d["dist"]) == 5
+    assert len(d["views"]) == 20
 
 
 def test_outlier_corners_are_dropped() -> None:
@@ -90,7 +94,8 @@ def test_outlier_corners_are_dropped() -> None:
     moved[:3] += 2.5  # three corners the detector put 3.5 px off
     views[4] = BoardView(bad.name, moved, bad.ids)
     result = calibrate_camera(views, SIZE, BOARD)
-    assert result.views[4].n_dropped == 3 and result.n_dropped == 3
+    assert result.views[4].n_dropped == 3
+    assert result.n_dropped == 3
     assert result.rms_px < 0.1
     assert result.intrinsics.fx_px == pytest.approx(TRUTH.fx_px, rel=1e-3)
 

@@ -26,7 +26,8 @@ def test_detected_corners_lie_where_the_distorted_camera_projects_them() -> None
     errors = []
     for pose in board_poses(board, CAMERA, 6, rng):
         image = renderer.render(pose, rng)
-        assert image.shape == (480, 640, 3) and image.dtype == np.uint8
+        assert image.shape == (480, 640, 3)
+        assert image.dtype == np.uint8
         view = detect_board(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY), board)
         if view is None:  # far and tilted, its markers a few pixels wide
             continue
@@ -61,7 +62,8 @@ def test_views_are_seeded_and_spread_over_the_image() -> None:
     assert all(np.array_equal(a, b) for a, b in zip(first, again, strict=True))
     renderer = BoardRenderer(board, CAMERA)
     centres = np.array([renderer.corners_px(p).mean(axis=0) for p in first])
-    assert np.ptp(centres[:, 0]) > 0.5 * 640 and np.ptp(centres[:, 1]) > 0.4 * 480
+    assert np.ptp(centres[:, 0]) > 0.5 * 640
+    assert np.ptp(centres[:, 1]) > 0.4 * 480
     for pose in first:
         px = renderer.corners_px(pose)
         inside = (px[:, 0] >= 8) & (px[:, 0] <= 631) & (px[:, 1] >= 8) & (px[:, 1] <= 471)

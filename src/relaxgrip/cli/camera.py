@@ -332,6 +332,13 @@ def _save_views(folder: Path, images: list[np.ndarray]) -> None:
         write_files_atomically(folder, files)
 
 
+def _new_clock() -> Clock:
+    """The live collection's clock; tests replace it."""
+    from relaxgrip.clock import WallClock
+
+    return WallClock()
+
+
 def _open_rgb_source(rig: RigFile, clock: Clock) -> FrameSource:
     """The rig's RGB camera (not started); tests replace it."""
     from relaxgrip.hardware.cameras import open_frame_sources
@@ -403,7 +410,6 @@ def calibrate_camera_command(
     Refuses a poorly constrained calibration (too few views, too little image
     coverage or tilt, too uncertain, too large an error), saying which.
     """
-    from relaxgrip.clock import WallClock
     from relaxgrip.fileio import check_output_dir
     from relaxgrip.hardware.rig_file import parse_rig, read_rig_text
     from relaxgrip.perception.camera_calibration import (
@@ -452,7 +458,7 @@ def calibrate_camera_command(
     if live:
         assert spec is not None
         intr = spec.rgb.mount.intrinsics
-        clock = WallClock()
+        clock = _new_clock()
         source = _open_rgb_source(spec, clock)
         state = _LiveState(views_wanted, (intr.width_px, intr.height_px), limits.min_coverage,
                            limits.min_tilt_deg)
