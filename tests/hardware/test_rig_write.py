@@ -115,7 +115,7 @@ def test_an_edit_that_breaks_the_rig_file_writes_nothing(tmp_path: Path) -> None
 
     def wrong_size(doc: tomlkit.TOMLDocument) -> None:
         set_rgb_intrinsics(doc, bad)
-        doc["rgb"]["cx_px"] = 2000.0  # type: ignore[index]
+        doc["rgb"]["cx_px"] = 2000.0
 
     with pytest.raises(InputError, match=r"\[rgb\] cx_px must lie within the image"):
         update_rig_file(rig, before, wrong_size)

@@ -53,6 +53,9 @@ class _Pressing:
     def act(self, command: Command) -> None:
         self.twin.act(replace(command, motor_velocity_mm_s=self.velocity_mm_s))
 
+    def close(self) -> None:
+        self.twin.close()
+
 
 def test_the_zero_pose_of_a_gripper_at_rest_is_where_the_marker_is() -> None:
     twin, clock = _twin()

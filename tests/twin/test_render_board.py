@@ -28,7 +28,8 @@ def test_detected_corners_lie_where_the_distorted_camera_projects_them() -> None
         image = renderer.render(pose, rng)
         assert image.shape == (480, 640, 3)
         assert image.dtype == np.uint8
-        view = detect_board(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY), board)
+        view = detect_board(np.asarray(cv2.cvtColor(image, cv2.COLOR_RGB2GRAY), np.uint8),
+                            board)
         if view is None:  # far and tilted, its markers a few pixels wide
             continue
         truth = renderer.corners_px(pose)[view.ids]

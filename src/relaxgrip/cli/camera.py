@@ -201,6 +201,7 @@ class _LiveState:
     """The views a live calibration has kept, and what they cover."""
 
     target: int
+    min_views: int
     image_size: tuple[int, int]
     min_coverage: float
     min_tilt_deg: float
@@ -213,8 +214,10 @@ class _LiveState:
     last_kept_s: float = -math.inf
 
     def done(self) -> bool:
-        return (len(self.views) >= self.target and self.coverage >= self.min_coverage
-                and min(self.directions) >= 1)
+        """``target`` views, or enough of them tilted every way over enough of the image."""
+        return len(self.views) >= self.target or (
+            len(self.views) >= self.min_views and self.coverage >= self.min_coverage
+            and min(self.directions) >= _PER_DIRECTION)
 
     def table(self) -> Table:
         table = Table(title="calibrate-camera: views from the rig's RGB camera", show_header=False)
@@ -225,7 +228,8 @@ class _LiveState:
                       f"(at least {100 * self.min_coverage:.0f} %)")
         left, down, right, up = self.directions
         table.add_row(f"tilted ≥ {self.min_tilt_deg:g}°",
-                      f"left {left}, right {right}, up {up}, down {down}")
+                      f"left {left}, right {right}, up {up}, down {down} "
+                      f"({_PER_DIRECTION} each wanted)")
         table.add_row("frames", str(self.frames))
         table.add_row("last frame", self.status)
         return table
@@ -398,7 +402,8 @@ def calibrate_camera_command(
     min_views: Annotated[int, int_option(
         "--min-views", help="Fewest views with the board to calibrate from.")] = 12,
     views_wanted: Annotated[int, int_option(
-        "--views", help="Views to collect live (more if coverage or tilt still lack).")] = 25,
+        "--views", help="Most views to collect live (fewer, from --min-views, once they cover "
+                        "the image tilted every way).")] = 25,
     max_s: Annotated[float, float_option(
         "--max-s", help="Longest live collection (s).")] = 600.0,
     save_views: Annotated[Path | None, typer.Option(
@@ -460,8 +465,8 @@ def calibrate_camera_command(
         intr = spec.rgb.mount.intrinsics
         clock = _new_clock()
         source = _open_rgb_source(spec, clock)
-        state = _LiveState(views_wanted, (intr.width_px, intr.height_px), limits.min_coverage,
-                           limits.min_tilt_deg)
+        state = _LiveState(views_wanted, min_views, (intr.width_px, intr.height_px),
+                           limits.min_coverage, limits.min_tilt_deg)
         source.start()
         try:
             _collect_live(source, clock, board, spec, state, max_s)
@@ -594,9 +599,7 @@ def zero_pose_command(
         zero = measure_zero_pose(gripper, clock, spec.geometry, limits,
                                  require_force_ref=not no_force_ref)
     finally:
-        close = getattr(gripper, "close", None)
-        if close is not None:
-            close()
+        gripper.close()  # motor stopped, heaters off
     if write:
         from relaxgrip.hardware.rig_write import set_zero_pose, update_rig_file
 

@@ -116,7 +116,8 @@ def calibrate_on_twin(seed: int, *, board: CharucoBoard | None = None,
     detector = make_board_detector(b)
     views = []
     for k, pose in enumerate(board_poses(b, truth, n_views, rng)):
-        gray = cv2.cvtColor(renderer.render(pose, rng), cv2.COLOR_RGB2GRAY)
+        gray = np.asarray(cv2.cvtColor(renderer.render(pose, rng), cv2.COLOR_RGB2GRAY),
+                          dtype=np.uint8)
         view = detect_board(gray, b, f"view {k}", detector=detector)
         if view is not None:
             views.append(view)

@@ -68,7 +68,7 @@ def _layout(board: CharucoBoard, marker: MarkerMount, paper: str) -> tuple[float
     for page in ((w, h), (h, w)):
         if need_w <= page[0] and need_h <= page[1]:
             return page
-    raise InputError(f"a {board.describe()} board ({bw:g} x {bh:g} mm) and the "
+    raise InputError(f"the board ({board.describe()}: {bw:g} x {bh:g} mm) and the "
                      f"{marker.size_m * 1e3:g} mm finger marker need {need_w:.0f} x "
                      f"{need_h:.0f} mm, more than {paper} ({w:g} x {h:g} mm) holds: choose a "
                      "larger --paper or smaller squares")
