@@ -76,7 +76,7 @@ def test_the_zero_pose_is_written_read_and_removed(tmp_path: Path) -> None:
     again = ZeroPoseSpec((0.001, 0.0, 0.08), (0.0, 0.0, 0.0), 60, 0.0)
     update_rig_file(rig, text, lambda doc: set_zero_pose(doc, again))
     assert load_rig(rig).zero_pose == ZeroPoseSpec((0.001, 0.0, 0.08), (0.0, 0.0, 0.0), 60, 0.0)
-    assert rig.read_text(encoding="utf-8").count("[zero_pose]") == 1
+    assert rig.read_text(encoding="utf-8").count("\n[zero_pose]\n") == 1
     doc = tomlkit.parse(rig.read_text(encoding="utf-8"))
     assert remove_zero_pose(doc)
     assert not remove_zero_pose(doc)

@@ -416,7 +416,7 @@ def calibrate_camera_command(
     coverage or tilt, too uncertain, too large an error), saying which.
     """
     from relaxgrip.fileio import check_output_dir
-    from relaxgrip.hardware.rig_file import parse_rig, read_rig_text
+    from relaxgrip.hardware.rig_write import read_rig_for_edit
     from relaxgrip.perception.camera_calibration import (
         DIST_MODELS,
         CalibrationLimits,
@@ -447,13 +447,7 @@ def calibrate_camera_command(
     spec: RigFile | None = None
     text = ""
     if rig is not None:
-        import tomllib
-
-        text = read_rig_text(rig)
-        try:
-            spec = parse_rig(tomllib.loads(text), str(rig))
-        except tomllib.TOMLDecodeError as exc:
-            raise InputError(f"rig file {rig} is not valid TOML: {exc}") from None
+        spec, text = read_rig_for_edit(rig)
     if write:
         from relaxgrip.hardware.rig_write import check_rig_writable
 
@@ -578,18 +572,13 @@ def zero_pose_command(
     Refuses unless the gripper is at rest: heaters off and fingers cool, the
     force reference near zero, the marker found and still over the frames.
     """
-    import tomllib
-
-    from relaxgrip.hardware.rig_file import ZeroPoseSpec, parse_rig, read_rig_text
+    from relaxgrip.hardware.rig_file import ZeroPoseSpec
+    from relaxgrip.hardware.rig_write import read_rig_for_edit
     from relaxgrip.perception.zero_pose import ZeroPoseLimits, measure_zero_pose
 
     limits = ZeroPoseLimits(frames=frames, max_force_n=max_force_n, max_temp_c=max_temp_c,
                             max_spread_mm=max_spread_mm, max_spread_deg=max_spread_deg)
-    text = read_rig_text(rig)
-    try:
-        spec = parse_rig(tomllib.loads(text), str(rig))
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"rig file {rig} is not valid TOML: {exc}") from None
+    spec, text = read_rig_for_edit(rig)
     if write:
         from relaxgrip.hardware.rig_write import check_rig_writable
 

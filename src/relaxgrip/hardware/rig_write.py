@@ -34,8 +34,8 @@ from relaxgrip.fileio import atomic_file, check_writable
 from relaxgrip.hardware.rig_file import RigFile, ZeroPoseSpec, parse_rig, read_rig_text
 from relaxgrip.rig import CameraIntrinsics
 
-__all__ = ["check_rig_writable", "remove_zero_pose", "set_rgb_intrinsics", "set_zero_pose",
-           "update_rig_file"]
+__all__ = ["check_rig_writable", "read_rig_for_edit", "remove_zero_pose", "set_rgb_intrinsics",
+           "set_zero_pose", "update_rig_file"]
 
 #: Decimals written: a thousandth of a pixel, ten thousandths of a mm and of a degree.
 _PX_DECIMALS = 3
@@ -115,6 +115,21 @@ def remove_zero_pose(doc: TOMLDocument) -> bool:
         return False
     del doc["zero_pose"]
     return True
+
+
+def read_rig_for_edit(path: str | Path) -> tuple[RigFile, str]:
+    """A rig file, validated, and its text for :func:`update_rig_file`.
+
+    Raises
+    ------
+    InputError
+        As :func:`relaxgrip.hardware.rig_file.load_rig`.
+    """
+    text = read_rig_text(path)
+    try:
+        return parse_rig(tomllib.loads(text), str(path)), text
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"rig file {path} is not valid TOML: {exc}") from None
 
 
 def check_rig_writable(path: str | Path) -> Path:
