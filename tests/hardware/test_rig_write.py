@@ -158,3 +158,20 @@ def test_bad_zero_poses_are_named(tmp_path: Path, table: str, message: str) -> N
     with pytest.raises(InputError, match=message):
         load_rig(rig)
 
+
+
+def test_the_measured_home_travels_with_the_geometry(tmp_path: Path) -> None:
+    import json
+    from dataclasses import asdict
+
+    from relaxgrip.recording.reader import rig_from_dict
+    from relaxgrip.rig import RigGeometry
+
+    rig = _copy(tmp_path)
+    update_rig_file(rig, read_rig_text(rig), lambda doc: set_zero_pose(doc, ZERO))
+    geometry = load_rig(rig).geometry
+    # As a recording stores it: JSON, and back.
+    assert rig_from_dict(json.loads(json.dumps(asdict(geometry)))) == geometry
+    assert RigGeometry().marker_home_m == pytest.approx(RigGeometry().marker2cam()[:3, 3])
+    with pytest.raises(InputError, match="in front of the RGB camera"):
+        RigGeometry(marker_zero_m=(0.0, 0.0, -0.01))
