@@ -282,9 +282,11 @@ def _collect_live(source: FrameSource, clock: Clock, board: CharucoBoard, rig: R
             state.frames += 1
             image = np.asarray(frame.image, dtype=np.uint8)
             view = detect_board(to_gray(image), board, f"live {state.frames}", detector=detector)
-            state.status, keep = _judge_live(view, previous, state, board, rig, now)
+            state.status, keep, direction = _judge_live(view, previous, state, board, rig, now)
             previous = view
             if keep and view is not None:
+                if direction is not None:
+                    state.directions[direction] += 1
                 state.views.append(view)
                 state.images.append(image)
                 state.coverage = float(coverage_mask(state.views, state.image_size).mean())
@@ -293,32 +295,31 @@ def _collect_live(source: FrameSource, clock: Clock, board: CharucoBoard, rig: R
 
 
 def _judge_live(view: BoardView | None, previous: BoardView | None, state: _LiveState,
-                board: CharucoBoard, rig: RigFile, now: float) -> tuple[str, bool]:
-    """What a live frame shows, and whether it is kept."""
+                board: CharucoBoard, rig: RigFile, now: float
+                ) -> tuple[str, bool, int | None]:
+    """What a live frame shows, whether it is kept, and which way it is tilted."""
     from relaxgrip.perception.camera_calibration import coverage_mask
 
     if view is None:
-        return "no board", False
+        return "no board", False, None
     if previous is None:
-        return f"board, {view.n_corners} corners: hold it still", False
+        return f"board, {view.n_corners} corners: hold it still", False, None
     common, here, there = np.intersect1d(view.ids, previous.ids, return_indices=True)
     if common.size < 4:
-        return f"board, {view.n_corners} corners: hold it still", False
+        return f"board, {view.n_corners} corners: hold it still", False, None
     moved = float(np.linalg.norm(view.corners_px[here] - previous.corners_px[there],
                                  axis=1).max())
     if moved > _STILL_PX:
-        return f"board moving ({moved:.1f} px a frame): hold it still", False
+        return f"board moving ({moved:.1f} px a frame): hold it still", False, None
     if now - state.last_kept_s < _LIVE_GAP_S:
-        return f"board, {view.n_corners} corners, still", False
+        return f"board, {view.n_corners} corners, still", False, None
     direction = _tilt_bin(view, board, rig, state.min_tilt_deg)
     gained = (float(coverage_mask([*state.views, view], state.image_size).mean())
               - state.coverage)
     wanted_tilt = direction is not None and state.directions[direction] < _PER_DIRECTION
     if gained < _NEW_COVERAGE and not wanted_tilt and len(state.views) >= 3:
-        return f"board, {view.n_corners} corners: nothing new here, move or tilt it", False
-    if direction is not None:
-        state.directions[direction] += 1
-    return f"kept: {view.n_corners} corners", True
+        return f"board, {view.n_corners} corners: nothing new here, move or tilt it", False, None
+    return f"kept: {view.n_corners} corners", True, direction
 
 
 def _save_views(folder: Path, images: list[np.ndarray]) -> None:

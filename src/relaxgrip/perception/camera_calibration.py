@@ -356,7 +356,8 @@ def calibrate_camera(views: Sequence[BoardView], image_size: tuple[int, int],
         What the calibration needs (the defaults otherwise).
     check : bool
         Raise on a poorly constrained calibration; False returns it with
-        :attr:`CameraCalibration.problems` filled.
+        :attr:`CameraCalibration.problems` filled (fewer than ``min_views``
+        views are refused either way).
 
     Returns
     -------
@@ -365,8 +366,8 @@ def calibrate_camera(views: Sequence[BoardView], image_size: tuple[int, int],
     Raises
     ------
     PoorCalibrationError
-        Too few views, too little coverage or tilt, too uncertain, or too
-        large an RMS error (with ``check``): the message names each.
+        Too few views; with ``check``, too little coverage or tilt, too
+        uncertain, or too large an RMS error: the message names each.
     InputError
         An unknown model; a fit OpenCV cannot make or whose distortion
         describes no lens.

@@ -161,7 +161,10 @@ def sheet_figure(board: CharucoBoard, marker: MarkerMount, paper: str = "A4") ->
 
 def write_sheet(pdf_path: Path, png_path: Path, board: CharucoBoard, marker: MarkerMount,
                 paper: str = "A4", dpi: int = 300) -> tuple[float, float]:
-    """Write the sheet as a PDF and a PNG, both whole or neither.
+    """Write the sheet as a PDF and a PNG, each whole (atomically).
+
+    Into one folder, both are written before either is renamed into place:
+    a failure while writing leaves neither.
 
     Parameters
     ----------
@@ -196,7 +199,10 @@ def write_sheet(pdf_path: Path, png_path: Path, board: CharucoBoard, marker: Mar
         metadata = {"CreationDate": None} if fmt == "pdf" else {"Software": None}
         fig.savefig(buffer, format=fmt, dpi=res, metadata=metadata)
         files.append((Path(path), buffer.getvalue()))
-    for path, data in files:  # each into its own folder
-        write_files_atomically(path.parent, [(path.name, data)])
+    if files[0][0].parent == files[1][0].parent:
+        write_files_atomically(files[0][0].parent, [(p.name, data) for p, data in files])
+    else:
+        for path, data in files:
+            write_files_atomically(path.parent, [(path.name, data)])
     w_in, h_in = fig.get_size_inches()
     return float(w_in) * _MM_PER_INCH, float(h_in) * _MM_PER_INCH
