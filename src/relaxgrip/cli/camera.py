@@ -106,7 +106,7 @@ def make_board(
     marker_mm: Annotated[float, _OPT["marker_mm"]] = 7.0,
     dictionary: Annotated[str, _OPT["dictionary"]] = "5X5_100",
     rig: Annotated[Path | None, typer.Option(
-        "--rig", help="Rig file whose [marker] (dictionary, id, size) is printed.",
+        "--rig", help="Rig file whose \\[marker] (dictionary, id, size) is printed.",
         show_default=False)] = None,
     marker_dict: Annotated[str | None, typer.Option(
         "--marker-dict", help="Finger marker's dictionary without --rig (default 4X4_50).",
@@ -390,7 +390,7 @@ def calibrate_camera_command(
     live: Annotated[bool, typer.Option(
         "--live", help="Grab the views from the rig's RGB camera.")] = False,
     write: Annotated[bool, typer.Option(
-        "--write", help="Write the intrinsics and distortion into the rig file's [rgb].")
+        "--write", help="Write the intrinsics and distortion into the rig file's \\[rgb].")
     ] = False,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     squares: Annotated[str, _OPT["squares"]] = "9x7",
@@ -553,7 +553,7 @@ def _print_zero_pose(zero: ZeroPose) -> None:
 def zero_pose_command(
     rig: Annotated[Path, typer.Option("--rig", help="Rig file (TOML).", show_default=False)],
     write: Annotated[bool, typer.Option(
-        "--write", help="Write the zero pose into the rig file's [zero_pose].")] = False,
+        "--write", help="Write the zero pose into the rig file's \\[zero_pose].")] = False,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     frames: Annotated[int, int_option("--frames", help="RGB frames averaged.")] = 30,
     max_force_n: Annotated[float, float_option(
