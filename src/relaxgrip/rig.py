@@ -494,6 +494,12 @@ class RigGeometry:
         finger without it.  On by default, as the twin draws the bend
         (``IrSensorConfig.draw_bend``) and a rig file reads it (``[ir]
         follow_bend``); off only for frames of fingers drawn unbent.
+    marker_zero_m : tuple of float, optional
+        Where the marker was measured to be in the RGB camera frame with the
+        fingers unloaded and the heaters off (m; the rig file's ``[zero_pose]``,
+        ``relaxgrip zero-pose``); None: where the mounts put it
+        (:meth:`marker2cam`).  Perception takes it as the marker's home
+        (:attr:`marker_home_m`).
     """
 
     finger: FingerGeometry = field(default_factory=FingerGeometry)
@@ -503,8 +509,15 @@ class RigGeometry:
     open_aperture_m: float = 0.150
     marker_finger: int = 0
     ir_follow_bend: bool = True
+    marker_zero_m: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
+        if self.marker_zero_m is not None:
+            zero = tuple(float(v) for v in self.marker_zero_m)
+            if len(zero) != 3 or not all(math.isfinite(v) for v in zero) or zero[2] <= 0.0:
+                raise InputError(f"the marker's zero pose must be a point in front of the RGB "
+                                 f"camera (x, y, z > 0 m), got {self.marker_zero_m}")
+            object.__setattr__(self, "marker_zero_m", zero)
         if self.marker_finger not in (0, 1):
             raise InputError(f"marker_finger must be 0 or 1, got {self.marker_finger}")
         if not 0.0 < self.marker.position_m <= self.finger.length_m:
@@ -512,6 +525,15 @@ class RigGeometry:
                 f"marker position {self.marker.position_m} m is outside the finger "
                 f"(0, {self.finger.length_m}]"
             )
+
+    @property
+    def marker_home_m(self) -> tuple[float, float, float]:
+        """Where the unloaded finger's marker is in the RGB camera frame (m): as measured
+        (:attr:`marker_zero_m`), else as the mounts put it."""
+        if self.marker_zero_m is not None:
+            return self.marker_zero_m
+        x, y, z = (float(v) for v in self.marker2cam()[:3, 3])
+        return x, y, z
 
     def aperture_m(self, motor_position_mm: float) -> float:
         """Gap between the undeflected contact faces at an encoder position (m)."""

@@ -43,8 +43,10 @@ __all__ = [
     "RgbCameraSpec",
     "RigFile",
     "SerialSpec",
+    "ZeroPoseSpec",
     "load_rig",
     "parse_rig",
+    "read_rig_text",
 ]
 
 #: Where RGB frames can come from: an OpenCV ``VideoCapture`` or the MCU emulator.
@@ -289,6 +291,28 @@ class EmulatorSpec:
 
 
 @dataclass(frozen=True)
+class ZeroPoseSpec:
+    """The marker's pose at rest in the RGB camera frame, as ``relaxgrip zero-pose`` measured it.
+
+    Attributes
+    ----------
+    position_m : tuple of float
+        Marker centre in the camera frame (m).
+    rotation_rvec : tuple of float
+        Marker rotation in the camera frame, a rotation vector (rad).
+    frames : int
+        Frames it was averaged over.
+    spread_m : float
+        Farthest a frame lay from the mean (m).
+    """
+
+    position_m: tuple[float, float, float]
+    rotation_rvec: tuple[float, float, float]
+    frames: int
+    spread_m: float
+
+
+@dataclass(frozen=True)
 class RigFile:
     """A validated rig file.
 
@@ -310,6 +334,8 @@ class RigFile:
         Finger carrying the marker and the RGB camera.
     emulator : EmulatorSpec or None
         Present when a camera's source is ``emulator``.
+    zero_pose : ZeroPoseSpec or None
+        The marker's measured pose at rest (table ``[zero_pose]``), if measured.
     """
 
     path: str
@@ -323,6 +349,7 @@ class RigFile:
     open_aperture_m: float
     marker_finger: int
     emulator: EmulatorSpec | None = None
+    zero_pose: ZeroPoseSpec | None = None
 
     @property
     def geometry(self) -> RigGeometry:
@@ -330,7 +357,9 @@ class RigFile:
         return RigGeometry(finger=self.finger, marker=self.marker, rgb=self.rgb.mount,
                            ir=self.ir.mount, open_aperture_m=self.open_aperture_m,
                            marker_finger=self.marker_finger,
-                           ir_follow_bend=self.ir.follow_bend)
+                           ir_follow_bend=self.ir.follow_bend,
+                           marker_zero_m=(None if self.zero_pose is None
+                                          else self.zero_pose.position_m))
 
 
 def _intrinsics(t: _Table) -> CameraIntrinsics:
@@ -433,6 +462,20 @@ def _finger(t: _Table) -> FingerGeometry:
                           tuple(x * 1e-3 for x in beams), contact * 1e-3)
 
 
+def _zero_pose(t: _Table) -> ZeroPoseSpec:
+    x, y, z = t.numbers("position_mm", length=3)
+    if not z > 0.0:
+        raise t.fail("position_mm", f"must be in front of the RGB camera (z > 0), got {z:g}")
+    rvec = t.numbers("rotation_deg", length=3)
+    if math.hypot(*rvec) > 180.0 + 1e-9:
+        raise t.fail("rotation_deg", "must be a rotation vector of at most 180 degrees")
+    frames = t.integer("frames", min_value=1)
+    spread = t.number("spread_mm", min_value=0.0)
+    return ZeroPoseSpec((x * 1e-3, y * 1e-3, z * 1e-3),
+                        tuple(math.radians(v) for v in rvec),  # type: ignore[arg-type]
+                        frames, spread * 1e-3)
+
+
 def _limits(t: _Table) -> LimitsSpec:
     return LimitsSpec(
         t.number("max_motor_speed_mm_s", 20.0, positive=True, max_value=1000.0),
@@ -460,7 +503,7 @@ def parse_rig(data: dict[str, Any], where: str = "rig file") -> RigFile:
     InputError
         One line naming the first bad field.
     """
-    known = {"rig", "serial", "rgb", "ir", "marker", "finger", "limits", "emulator"}
+    known = {"rig", "serial", "rgb", "ir", "marker", "finger", "limits", "emulator", "zero_pose"}
     for key in data:
         if key not in known:
             raise InputError(f"{where}: unknown table [{key}]")
@@ -504,8 +547,43 @@ def parse_rig(data: dict[str, Any], where: str = "rig file") -> RigFile:
     elif uses_emulator:
         raise InputError(f"{where}: a camera source is 'emulator' but table [emulator] "
                          "(its socket) is missing")
+    zero_pose = None
+    if "zero_pose" in data:
+        zero_table = _Table(where, "zero_pose", data["zero_pose"])
+        zero_pose = _zero_pose(zero_table)
+        zero_table.done()
     return RigFile(where, name, serial, rgb, ir, marker, finger, limits, aperture * 1e-3,
-                   marker_finger, emulator)
+                   marker_finger, emulator, zero_pose)
+
+
+def read_rig_text(path: str | Path) -> str:
+    """A rig file's text, read with the checks :func:`load_rig` makes (not yet parsed).
+
+    Raises
+    ------
+    InputError
+        The file is missing, not a regular file (a FIFO, a device), larger
+        than :data:`MAX_RIG_BYTES` or not UTF-8 text.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"rig file {p} not found")
+    check_input_file(p, "rig file", InputError, max_bytes=MAX_RIG_BYTES)
+    try:
+        with open(p, "rb") as f:  # bounded: the file may have grown since the check
+            raw = f.read(MAX_RIG_BYTES + 1)
+    except FileNotFoundError:  # removed since the check
+        raise InputError(f"rig file {p} not found") from None
+    except OSError as exc:
+        raise InputError(f"cannot read rig file {p}: {exc.strerror or one_line(exc)}") from None
+    if len(raw) > MAX_RIG_BYTES:
+        raise InputError(f"{p}: is over the {MAX_RIG_BYTES:,}-byte limit for a rig file")
+    try:
+        # Universal newlines, as a text-mode read gives: a file saved with CR line ends reads.
+        return io.StringIO(raw.decode("utf-8"), newline=None).read()
+    except UnicodeDecodeError as exc:
+        raise InputError(f"rig file {p} is not UTF-8 text (byte {raw[exc.start]:#04x} at "
+                         f"offset {exc.start})") from None
 
 
 def load_rig(path: str | Path) -> RigFile:
@@ -527,27 +605,9 @@ def load_rig(path: str | Path) -> RigFile:
         than :data:`MAX_RIG_BYTES`, not UTF-8 text, not TOML, or has a bad
         field (one line naming it).
     """
-    p = Path(path)
-    if not p.exists():
-        raise InputError(f"rig file {p} not found")
-    check_input_file(p, "rig file", InputError, max_bytes=MAX_RIG_BYTES)
-    try:
-        with open(p, "rb") as f:  # bounded: the file may have grown since the check
-            raw = f.read(MAX_RIG_BYTES + 1)
-    except FileNotFoundError:  # removed since the check
-        raise InputError(f"rig file {p} not found") from None
-    except OSError as exc:
-        raise InputError(f"cannot read rig file {p}: {exc.strerror or one_line(exc)}") from None
-    if len(raw) > MAX_RIG_BYTES:
-        raise InputError(f"{p}: is over the {MAX_RIG_BYTES:,}-byte limit for a rig file")
-    try:
-        # Universal newlines, as a text-mode read gives: a file saved with CR line ends reads.
-        text = io.StringIO(raw.decode("utf-8"), newline=None).read()
-    except UnicodeDecodeError as exc:
-        raise InputError(f"rig file {p} is not UTF-8 text (byte {raw[exc.start]:#04x} at "
-                         f"offset {exc.start})") from None
+    text = read_rig_text(path)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"rig file {p} is not valid TOML: {exc}") from None
-    return parse_rig(data, str(p))
+        raise InputError(f"rig file {path} is not valid TOML: {exc}") from None
+    return parse_rig(data, str(path))

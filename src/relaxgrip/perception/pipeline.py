@@ -120,8 +120,7 @@ class Perception:
         self.rig = rig
         if tracker is None:
             # Where the unbent finger's marker is: of two markers of its id, the finger's.
-            x, y, z = (float(v) for v in rig.marker2cam()[:3, 3])
-            tracker = MarkerTracker(rig.rgb.intrinsics, rig.marker, home_m=(x, y, z))
+            tracker = MarkerTracker(rig.rgb.intrinsics, rig.marker, home_m=rig.marker_home_m)
         self.tracker = tracker
         self.thermal = thermal if thermal is not None else ThermalPerception(rig)
         self.ir = StreamSync(max_ir_age_s)

@@ -61,7 +61,8 @@ class RigCheck:
         Distance of the marker from the camera (mm; nan if not found).
     marker_offset_mm : float
         How far the detected marker is from where the rig file puts it on an
-        unloaded finger (mm; nan if not found).
+        unloaded finger (its ``[zero_pose]``, else its mounts; mm; nan if not
+        found).
     reprojection_px : float
         RMS corner reprojection error of the marker pose (pixels).
     marker_ids_seen : list of int
@@ -155,7 +156,7 @@ def check_rig(rig: RigFile, clock: Clock | None = None, *,
     if pose is None:
         distance = offset = reproj = math.nan
     else:
-        expected = rig.geometry.marker2cam()[:3, 3]
+        expected = np.asarray(rig.geometry.marker_home_m)
         distance = float(np.linalg.norm(pose.tvec_m)) * 1e3
         offset = float(np.linalg.norm(pose.tvec_m - expected)) * 1e3
         reproj = float(pose.reprojection_px)
