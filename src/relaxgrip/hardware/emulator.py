@@ -30,6 +30,7 @@ import tty
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -52,6 +53,9 @@ from relaxgrip.hardware.protocol.transport import FdTransport, SerialTransport
 from relaxgrip.hardware.rig_file import LimitsSpec, RigFile
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
 from relaxgrip.twin.objects import get_object
+
+if TYPE_CHECKING:
+    from relaxgrip.hardware.firmware_emulator import FirmwareEndpoint
 
 __all__ = [
     "DEFAULT_LOAD_CELL",
@@ -363,27 +367,55 @@ class McuEmulator:
         Wall-clock poll period of the serving thread (s).
     load_cell : Hx711Config or None
         The calibration object's load cell and ADC; None: the MCU has none.
+    firmware : bool
+        Run the compiled firmware in simavr (:mod:`relaxgrip.hardware.firmware_emulator`)
+        instead of the Python MCU; ``mcu`` is then ignored (the firmware is built for
+        the twin's motor and encoder).
     """
 
     def __init__(self, config: TwinConfig | None = None, seed: int = 0,
                  clock: Clock | None = None, mcu: McuConfig | None = None,
                  poll_s: float = 0.002,
-                 load_cell: Hx711Config | None = DEFAULT_LOAD_CELL) -> None:
+                 load_cell: Hx711Config | None = DEFAULT_LOAD_CELL,
+                 firmware: bool = False) -> None:
         self.config = config if config is not None else TwinConfig()
         self.clock: Clock = clock if clock is not None else VirtualClock()
-        self.twin = GripperTwin(self.config, seed=seed, clock=self.clock)
+        # The firmware's AVR keeps the twin's time, a step ahead of the host's at most.
+        twin_clock = VirtualClock(self.clock.now()) if firmware else self.clock
+        self.twin = GripperTwin(self.config, seed=seed, clock=twin_clock)
         max_um_s = round(self.config.motor.max_velocity_mm_s * 1000.0)
-        self.mcu_config = mcu if mcu is not None else McuConfig(
+        self.mcu_config = mcu if mcu is not None and not firmware else McuConfig(
             max_velocity_um_s=max_um_s, load_cell=load_cell is not None)
         self.publisher = FramePublisher()
         self.load_cell = None if load_cell is None else load_cell_model(
             load_cell, seed, self.clock.now())
-        self.plant = TwinPlant(self.twin, self.publisher, self.load_cell)
         self._pty = _open_pty()
         self.transport = _TamperableFd(self._pty.master)
-        self.endpoint = McuEndpoint(self.transport, self.clock,
-                                    McuCore(self.mcu_config, start_s=self.clock.now()),
-                                    self.plant)
+        self._python: McuEndpoint | None = None
+        self.firmware: FirmwareEndpoint | None = None
+        """The simulated firmware, with ``firmware=True``."""
+        if firmware:
+            from relaxgrip.hardware.firmware_emulator import (
+                FirmwareEndpoint,
+                MotorDrive,
+                firmware_for_twin,
+            )
+
+            assert isinstance(twin_clock, VirtualClock)
+            self.plant = TwinPlant(self.twin, self.publisher)
+            drive = MotorDrive()
+            try:
+                image = firmware_for_twin(self.config, drive, load_cell is not None)
+                self.firmware = FirmwareEndpoint(self.transport, self.clock, self.plant,
+                                                 twin_clock, image, drive, self.load_cell)
+            except BaseException:
+                self._close_pty()
+                raise
+        else:
+            self.plant = TwinPlant(self.twin, self.publisher, self.load_cell)
+            self._python = McuEndpoint(self.transport, self.clock,
+                                       McuCore(self.mcu_config, start_s=self.clock.now()),
+                                       self.plant)
         self.poll_s = poll_s
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -392,6 +424,19 @@ class McuEmulator:
         self._socket_lock: tuple[int, Path] | None = None
         self._accept_thread: threading.Thread | None = None
         self.error: BaseException | None = None
+
+    @property
+    def endpoint(self) -> McuEndpoint:
+        """The Python MCU and its state machine.
+
+        Raises
+        ------
+        InputError
+            If this emulator runs the firmware (see :attr:`firmware`).
+        """
+        if self._python is None:
+            raise InputError("this emulator runs the compiled firmware: see .firmware")
+        return self._python
 
     @property
     def port(self) -> str:
@@ -417,7 +462,8 @@ class McuEmulator:
 
     def _serve(self) -> None:
         try:
-            self.endpoint.serve(self._stop, self.poll_s)
+            server = self.firmware if self.firmware is not None else self.endpoint
+            server.serve(self._stop, self.poll_s)
         except BaseException as exc:  # reported by stop(); the host sees a dead link
             if not self._stop.is_set():
                 self.error = exc
@@ -514,6 +560,11 @@ class McuEmulator:
         if self._socket_lock is not None:
             _unlock_socket(self._socket_lock)
             self._socket_lock = None
+        self._close_pty()
+        if self.firmware is not None:
+            self.firmware.close()
+
+    def _close_pty(self) -> None:
         self.transport.close_fd()
         if self._pty.slave >= 0:  # once: a second stop must not close a reused descriptor
             with contextlib.suppress(OSError):
@@ -601,7 +652,8 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
                           clock: VirtualClock | None = None, *,
                           mcu: McuConfig | None = None,
                           grace_s: float = 2.0,
-                          reply_timeout_s: float = 0.1) -> tuple[SerialGripper, McuEmulator]:
+                          reply_timeout_s: float = 0.1,
+                          firmware: bool = False) -> tuple[SerialGripper, McuEmulator]:
     """An in-process emulator thread and a :class:`SerialGripper` on its pty, in lockstep.
 
     Parameters
@@ -618,6 +670,8 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
         Wall-clock wait after which silence counts as a timeout (s).
     reply_timeout_s : float
         Host reply timeout in virtual time (s).
+    firmware : bool
+        Run the compiled firmware in simavr instead of the Python MCU.
 
     Returns
     -------
@@ -625,7 +679,7 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
         The gripper (closing it stops the emulator) and the emulator.
     """
     clk = clock if clock is not None else VirtualClock()
-    emu = McuEmulator(config, seed, clk, mcu)
+    emu = McuEmulator(config, seed, clk, mcu, firmware=firmware)
     try:
         host_sock = emu.connect_host()
         emu.start()
@@ -654,9 +708,9 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
 
 
 def ready_emulated_gripper(config: TwinConfig | None, seed: int,
-                           clock: VirtualClock) -> SerialGripper:
+                           clock: VirtualClock, firmware: bool = False) -> SerialGripper:
     """:func:`open_emulated_gripper`, then reset (handshake, first frames); closed if that fails."""
-    gripper, _ = open_emulated_gripper(config, seed, clock)
+    gripper, _ = open_emulated_gripper(config, seed, clock, firmware=firmware)
     try:
         gripper.reset()
     except BaseException:

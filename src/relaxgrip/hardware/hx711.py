@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from relaxgrip.clock import TIME_SLACK_S
 from relaxgrip.errors import InputError
 from relaxgrip.validate import check_positive
 
@@ -164,7 +165,7 @@ class Hx711Model:
             self._force_n = float(force_n)
             return out
         slope = (force_n - f0) / (t_s - t0)
-        while self.next_conversion_s <= t_s:
+        while self.next_conversion_s <= t_s + TIME_SLACK_S:  # k · period's round-off
             t_c = self.next_conversion_s
             f_c = f0 + slope * (t_c - t0)
             self._integral += 0.5 * (f0 + f_c) * (t_c - t0)

@@ -1,0 +1,427 @@
+"""The MCU firmware (``firmware/``) built with avr-gcc and run in simavr, from Python.
+
+:func:`build_firmware` makes the ELF with the firmware's own Makefile, for a
+gripper's constants (``make ENCODER_NM_PER_COUNT=... MAX_VELOCITY_UM_S=...``),
+into a cache folder keyed by the sources and the constants.  :class:`SimAvr`
+runs that unmodified ELF on simavr's ATmega328P through ``firmware/sim/rgsim.c``,
+a small C library compiled against libsimavr on first use and loaded with
+ctypes: it wires the UART, the PWM and direction pins (their high time
+integrated to the cycle), the encoder inputs and an HX711 around the chip, and
+keeps a sleeping AVR from waiting in wall-clock time.
+
+Nothing here knows the twin; :mod:`relaxgrip.hardware.firmware_emulator` puts
+one behind these pins.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+from relaxgrip.errors import InputError
+
+__all__ = [
+    "CPU_HZ",
+    "PINS",
+    "FirmwareImage",
+    "FirmwareToolchainError",
+    "PinReport",
+    "SimAvr",
+    "build_firmware",
+    "build_shim",
+    "cache_dir",
+    "firmware_dir",
+    "toolchain_missing",
+]
+
+CPU_HZ = 16_000_000
+"""The ATmega328P's clock on an Arduino Uno or Nano (Hz)."""
+PINS = ("motor_en", "motor_in1", "motor_in2", "heater0", "heater1")
+"""The output pins the simulation measures, in ``rgsim.c``'s order."""
+#: Deepest the painted SRAM may be found untouched from (0x100 + .data + .bss), to RAMEND.
+_RAMEND = 0x8FF
+_PAINT = 0xA5
+_APT = "apt-get install gcc-avr avr-libc simavr libsimavr-dev"
+
+
+class FirmwareToolchainError(InputError):
+    """avr-gcc, avr-libc, simavr or a C compiler is missing."""
+
+
+def firmware_dir() -> Path:
+    """The firmware's sources: ``firmware/`` beside ``src/`` in a checkout, or the copy
+    a wheel installs inside the package.
+
+    Raises
+    ------
+    FirmwareToolchainError
+        If neither is there.
+    """
+    here = Path(__file__).resolve()
+    for candidate in (here.parents[1] / "firmware", here.parents[3] / "firmware"):
+        if (candidate / "Makefile").is_file() and (candidate / "src" / "main.c").is_file():
+            return candidate
+    raise FirmwareToolchainError("the firmware sources (firmware/Makefile) are not installed "
+                                 "with this relaxgrip: run it from a source checkout")
+
+
+def toolchain_missing() -> list[str]:
+    """What the simulated firmware needs and this machine lacks (empty when complete)."""
+    missing = [tool for tool in ("avr-gcc", "avr-objcopy", "avr-size", "make", "cc")
+               if shutil.which(tool) is None]
+    if not Path("/usr/include/avr/io.h").is_file() and not Path(
+            "/usr/lib/avr/include/avr/io.h").is_file():
+        missing.append("avr-libc")
+    if not Path("/usr/include/simavr/sim_avr.h").is_file():
+        missing.append("libsimavr-dev")
+    return missing
+
+
+def _require_toolchain() -> None:
+    missing = toolchain_missing()
+    if missing:
+        raise FirmwareToolchainError(f"the simulated firmware needs {', '.join(missing)}: "
+                                     f"{_APT}")
+
+
+def cache_dir() -> Path:
+    """Where built firmware and the simulator library are kept:
+    ``$RELAXGRIP_CACHE_DIR`` or ``~/.cache/relaxgrip``."""
+    root = os.environ.get("RELAXGRIP_CACHE_DIR")
+    base = Path(root) if root else Path(os.path.expanduser("~")) / ".cache" / "relaxgrip"
+    return base / "firmware"
+
+
+def _digest(paths: list[Path], extra: str) -> str:
+    h = hashlib.sha256(extra.encode())
+    for path in sorted(paths):
+        h.update(str(path.name).encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+@contextlib.contextmanager
+def _building(final: Path) -> Iterator[Path]:
+    """A temporary folder beside ``final`` that becomes it (atomically) if the block ends
+    well; a concurrent build of the same key wins the rename and this one is dropped."""
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=final.name + ".", dir=final.parent))
+    try:
+        yield tmp
+        try:
+            tmp.rename(final)
+        except OSError:
+            if not final.is_dir():
+                raise
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _run(cmd: list[str], cwd: Path | None = None) -> str:
+    run = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, check=False)
+    if run.returncode != 0:
+        tail = (run.stderr or run.stdout).strip().splitlines()[-3:]
+        raise InputError(f"{cmd[0]} failed: {' / '.join(tail)}")
+    return run.stdout
+
+
+@dataclass(frozen=True)
+class FirmwareImage:
+    """A built firmware.
+
+    Attributes
+    ----------
+    elf : Path
+        The ELF simavr runs (``relaxgrip.hex`` beside it is what avrdude flashes).
+    text_bytes, data_bytes, bss_bytes : int
+        ``avr-size`` of the image: flash is text + data, static RAM data + bss.
+    options : dict
+        The make variables it was built with.
+    """
+
+    elf: Path
+    text_bytes: int
+    data_bytes: int
+    bss_bytes: int
+    options: Mapping[str, int | str]
+
+    @property
+    def flash_bytes(self) -> int:
+        """Flash used (text + initialised data)."""
+        return self.text_bytes + self.data_bytes
+
+    @property
+    def static_ram_bytes(self) -> int:
+        """SRAM used before the stack (data + bss)."""
+        return self.data_bytes + self.bss_bytes
+
+
+def _size(elf: Path) -> tuple[int, int, int]:
+    lines = _run(["avr-size", "--format=berkeley", str(elf)]).strip().splitlines()
+    text, data, bss = (int(v) for v in lines[-1].split()[:3])
+    return text, data, bss
+
+
+def build_firmware(options: Mapping[str, int | str] | None = None) -> FirmwareImage:
+    """Build the firmware for a gripper's constants (cached).
+
+    Parameters
+    ----------
+    options : mapping, optional
+        Make variables of ``firmware/src/config.h`` (``MAX_VELOCITY_UM_S``,
+        ``ENCODER_NM_PER_COUNT``, ``LOAD_CELL``, ...); default: its defaults.
+
+    Returns
+    -------
+    FirmwareImage
+
+    Raises
+    ------
+    FirmwareToolchainError
+        If avr-gcc or avr-libc is missing.
+    InputError
+        If make fails (an option the code refuses, e.g.).
+    """
+    _require_toolchain()
+    opts = dict(sorted((options or {}).items()))
+    src = firmware_dir()
+    files = [src / "Makefile", *sorted((src / "src").glob("*.[ch]"))]
+    compiler = _run(["avr-gcc", "--version"]).splitlines()[0]
+    key = _digest(files, repr(opts) + compiler)
+    final = cache_dir() / f"fw-{key}"
+    if not (final / "relaxgrip.elf").is_file():
+        with _building(final) as tmp:
+            args = [f"{k}={v}" for k, v in opts.items()]
+            _run(["make", "-s", "-C", str(src), f"BUILD={tmp}", *args, str(tmp / "relaxgrip.hex")])
+    text, data, bss = _size(final / "relaxgrip.elf")
+    return FirmwareImage(final / "relaxgrip.elf", text, data, bss, opts)
+
+
+def build_shim() -> Path:
+    """``firmware/sim/rgsim.c`` compiled against libsimavr (cached); its path.
+
+    Raises
+    ------
+    FirmwareToolchainError
+        If simavr's headers or a C compiler are missing.
+    """
+    _require_toolchain()
+    source = firmware_dir() / "sim" / "rgsim.c"
+    key = _digest([source], _run(["cc", "--version"]).splitlines()[0])
+    final = cache_dir() / f"rgsim-{key}"
+    lib = final / "librgsim.so"
+    if not lib.is_file():
+        with _building(final) as tmp:
+            _run(["cc", "-O2", "-shared", "-fPIC", "-Wall", "-Wextra", str(source), "-o",
+                  str(tmp / "librgsim.so"), "-lsimavr"])
+    return lib
+
+
+def _load(lib_path: Path) -> ctypes.CDLL:
+    lib = ctypes.CDLL(str(lib_path))
+    u8p = ctypes.POINTER(ctypes.c_uint8)
+    u64p = ctypes.POINTER(ctypes.c_uint64)
+    sigs: dict[str, tuple[object, list[object]]] = {
+        "rgsim_open": (ctypes.c_void_p, [ctypes.c_char_p, ctypes.c_uint32, ctypes.c_char_p,
+                                         ctypes.c_int]),
+        "rgsim_close": (None, [ctypes.c_void_p]),
+        "rgsim_cycle": (ctypes.c_uint64, [ctypes.c_void_p]),
+        "rgsim_run_until": (ctypes.c_int, [ctypes.c_void_p, ctypes.c_uint64]),
+        "rgsim_error": (ctypes.c_char_p, []),
+        "rgsim_uart_write": (None, [ctypes.c_void_p, ctypes.c_char_p, ctypes.c_uint32]),
+        "rgsim_uart_pending": (ctypes.c_uint32, [ctypes.c_void_p]),
+        "rgsim_uart_read": (ctypes.c_uint32, [ctypes.c_void_p, u8p, ctypes.c_uint32]),
+        "rgsim_uart_last_tx_cycle": (ctypes.c_uint64, [ctypes.c_void_p]),
+        "rgsim_uart_tx_total": (ctypes.c_uint64, [ctypes.c_void_p]),
+        "rgsim_take_pins": (ctypes.c_uint64, [ctypes.c_void_p, u64p, u8p, u64p, u64p]),
+        "rgsim_encoder_to": (None, [ctypes.c_void_p, ctypes.c_int64, ctypes.c_uint64]),
+        "rgsim_encoder_position": (ctypes.c_int64, [ctypes.c_void_p]),
+        "rgsim_hx711_push": (ctypes.c_int, [ctypes.c_void_p, ctypes.c_int32, ctypes.c_uint64]),
+        "rgsim_hx711_reads": (ctypes.c_uint32, [ctypes.c_void_p]),
+        "rgsim_hx711_lost": (ctypes.c_uint32, [ctypes.c_void_p]),
+        "rgsim_read_data": (ctypes.c_int, [ctypes.c_void_p, ctypes.c_uint16, u8p,
+                                           ctypes.c_uint16]),
+    }
+    for name, (restype, argtypes) in sigs.items():
+        fn = getattr(lib, name)
+        fn.restype = restype
+        fn.argtypes = argtypes
+    return lib
+
+
+@dataclass(frozen=True)
+class PinReport:
+    """The output pins over one stretch of simulated time.
+
+    Attributes
+    ----------
+    span_cycles : int
+        Cycles since the previous report.
+    high_cycles : tuple of int
+        Cycles each pin of :data:`PINS` was high in that stretch.
+    level : tuple of int
+        Each pin's level now (0 or 1).
+    last_change_cycle : tuple of int
+        Cycle of each pin's last change.
+    edges : tuple of int
+        Each pin's level changes since power-up.
+    """
+
+    span_cycles: int
+    high_cycles: tuple[int, ...]
+    level: tuple[int, ...]
+    last_change_cycle: tuple[int, ...]
+    edges: tuple[int, ...]
+
+    def duty(self, pin: str) -> float:
+        """Mean level of ``pin`` over the stretch (0..1)."""
+        i = PINS.index(pin)
+        return self.high_cycles[i] / self.span_cycles if self.span_cycles else float(
+            self.level[i])
+
+
+class SimAvr:
+    """One simulated ATmega328P running a firmware ELF, with its board's pins.
+
+    Parameters
+    ----------
+    image : FirmwareImage
+        The firmware (:func:`build_firmware`).
+
+    Raises
+    ------
+    FirmwareToolchainError
+        If simavr is missing.
+    InputError
+        If simavr cannot load the ELF.
+    """
+
+    def __init__(self, image: FirmwareImage) -> None:
+        self.image = image
+        self._lib = _load(build_shim())
+        err = ctypes.create_string_buffer(256)
+        handle = self._lib.rgsim_open(str(image.elf).encode(), CPU_HZ, err, len(err))
+        if not handle:
+            raise InputError(f"simavr: {err.value.decode(errors='replace')}")
+        self._h: int | None = handle
+        n = len(PINS)
+        self._high = (ctypes.c_uint64 * n)()
+        self._level = (ctypes.c_uint8 * n)()
+        self._since = (ctypes.c_uint64 * n)()
+        self._edges = (ctypes.c_uint64 * n)()
+        self._rx = (ctypes.c_uint8 * 65536)()
+
+    def _handle(self) -> int:
+        if self._h is None:
+            raise InputError("the simulated MCU is closed")
+        return self._h
+
+    def close(self) -> None:
+        """Free the simulator."""
+        if self._h is not None:
+            self._lib.rgsim_close(self._h)
+            self._h = None
+
+    @property
+    def cycle(self) -> int:
+        """CPU cycles since power-up."""
+        return int(self._lib.rgsim_cycle(self._handle()))
+
+    @property
+    def time_s(self) -> float:
+        """Simulated time since power-up (s)."""
+        return self.cycle / CPU_HZ
+
+    def run_until(self, cycle: int) -> None:
+        """Run the AVR up to ``cycle``.
+
+        Raises
+        ------
+        InputError
+            If the firmware stopped (sleeping with interrupts off) or crashed.
+        """
+        if self._lib.rgsim_run_until(self._handle(), cycle) != 0:
+            why = (self._lib.rgsim_error() or b"").decode(errors="replace").strip()
+            raise InputError(f"the simulated firmware stopped at {self.time_s:.6f} s"
+                             + (f": {why}" if why else ""))
+
+    def run_for(self, seconds: float) -> None:
+        """Run the AVR for ``seconds`` of simulated time."""
+        self.run_until(self.cycle + round(seconds * CPU_HZ))
+
+    def write(self, data: bytes) -> None:
+        """Bytes from the host to the AVR's RX line (delivered at the line rate)."""
+        self._lib.rgsim_uart_write(self._handle(), bytes(data), len(data))
+
+    @property
+    def rx_pending(self) -> int:
+        """Host bytes the AVR's UART has not taken yet."""
+        return int(self._lib.rgsim_uart_pending(self._handle()))
+
+    def read(self) -> bytes:
+        """Bytes the AVR sent since the last call."""
+        n = self._lib.rgsim_uart_read(self._handle(), self._rx, len(self._rx))
+        return bytes(self._rx[:n])
+
+    @property
+    def last_tx_cycle(self) -> int:
+        """Cycle at which the AVR sent its latest byte."""
+        return int(self._lib.rgsim_uart_last_tx_cycle(self._handle()))
+
+    def take_pins(self) -> PinReport:
+        """The output pins since the previous call (see :class:`PinReport`)."""
+        span = self._lib.rgsim_take_pins(self._handle(), self._high, self._level, self._since,
+                                         self._edges)
+        return PinReport(int(span), tuple(self._high), tuple(self._level), tuple(self._since),
+                         tuple(self._edges))
+
+    def encoder_to(self, counts: int, by_cycle: int) -> None:
+        """Move the encoder to ``counts`` (x4 quadrature counts) by ``by_cycle``, its edges
+        evenly spaced from now."""
+        self._lib.rgsim_encoder_to(self._handle(), counts, by_cycle)
+
+    @property
+    def encoder_counts(self) -> int:
+        """The encoder position the pins show now (counts)."""
+        return int(self._lib.rgsim_encoder_position(self._handle()))
+
+    def hx711_push(self, counts: int, cycle: int) -> None:
+        """A load-cell conversion the HX711 has ready at ``cycle`` (24-bit counts)."""
+        if self._lib.rgsim_hx711_push(self._handle(), counts, cycle) != 0:
+            raise InputError("the simulated HX711 holds 16 conversions already")
+
+    @property
+    def hx711_reads(self) -> int:
+        """Conversions the firmware shifted out of the HX711."""
+        return int(self._lib.rgsim_hx711_reads(self._handle()))
+
+    @property
+    def hx711_lost(self) -> int:
+        """Conversions replaced before the firmware read them."""
+        return int(self._lib.rgsim_hx711_lost(self._handle()))
+
+    def stack_bytes(self) -> int:
+        """Deepest the stack has reached since power-up (bytes below RAMEND), from the SRAM
+        the simulator painted before the firmware started."""
+        start = 0x100 + self.image.static_ram_bytes
+        n = _RAMEND + 1 - start
+        buf = (ctypes.c_uint8 * n)()
+        self._lib.rgsim_read_data(self._handle(), start, buf, n)
+        data = bytes(buf)
+        untouched = len(data) - len(data.lstrip(bytes([_PAINT])))
+        return n - untouched
+
+    def __enter__(self) -> SimAvr:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
