@@ -37,6 +37,8 @@
 
 enum { PIN_MOTOR_EN, PIN_MOTOR_IN1, PIN_MOTOR_IN2, PIN_HEATER0, PIN_HEATER1, N_PINS };
 
+DEFINE_FIFO(uint16_t, uart_fifo); /* the accessors of the UART's input FIFO */
+
 #define IN_CAP (1u << 16)
 #define OUT_CAP (1u << 16)
 #define HX_QUEUE 16
@@ -45,6 +47,7 @@ typedef struct {
     avr_t *avr;
     /* UART */
     avr_irq_t *uart_in;
+    avr_uart_t *uart; /* its input FIFO shows what the firmware has not read yet */
     uint8_t in_buf[IN_CAP];
     uint32_t in_head, in_tail; /* host -> AVR, not yet in the UART's FIFO */
     int xoff;
@@ -315,6 +318,9 @@ rgsim_t *rgsim_open(const char *elf_path, uint32_t frequency, char *err, int err
     uint32_t flags = 0; /* no stdio echo, no usleep() on polled reads */
     avr_ioctl(s->avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
     s->uart_in = avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
+    for (avr_io_t *io = s->avr->io_port; io; io = io->next)
+        if (io->kind && strcmp(io->kind, "uart") == 0 && ((avr_uart_t *)io)->name == '0')
+            s->uart = (avr_uart_t *)io;
     avr_irq_register_notify(avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
                             on_uart_out, s);
     avr_irq_register_notify(avr_io_getirq(s->avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON),
@@ -342,7 +348,7 @@ rgsim_t *rgsim_open(const char *elf_path, uint32_t frequency, char *err, int err
     s->hx_bit = -1;
     drive_input(s, 'C', s->hx_dout, 1, 1);
 
-    if (!s->uart_in || !s->w_motor || !s->w_heater0 || !s->enc_a || !s->hx_dout) {
+    if (!s->uart_in || !s->uart || !s->w_motor || !s->w_heater0 || !s->enc_a || !s->hx_dout) {
         snprintf(err, (size_t)err_len, "simavr did not give the UART, timer or port IRQs");
         rgsim_close(s);
         return NULL;
@@ -393,7 +399,11 @@ void rgsim_uart_write(rgsim_t *s, const uint8_t *data, uint32_t n)
     feed_uart(s);
 }
 
-uint32_t rgsim_uart_pending(rgsim_t *s) { return s->in_head - s->in_tail; }
+/* Host bytes the firmware has not read from UDR yet: queued here or in the UART's FIFO. */
+uint32_t rgsim_uart_pending(rgsim_t *s)
+{
+    return s->in_head - s->in_tail + uart_fifo_get_read_size(&s->uart->input);
+}
 
 uint32_t rgsim_uart_read(rgsim_t *s, uint8_t *out, uint32_t cap)
 {

@@ -327,12 +327,8 @@ static void send_replies(rg_replies_t *r)
 
 static void apply_outputs(void)
 {
-    static uint8_t was_enabled;
     heater_pwm(0, rg_mcu_duty(&mcu, 0));
     heater_pwm(1, rg_mcu_duty(&mcu, 1));
-    if (mcu.enabled && !was_enabled)
-        enc_errors = 0; /* SetEnable(1) cleared the faults: count afresh */
-    was_enabled = mcu.enabled;
     if (!mcu.enabled) {
         motor_pwm(0, 0);
         loop.running = 0;
@@ -357,7 +353,14 @@ static void handle_byte(uint8_t b, rg_replies_t *r)
         code = rg_decode_frame(rx.buf, rx.len, RG_PROTOCOL_VERSION, RG_PROTOCOL_MINOR, &msg, &err);
     }
     mcu.encoder_position_um = counts_to_um(encoder_counts());
+    uint16_t errors_before = mcu.rx_error_count;
     rg_mcu_receive(&mcu, code, &msg, &err, micros(), r);
+    if (code == RG_OK && msg.type == RG_SET_ENABLE && mcu.rx_error_count == errors_before) {
+        /* An accepted SetEnable starts afresh: the loop from where the motor is, the
+         * encoder's error count from zero (its fault was cleared). */
+        loop.running = 0;
+        enc_errors = 0;
+    }
     apply_outputs(); /* a Command's duties and a trip's zeros take effect now */
     send_replies(r);
 }

@@ -61,7 +61,7 @@ def test_conversions_reach_the_host_once_each_on_its_clock() -> None:
 ])
 def test_a_load_cell_the_mcu_does_not_report_is_one_clear_error(
         config: McuConfig, minor: int, words: str) -> None:
-    client, _, clock = _client(config)
+    client, _, _ = _client(config)
     client.protocol_minor = minor
     client.decoder = c.FrameDecoder(minor=minor)
     client.handshake()
@@ -131,7 +131,7 @@ def test_tare_zeroes_a_wrong_offset_with_nothing_on_the_cell() -> None:
         assert len(after) >= 5
         assert np.abs(after).max() < 0.002
         assert emu.endpoint.core.enabled  # the tare's zero Commands kept the watchdog fed
-        with pytest.raises(InputError, match="tare duration_s must be 0.1..10 s"):
+        with pytest.raises(InputError, match=r"tare duration_s must be 0\.1\.\.10 s"):
             gripper.tare_force_ref(duration_s=20.0)
     finally:
         gripper.close()

@@ -46,7 +46,7 @@ def test_a_conversion_is_the_mean_force_over_its_period() -> None:
     assert counts / cfg.counts_per_n == pytest.approx(5.0, abs=1e-3)
     # A reading that spans two conversions splits the ramp between them.
     (first, second) = model.feed(0.3, 10.0)
-    assert (first[0], second[0]) == (pytest.approx(0.2), pytest.approx(0.3))
+    assert [first[0], second[0]] == pytest.approx([0.2, 0.3])
     assert first[1] / cfg.counts_per_n == pytest.approx(10.0, abs=1e-3)
 
 

@@ -34,7 +34,14 @@ from typing import TYPE_CHECKING
 from relaxgrip.backend import Command
 from relaxgrip.clock import Clock, VirtualClock
 from relaxgrip.errors import InputError
-from relaxgrip.hardware.firmware_sim import CPU_HZ, FirmwareImage, PinReport, SimAvr, build_firmware
+from relaxgrip.hardware.firmware_sim import (
+    BYTE_S,
+    CPU_HZ,
+    FirmwareImage,
+    PinReport,
+    SimAvr,
+    build_firmware,
+)
 from relaxgrip.hardware.hx711 import Hx711Model
 from relaxgrip.hardware.protocol.transport import Transport
 from relaxgrip.twin import GripperTwin, TwinConfig
@@ -45,8 +52,6 @@ if TYPE_CHECKING:
 
 __all__ = ["FirmwareEndpoint", "MotorDrive", "firmware_for_twin"]
 
-#: The UART at 115 200 bit/s, 10 bits a byte (s).
-_BYTE_S = 10 / 115_200
 #: Steps the firmware runs before the emulator's start (it sets up its UART in microseconds).
 _BOOT_STEPS = 5
 
@@ -197,11 +202,10 @@ class FirmwareEndpoint:
         """Frames and a tick of the twin at the AVR's time, on the frame channel."""
         self.plant.encoder_position_um(self.twin_clock.now())
 
-    def _answered(self, injected: int, n_bytes: int) -> bool:
-        sim = self.sim
-        delivered = injected + round((n_bytes * _BYTE_S) * CPU_HZ)
-        return (sim.rx_pending == 0 and sim.cycle >= delivered + self._idle
-                and sim.cycle - max(sim.last_tx_cycle, delivered) >= self._idle)
+    def _answered(self, drained: int) -> bool:
+        """Whether the firmware, which read the host's last byte at ``drained``, has
+        finished answering: its line quiet for ``idle_s`` since then."""
+        return self.sim.cycle - max(self.sim.last_tx_cycle, drained) >= self._idle
 
     def poll(self, timeout_s: float = 0.0) -> None:
         """Read what the host sent (waiting up to ``timeout_s``), run the AVR, send its bytes."""
@@ -212,9 +216,15 @@ class FirmwareEndpoint:
             injected = self.sim.cycle
             self.sim.write(data)
             if self._lockstep:
-                limit = injected + round((len(data) * _BYTE_S + 0.05) * CPU_HZ)
-                while self.sim.cycle < limit and not self._answered(injected, len(data)):
+                limit = injected + round((len(data) * BYTE_S + 0.05) * CPU_HZ)
+                drained: int | None = None
+                while self.sim.cycle < limit:
                     self._step_once()
+                    if self.sim.rx_pending:
+                        continue
+                    drained = self.sim.cycle if drained is None else drained
+                    if self._answered(drained):
+                        break
         out = self.sim.read()
         self._publish()
         if out:

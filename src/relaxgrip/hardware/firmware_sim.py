@@ -27,14 +27,23 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from relaxgrip.errors import InputError
+from relaxgrip.hardware.protocol.codec import (
+    PROTOCOL_VERSION,
+    DecodeResult,
+    FrameDecoder,
+    Message,
+    encode_frame,
+)
 
 __all__ = [
+    "BYTE_S",
     "CPU_HZ",
     "PINS",
     "FirmwareImage",
     "FirmwareToolchainError",
     "PinReport",
     "SimAvr",
+    "SimLink",
     "build_firmware",
     "build_shim",
     "cache_dir",
@@ -44,6 +53,8 @@ __all__ = [
 
 CPU_HZ = 16_000_000
 """The ATmega328P's clock on an Arduino Uno or Nano (Hz)."""
+BYTE_S = 10 / 115_200
+"""A byte on the UART at 115 200 bit/s, 8N1 (s)."""
 PINS = ("motor_en", "motor_in1", "motor_in2", "heater0", "heater1")
 """The output pins the simulation measures, in ``rgsim.c``'s order."""
 #: Deepest the painted SRAM may be found untouched from (0x100 + .data + .bss), to RAMEND.
@@ -364,7 +375,7 @@ class SimAvr:
 
     @property
     def rx_pending(self) -> int:
-        """Host bytes the AVR's UART has not taken yet."""
+        """Host bytes the firmware has not read from its UART yet."""
         return int(self._lib.rgsim_uart_pending(self._handle()))
 
     def read(self) -> bytes:
@@ -425,3 +436,66 @@ class SimAvr:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+
+
+class SimLink:
+    """The host's end of a :class:`SimAvr`'s UART, on the AVR's clock (tests, benchmarks).
+
+    Parameters
+    ----------
+    sim : SimAvr
+        The simulated MCU.
+    """
+
+    def __init__(self, sim: SimAvr) -> None:
+        self.sim = sim
+        self.decoder = FrameDecoder()
+        self.seq = 0
+        self.delivered_cycle = 0
+        """Cycle at which the AVR had the last byte written (its delimiter)."""
+
+    def write(self, data: bytes) -> None:
+        """Put ``data`` on the line now."""
+        self.sim.write(data)
+        self.delivered_cycle = self.sim.cycle + round(len(data) * BYTE_S * CPU_HZ)
+
+    def send(self, message: Message, *, seq: int | None = None, version: int = PROTOCOL_VERSION,
+             settle_s: float = 0.001, limit_s: float = 0.2) -> list[DecodeResult]:
+        """Frame ``message`` (next seq unless given), send it and return what came back."""
+        s = self.seq if seq is None else seq
+        if seq is None:
+            self.seq = (self.seq + 1) % 65536
+        frame = encode_frame(message, s, version=version, leading_delimiter=True)
+        return self.exchange(frame, settle_s, limit_s)
+
+    def exchange(self, data: bytes, settle_s: float = 0.001,
+                 limit_s: float = 0.2) -> list[DecodeResult]:
+        """Send raw bytes; run until the firmware has read them all and its line has been
+        quiet for ``settle_s`` since (at most ``limit_s`` past their line time); decode what
+        it sent."""
+        sim = self.sim
+        self.write(data)
+        settle = round(settle_s * CPU_HZ)
+        limit = self.delivered_cycle + round(limit_s * CPU_HZ)
+        slice_ = round(0.0002 * CPU_HZ)
+        drained: int | None = None
+        while sim.cycle < limit:
+            sim.run_until(sim.cycle + slice_)
+            if sim.rx_pending:
+                drained = None
+                continue
+            drained = sim.cycle if drained is None else drained
+            if sim.cycle - max(drained, sim.last_tx_cycle) >= settle:
+                break
+        return self.receive()
+
+    def receive(self) -> list[DecodeResult]:
+        """Decode what the AVR sent since the last call (packets and frame errors)."""
+        return list(self.decoder.feed(self.sim.read()))
+
+    def run_for(self, seconds: float) -> list[DecodeResult]:
+        """Let ``seconds`` pass; what the AVR sent meanwhile."""
+        self.sim.run_for(seconds)
+        return self.receive()
