@@ -1,4 +1,4 @@
-"""The compiled firmware (relaxgrip.elf) in simavr: its UART byte for byte, its pins cycle for cycle.
+"""The compiled firmware (relaxgrip.elf) in simavr: its UART byte for byte, its pins by the cycle.
 
 Every test here runs the unmodified ELF that ``make -C firmware`` builds for the
 ATmega328P; they skip, saying so, only where avr-gcc or simavr is missing.
@@ -6,7 +6,7 @@ ATmega328P; they skip, saying so, only where avr-gcc or simavr is missing.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 import pytest
@@ -249,7 +249,8 @@ def test_a_duty_above_the_limit_is_clamped(image: FirmwareImage) -> None:
         assert report.duty("heater1") == pytest.approx(0.6, abs=1e-6)
         st = answer(link, c.Command(50_000, (6_000, 1)))
         assert isinstance(st, c.Status)
-        assert (st.velocity_um_s, st.faults) == (20_000, {"VELOCITY_CLAMPED"})
+        assert st.velocity_um_s == 20_000
+        assert st.faults == {"VELOCITY_CLAMPED"}
 
 
 # ---------------------------------------------------------------------------- watchdog
@@ -379,11 +380,12 @@ def test_firmware_and_python_mcu_answer_every_frame_alike(link: SimLink) -> None
     core = McuCore(McuConfig(firmware_id="relaxgrip-fw 1.1", load_cell=True),
                    start_s=0.0)
     decoder = c.FrameDecoder()
+
     def command() -> c.Message:
         return c.Command(int(rng.integers(-30_000, 30_000)),
                          (int(rng.integers(0, 12_000)), int(rng.integers(0, 12_000))))
 
-    choices = [
+    choices: list[Callable[[], c.Message]] = [
         lambda: c.Hello(1), lambda: c.Hello(), lambda: c.GetStatus(), lambda: c.GetStatus(),
         lambda: c.SetEnable(True), lambda: c.SetEnable(True), lambda: c.SetEnable(False),
         lambda: c.SetWatchdog(int(rng.choice([5, 20, 200, 500, 2000, 3000]))),
