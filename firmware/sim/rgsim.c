@@ -481,3 +481,19 @@ int rgsim_read_data(rgsim_t *s, uint16_t addr, uint8_t *out, uint16_t n)
     memcpy(out, s->avr->data + addr, n);
     return 0;
 }
+
+/* One co-simulation step: move the encoder to `counts` by `end`, run to `end`, and return
+ * each pin's mean level over the step (out: N_PINS).  The same as rgsim_encoder_to,
+ * rgsim_run_until and rgsim_take_pins, in one call from the host. */
+int rgsim_step(rgsim_t *s, int64_t counts, uint64_t end, double *duty)
+{
+    rgsim_encoder_to(s, counts, end);
+    if (rgsim_run_until(s, end) != 0)
+        return -1;
+    uint64_t high[N_PINS], since[N_PINS], edges[N_PINS];
+    uint8_t level[N_PINS];
+    uint64_t span = rgsim_take_pins(s, high, level, since, edges);
+    for (int i = 0; i < N_PINS; i++)
+        duty[i] = span ? (double)high[i] / (double)span : (double)level[i];
+    return 0;
+}

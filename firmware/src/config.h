@@ -38,6 +38,12 @@
 #ifndef RG_KI_PERMYRIAD_PER_MM_S
 #define RG_KI_PERMYRIAD_PER_MM_S 8000l /* duty per mm·s of integrated error */
 #endif
+#ifndef RG_I_MAX_PERMYRIAD
+#define RG_I_MAX_PERMYRIAD 1000l /* the integral's share of the duty at most (anti-windup) */
+#endif
+#ifndef RG_I_VMAX_UM_S
+#define RG_I_VMAX_UM_S 1000l /* the integral learns at commanded speeds up to this */
+#endif
 #ifndef RG_CONTROL_PERIOD_MS
 #define RG_CONTROL_PERIOD_MS 2 /* velocity loop period */
 #endif

@@ -222,8 +222,7 @@ static void pwm_init(void)
 
 /* ------------------------------------------------------------------ velocity loop */
 
-#define ERR_MAX_UM 2000l      /* the reference waits for a motor this far behind */
-#define I_MAX_PERMYRIAD 3000l /* integral share of the duty */
+#define ERR_MAX_UM 2000l /* the reference waits for a motor this far behind */
 
 static struct {
     int32_t ref_nm;    /* reference position: the commanded velocity integrated */
@@ -253,8 +252,12 @@ static void loop_step(int32_t v_um_s)
         err_um = err_um > 0 ? ERR_MAX_UM : -ERR_MAX_UM;
         loop.ref_nm = (pos_um + err_um) * 1000l;
     }
-    int32_t i_lim = (int32_t)((int64_t)I_MAX_PERMYRIAD * 1000000l / RG_KI_PERMYRIAD_PER_MM_S);
-    loop.i_um_ms += err_um * RG_CONTROL_PERIOD_MS;
+    int32_t i_lim = (int32_t)((int64_t)RG_I_MAX_PERMYRIAD * 1000000l / RG_KI_PERMYRIAD_PER_MM_S);
+    /* The integral only learns while the motor holds or creeps: the error of a fast move
+     * is the motor's lag, which the move's end takes back, and integrating it would
+     * overshoot there. */
+    if (v_um_s <= RG_I_VMAX_UM_S && v_um_s >= -RG_I_VMAX_UM_S)
+        loop.i_um_ms += err_um * RG_CONTROL_PERIOD_MS;
     if (loop.i_um_ms > i_lim)
         loop.i_um_ms = i_lim;
     if (loop.i_um_ms < -i_lim)

@@ -700,10 +700,20 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
         cell = emu.load_cell
         force_ref = McuLoadCell(client, LinearCalibration(1.0 / cell.config.counts_per_n,
                                                           cell.offset_counts))
+    on_close = emu.stop
+    if cfg.rgb is None and cfg.ir is None:
+        # No camera starts the frame channel: start it here, or its ticks (the truth) would
+        # fill the socket until the emulator's thread blocks on it.
+        channel.start()
+
+        def on_close() -> None:
+            channel.close()
+            emu.stop()
+
     gripper = SerialGripper(client, rgb if cfg.rgb is not None else None,
                             ir if cfg.ir is not None else None, limits=limits,
                             name="emulator", truth_feed=channel.take_truth,
-                            twin_version=TWIN_VERSION, on_close=emu.stop, force_ref=force_ref)
+                            twin_version=TWIN_VERSION, on_close=on_close, force_ref=force_ref)
     return gripper, emu
 
 

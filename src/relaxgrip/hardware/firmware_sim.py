@@ -26,6 +26,8 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from relaxgrip.errors import InputError
 from relaxgrip.hardware.protocol.codec import (
     PROTOCOL_VERSION,
@@ -49,6 +51,7 @@ __all__ = [
     "cache_dir",
     "firmware_dir",
     "toolchain_missing",
+    "watchdog_reactions",
 ]
 
 CPU_HZ = 16_000_000
@@ -261,6 +264,8 @@ def _load(lib_path: Path) -> ctypes.CDLL:
         "rgsim_hx711_lost": (ctypes.c_uint32, [ctypes.c_void_p]),
         "rgsim_read_data": (ctypes.c_int, [ctypes.c_void_p, ctypes.c_uint16, u8p,
                                            ctypes.c_uint16]),
+        "rgsim_step": (ctypes.c_int, [ctypes.c_void_p, ctypes.c_int64, ctypes.c_uint64,
+                                      ctypes.POINTER(ctypes.c_double)]),
     }
     for name, (restype, argtypes) in sigs.items():
         fn = getattr(lib, name)
@@ -330,6 +335,7 @@ class SimAvr:
         self._since = (ctypes.c_uint64 * n)()
         self._edges = (ctypes.c_uint64 * n)()
         self._rx = (ctypes.c_uint8 * 65536)()
+        self._duty = (ctypes.c_double * n)()
 
     def _handle(self) -> int:
         if self._h is None:
@@ -394,6 +400,20 @@ class SimAvr:
                                          self._edges)
         return PinReport(int(span), tuple(self._high), tuple(self._level), tuple(self._since),
                          tuple(self._edges))
+
+    def step(self, encoder_counts: int, end_cycle: int) -> tuple[float, ...]:
+        """Move the encoder to ``encoder_counts`` by ``end_cycle`` (evenly), run to it, and
+        return each pin's mean level over the step (:data:`PINS` order); a co-simulation
+        step in one call.
+
+        Raises
+        ------
+        InputError
+            If the firmware stopped or crashed.
+        """
+        if self._lib.rgsim_step(self._handle(), encoder_counts, end_cycle, self._duty) != 0:
+            self.run_until(end_cycle)  # raises with the reason
+        return tuple(self._duty)
 
     def encoder_to(self, counts: int, by_cycle: int) -> None:
         """Move the encoder to ``counts`` (x4 quadrature counts) by ``by_cycle``, its edges
@@ -499,3 +519,73 @@ class SimLink:
         """Let ``seconds`` pass; what the AVR sent meanwhile."""
         self.sim.run_for(seconds)
         return self.receive()
+
+
+def watchdog_reactions(link: SimLink, trials: int, rng: np.random.Generator) -> list[float]:
+    """Inject ``trials`` link losses; the time from the last Command to all pins low, each.
+
+    Each trial enables the MCU, sends 2-10 Commands at 30 Hz (motor closing, both
+    heaters on) starting at a random phase, then falls silent; the firmware must
+    then drive every output pin low, send an unsolicited Status with the WATCHDOG
+    fault, and refuse the next Command with NOT_ENABLED.  The reaction is measured
+    on the pins, from the last Command's arrival (its delimiter) to the last pin's
+    fall.
+
+    Parameters
+    ----------
+    link : SimLink
+        The simulated MCU, after its handshake.
+    trials : int
+        Link losses to inject.
+    rng : numpy.random.Generator
+        Phases and command counts.
+
+    Returns
+    -------
+    list of float
+        Reaction times (s).
+
+    Raises
+    ------
+    InputError
+        If a trial does not end as described.
+    """
+    from relaxgrip.hardware.protocol.codec import (
+        Command,
+        ErrorCode,
+        ErrorReply,
+        FaultFlag,
+        Packet,
+        SetEnable,
+        Status,
+    )
+
+    sim = link.sim
+    out = []
+    period = round(CPU_HZ / 30)
+    for trial in range(trials):
+        link.send(SetEnable(True))
+        sim.run_for(float(rng.uniform(0.0, 1 / 30)))
+        for _ in range(int(rng.integers(2, 11))):
+            replies = link.send(Command(8_000, (8_000, 5_000)))
+            if not any(isinstance(r, Packet) and isinstance(r.message, Status) for r in replies):
+                raise InputError(f"watchdog trial {trial}: a Command got {replies}")
+            sim.run_until(link.delivered_cycle + period)
+        last = link.delivered_cycle
+        if sim.take_pins().edges[PINS.index("heater0")] == 0:
+            raise InputError(f"watchdog trial {trial}: the heater PWM never ran")
+        replies = link.run_for(0.4)
+        report = sim.take_pins()
+        if any(report.level):
+            raise InputError(f"watchdog trial {trial}: pins still high 400 ms after the link "
+                             f"fell silent: {dict(zip(PINS, report.level, strict=True))}")
+        trips = [r.message for r in replies if isinstance(r, Packet)]
+        if not (len(trips) == 1 and isinstance(trips[0], Status) and trips[0].unsolicited
+                and trips[0].fault_flags & FaultFlag.WATCHDOG):
+            raise InputError(f"watchdog trial {trial}: no unsolicited WATCHDOG Status: {trips}")
+        refused = [r.message for r in link.send(Command(1_000, (0, 0))) if isinstance(r, Packet)]
+        if not (refused and isinstance(refused[0], ErrorReply)
+                and refused[0].code == ErrorCode.NOT_ENABLED):
+            raise InputError(f"watchdog trial {trial}: a Command after the trip got {refused}")
+        out.append((max(report.last_change_cycle) - last) / CPU_HZ)
+    return out
