@@ -134,9 +134,11 @@ def test_hold_on_the_firmware_from_the_command_line(monkeypatch, capsys) -> None
 
 
 def test_without_the_toolchain_the_firmware_is_one_clear_error(monkeypatch) -> None:
+    import shutil
+
     from relaxgrip.hardware import firmware_sim
 
-    monkeypatch.setattr(firmware_sim.shutil, "which", lambda tool: None)
+    monkeypatch.setattr(shutil, "which", lambda tool: None)
     with pytest.raises(firmware_sim.FirmwareToolchainError) as info:
         McuEmulator(seed=0, clock=VirtualClock(), firmware=True)
     msg = str(info.value)

@@ -71,20 +71,18 @@ class FirmwareToolchainError(InputError):
 
 
 def firmware_dir() -> Path:
-    """The firmware's sources: ``firmware/`` beside ``src/`` in a checkout, or the copy
-    a wheel installs inside the package.
+    """The firmware's sources: ``firmware/`` beside ``src/`` in a checkout.
 
     Raises
     ------
     FirmwareToolchainError
-        If neither is there.
+        If they are not there (a relaxgrip installed from a wheel has no firmware).
     """
-    here = Path(__file__).resolve()
-    for candidate in (here.parents[1] / "firmware", here.parents[3] / "firmware"):
-        if (candidate / "Makefile").is_file() and (candidate / "src" / "main.c").is_file():
-            return candidate
-    raise FirmwareToolchainError("the firmware sources (firmware/Makefile) are not installed "
-                                 "with this relaxgrip: run it from a source checkout")
+    candidate = Path(__file__).resolve().parents[3] / "firmware"
+    if (candidate / "Makefile").is_file() and (candidate / "src" / "main.c").is_file():
+        return candidate
+    raise FirmwareToolchainError(f"the firmware sources are not at {candidate}: the simulated "
+                                 "firmware runs from a source checkout of relaxgrip")
 
 
 def toolchain_missing() -> list[str]:
