@@ -145,3 +145,39 @@ def test_without_the_toolchain_the_firmware_is_one_clear_error(monkeypatch) -> N
     assert msg.startswith("the simulated firmware needs avr-gcc, avr-objcopy")
     assert "apt-get install gcc-avr avr-libc simavr libsimavr-dev" in msg
     assert "\n" not in msg
+
+
+@needs_toolchain
+def test_the_wall_clock_emulator_serves_check_rig_through_the_firmware(tmp_path) -> None:
+    import dataclasses
+    from pathlib import Path
+
+    from relaxgrip.clock import WallClock
+    from relaxgrip.hardware.rig_file import load_rig
+    from relaxgrip.perception.rig_check import check_rig
+    from relaxgrip.twin import TwinConfig
+
+    rig = load_rig(Path(__file__).resolve().parents[2] / "docs" / "rig-emulator.toml")
+    emu = McuEmulator(TwinConfig(), seed=0, clock=WallClock(), firmware=True)
+    try:
+        sock = str(tmp_path / "frames.sock")
+        emu.listen(sock)
+        emu.start()
+        assert rig.emulator is not None
+        spec = dataclasses.replace(
+            rig, serial=dataclasses.replace(rig.serial, port=emu.port),
+            emulator=dataclasses.replace(rig.emulator, socket=sock))
+        found = check_rig(spec)
+    finally:
+        emu.stop()
+    assert emu.error is None
+    assert found.firmware_id == "relaxgrip-fw 1.1"
+    assert found.marker_found
+
+
+def test_the_emulator_command_refuses_an_unknown_mcu(monkeypatch, capsys) -> None:
+    code, out, err = run_main(["emulator", "--mcu", "avr", "--duration-s", "1"], monkeypatch,
+                              capsys)
+    assert code == 2
+    assert err == "error: --mcu must be python or firmware, got 'avr'\n"
+    assert out == ""
