@@ -135,3 +135,22 @@ def test_tare_zeroes_a_wrong_offset_with_nothing_on_the_cell() -> None:
             gripper.tare_force_ref(duration_s=20.0)
     finally:
         gripper.close()
+
+
+def test_a_recording_on_the_emulator_carries_the_load_cell_as_force_ref(tmp_path) -> None:
+    """/relaxgrip/force_ref holds the MCU's load-cell conversions (10 per second, on the
+    host's clock), not the twin's truth feed."""
+    from relaxgrip.experiments.controlled_hold import run_hold
+    from relaxgrip.recording import McapRecorder
+    from relaxgrip.recording.reader import iter_messages
+
+    path = tmp_path / "hold.mcap"
+    with McapRecorder(path) as recorder:
+        run_hold("relax", 5.0, 2.0, 40.0, seed=4, backend="emulator", recorder=recorder)
+    t = [v for topic, _, msg in iter_messages(path) if topic == "/relaxgrip/force_ref"
+         for v in msg["t_s"]]
+    f = [v for topic, _, msg in iter_messages(path) if topic == "/relaxgrip/force_ref"
+         for v in msg["force_n"]]
+    assert len(t) > 100
+    np.testing.assert_allclose(np.diff(t), 0.1, atol=1e-6)
+    assert max(f) > 4.0  # the ball held near the 5 N target
