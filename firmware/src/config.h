@@ -23,6 +23,9 @@
 #ifndef RG_MOTOR_FULL_SPEED_UM_S
 #define RG_MOTOR_FULL_SPEED_UM_S 25000l /* closing speed at 100 % PWM: the feed-forward */
 #endif
+#ifndef RG_MOTOR_LAG_MS
+#define RG_MOTOR_LAG_MS 50l /* the motor's velocity time constant: the reference model's */
+#endif
 #ifndef RG_ENCODER_NM_PER_COUNT
 #define RG_ENCODER_NM_PER_COUNT 5000l /* travel per quadrature count (x4 decoding) */
 #endif

@@ -224,8 +224,18 @@ static void pwm_init(void)
 
 #define ERR_MAX_UM 2000l /* the reference waits for a motor this far behind */
 
+/* The reference model's step: 1 - exp(-T/tau) to 1e-5 as T / (tau + T/2), Q16. */
+#if RG_MOTOR_LAG_MS > 0
+#define REF_ALPHA_Q16                                                                  \
+    ((65536l * 2l * RG_CONTROL_PERIOD_MS + RG_MOTOR_LAG_MS + RG_CONTROL_PERIOD_MS / 2) / \
+     (2l * RG_MOTOR_LAG_MS + RG_CONTROL_PERIOD_MS))
+#else
+#define REF_ALPHA_Q16 65536l
+#endif
+
 static struct {
-    int32_t ref_nm;    /* reference position: the commanded velocity integrated */
+    int32_t v_ref_q8;  /* reference velocity (µm/s, Q8): the command through the motor's lag */
+    int32_t ref_nm;    /* reference position: the reference velocity integrated */
     int32_t i_um_ms;   /* integrated position error */
     uint32_t acc;      /* sigma-delta remainder of the 8-bit duty */
     uint8_t running;
@@ -234,6 +244,7 @@ static struct {
 static void loop_reset(void)
 {
     loop.ref_nm = counts_to_um(encoder_counts()) * 1000l;
+    loop.v_ref_q8 = 0;
     loop.i_um_ms = 0;
     loop.acc = 0;
     loop.running = 0;
@@ -246,11 +257,17 @@ static void loop_step(int32_t v_um_s)
         loop_reset();
         loop.running = 1;
     }
-    loop.ref_nm += v_um_s * RG_CONTROL_PERIOD_MS; /* µm/s · ms = nm */
+    /* Model following: the reference moves as the motor answers the command (a first-order
+     * lag of RG_MOTOR_LAG_MS) while the feed-forward is the command itself, so a motor
+     * that behaves as modelled tracks the reference with no error, and a stop brings no
+     * overshoot; the PI corrects what the model does not explain. */
+    loop.v_ref_q8 += (int32_t)(((int64_t)v_um_s * 256 - loop.v_ref_q8) * REF_ALPHA_Q16 / 65536);
+    loop.ref_nm += (loop.v_ref_q8 / 256) * RG_CONTROL_PERIOD_MS; /* µm/s · ms = nm */
     int32_t err_um = loop.ref_nm / 1000l - pos_um;
     if (err_um > ERR_MAX_UM || err_um < -ERR_MAX_UM) {
         err_um = err_um > 0 ? ERR_MAX_UM : -ERR_MAX_UM;
         loop.ref_nm = (pos_um + err_um) * 1000l;
+        loop.v_ref_q8 = v_um_s * 256; /* a stalled motor: the model starts again from here */
     }
     int32_t i_lim = (int32_t)((int64_t)RG_I_MAX_PERMYRIAD * 1000000l / RG_KI_PERMYRIAD_PER_MM_S);
     /* The integral only learns while the motor holds or creeps: the error of a fast move

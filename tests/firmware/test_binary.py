@@ -138,10 +138,10 @@ def test_command_status_round_trips_and_pins(link: SimLink) -> None:
                                                                              0)
     link.run_for(0.005)
     link.sim.take_pins()
-    link.run_for(0.1)  # 20 periods of the heaters' 200 Hz PWM
-    report = link.sim.take_pins()
-    assert report.duty("heater0") == pytest.approx(0.25, abs=1e-6)
-    assert report.duty("heater1") == pytest.approx(0.70, abs=1e-6)
+    link.run_for(0.1)  # 20 periods of the heaters' 200 Hz PWM (the AVR ends a run a few
+    report = link.sim.take_pins()  # cycles late: an instruction's; hence 2e-5)
+    assert report.duty("heater0") == pytest.approx(0.25, abs=2e-5)
+    assert report.duty("heater1") == pytest.approx(0.70, abs=2e-5)
     assert report.duty("motor_in1") == 1.0  # closing: IN1 high, IN2 low
     assert report.duty("motor_in2") == 0.0
     assert report.duty("motor_en") > 0.2  # the encoder never moves: the loop drives harder
@@ -246,8 +246,8 @@ def test_a_duty_above_the_limit_is_clamped(image: FirmwareImage) -> None:
         sim.take_pins()
         link.run_for(0.1)
         report = sim.take_pins()
-        assert report.duty("heater0") == pytest.approx(0.6, abs=1e-6)
-        assert report.duty("heater1") == pytest.approx(0.6, abs=1e-6)
+        assert report.duty("heater0") == pytest.approx(0.6, abs=2e-5)
+        assert report.duty("heater1") == pytest.approx(0.6, abs=2e-5)
         st = answer(link, c.Command(50_000, (6_000, 1)))
         assert isinstance(st, c.Status)
         assert st.velocity_um_s == 20_000

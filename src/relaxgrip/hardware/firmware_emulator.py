@@ -105,7 +105,8 @@ class MotorDrive:
 
 
 def firmware_for_twin(config: TwinConfig, drive: MotorDrive, load_cell: bool) -> FirmwareImage:
-    """The firmware built for a twin's gripper: its velocity limit, encoder and motor.
+    """The firmware built for a twin's gripper: its velocity limit, encoder and motor
+    (speed at full duty, velocity lag).
 
     Raises
     ------
@@ -116,6 +117,7 @@ def firmware_for_twin(config: TwinConfig, drive: MotorDrive, load_cell: bool) ->
         "MAX_VELOCITY_UM_S": round(config.motor.max_velocity_mm_s * 1000.0),
         "ENCODER_NM_PER_COUNT": round(config.motor.encoder_resolution_mm * 1e6),
         "MOTOR_FULL_SPEED_UM_S": round(drive.full_speed_mm_s * 1000.0),
+        "MOTOR_LAG_MS": round(config.motor.lag_s * 1000.0),
         "LOAD_CELL": int(load_cell),
     })
 
