@@ -185,10 +185,10 @@ class FirmwareEndpoint:
 
     # ------------------------------------------------------------------ time
 
-    def _cycle_at(self, t_s: float, grid: int | None = None) -> int:
-        """The first boundary of ``grid`` (default: a step) at or after host time ``t_s``
-        (cycles since power-up)."""
-        g = self._step if grid is None else grid
+    def _cycle_at(self, t_s: float) -> int:
+        """The first boundary of the fine grid at or after host time ``t_s`` (cycles since
+        power-up)."""
+        g = self._step
         return max(0, math.ceil(round((t_s - self._t0) * CPU_HZ, 3) / g) * g)
 
     def _coarse_before(self, t_s: float) -> int:
@@ -243,11 +243,10 @@ class FirmwareEndpoint:
         """Note what each host frame in ``data`` waits for (docs/protocol.md §4: one answer
         per non-empty frame)."""
         for item in self._host_frames.feed(data):
+            # A frame whose CRC failed has no seq: its answer is an Error of type 0.
+            self._waiting.append(item.seq)
             if isinstance(item, Packet):
-                self._waiting.append(item.seq)
                 self._observed |= isinstance(item.message, GetStatus)
-            else:  # an unreadable frame is answered with type 0; a readable one by its seq
-                self._waiting.append(None if item.seq is None else item.seq)
 
     def _answered(self, out: bytes) -> None:
         """Strike off the host frames that ``out`` answers."""
