@@ -1,8 +1,10 @@
 """Write ``docs/protocol-vectors.json`` from the codec (a maintainer's tool, not a test).
 
 Run ``python3 tests/hardware/make_vectors.py`` only when the protocol
-changes on purpose (and bump PROTOCOL_VERSION then): the file is the frozen
-reference that ``test_vectors.py`` and firmware tests check against.
+changes on purpose (and bump PROTOCOL_VERSION or PROTOCOL_MINOR then, by the
+rules of docs/protocol.md §12): the file is the frozen reference that
+``test_vectors.py`` and the firmware's host tests check against.  A minor
+version only adds vectors: the frames of older minors stay byte-identical.
 """
 
 from __future__ import annotations
@@ -27,13 +29,19 @@ def fields(msg: c.Message) -> dict[str, Any]:
     return out
 
 
+def layout_minor(msg: c.Message) -> int:
+    """The oldest minor version whose receiver decodes ``msg`` (its payload layout's)."""
+    return type(msg).PAYLOAD_LAYOUTS.index(len(msg.payload()))
+
+
 def valid(name: str, msg: c.Message, seq: int) -> dict[str, Any]:
     return {
         "name": name,
         "type": type(msg).__name__,
         "type_id": int(msg.TYPE),
         "seq": seq,
-        "fields": fields(msg),
+        "minor": layout_minor(msg),
+        "fields": {k: v for k, v in fields(msg).items() if v is not None},
         "frame": c.encode_frame(msg, seq).hex(),
     }
 
@@ -66,8 +74,16 @@ def main() -> None:
         valid("command opening, heaters off", c.Command(-20_000, (0, 0)), 0x1234),
         valid("command extremes", c.Command(I32_MIN, (65_535, 65_535)), 0xFFFF),
         valid("get status", c.GetStatus(), 100),
+        valid("hello naming minor 1", c.Hello(1), 0),
+        valid("hello naming minor 255", c.Hello(255), 0xFFFF),
         valid("hello ack", c.HelloAck(0, 200, 20_000, "relaxgrip-fw 1.0"), 0),
         valid("hello ack, empty firmware id", c.HelloAck(0xFFFF, 20, 1, ""), 1),
+        valid("hello ack minor 1, load cell",
+              c.HelloAck(0, 200, 20_000, "relaxgrip-fw 1.1", 1, 0x01, 10_000), 0),
+        valid("hello ack minor 1, no load cell, duty limit 0.6",
+              c.HelloAck(3, 200, 20_000, "relaxgrip-fw 1.1", 1, 0x00, 6_000), 1),
+        valid("hello ack minor 1, extremes",
+              c.HelloAck(0xFFFF, 0xFFFF, I32_MAX, "0123456789abcdef", 0xFF, 0xFF, 0xFFFF), 2),
         valid(
             "status, enabled, gripping",
             c.Status(42, 1_234_567, 31_250, 5_000, (5_000, 10_000), 0, 0x01, 0, 0),
@@ -93,6 +109,25 @@ def main() -> None:
                 0xFFFF,
             ),
             0xFFFF,
+        ),
+    ]
+    V += [
+        valid(
+            "status minor 1, load cell reading",
+            c.Status(42, 1_234_567, 31_250, 5_000, (5_000, 10_000), 0, 0x05, 0, 0,
+                     548_123, 1_230_001, 77),
+            19,
+        ),
+        valid(
+            "status minor 1, no conversion yet",
+            c.Status(1, 1_000, 0, 0, (0, 0), 0x0002, 0x00, 0, 0, 0, 0, 0),
+            20,
+        ),
+        valid(
+            "status minor 1, negative 24-bit extreme",
+            c.Status(7, 0xFFFF_FFFF, I32_MIN, I32_MAX, (65_535, 65_535), 0xFFFF, 0xFF,
+                     0xFFFF, 0xFFFF, -(1 << 23), 0xFFFF_FFFF, 0xFFFF),
+            21,
         ),
     ]
     for code in c.ErrorCode:
@@ -169,6 +204,23 @@ def main() -> None:
             "seq": 8,
         },
         {
+            "name": "wrong length (Status with 30 payload bytes: no minor has that layout)",
+            "frame": raw_frame(1, 0x82, 9, bytes(30)).hex(),
+            "error": "WRONG_LENGTH",
+            "version": 1,
+            "type_id": 0x82,
+            "seq": 9,
+        },
+        {
+            "name": "wrong length for a minor-0 receiver (a minor-1 Hello)",
+            "frame": c.encode_frame(c.Hello(1), 10).hex(),
+            "error": "WRONG_LENGTH",
+            "receiver_minor": 0,
+            "version": 1,
+            "type_id": 0x01,
+            "seq": 10,
+        },
+        {
             "name": "oversize (300 bytes without a delimiter)",
             "frame": (b"\x01" * 300 + b"\x00").hex(),
             "error": "OVERSIZE",
@@ -177,8 +229,12 @@ def main() -> None:
     doc = {
         "description": "relaxgrip MCU protocol test vectors; see docs/protocol.md. "
         "'frame' is the exact wire bytes in hex, including the trailing 0x00 delimiter. "
-        "Field values are the wire integers (velocity in um/s, duty in permyriad).",
+        "Field values are the wire integers (velocity in um/s, duty in permyriad). "
+        "'minor' is the oldest protocol minor version whose receiver decodes the frame "
+        "(its payload layout's); an invalid frame's 'receiver_minor' (default: the file's "
+        "protocol_minor) is the receiver that rejects it.",
         "protocol_version": c.PROTOCOL_VERSION,
+        "protocol_minor": c.PROTOCOL_MINOR,
         "crc": {
             "name": "CRC-16/CCITT-FALSE",
             "poly": "0x1021",

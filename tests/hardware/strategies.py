@@ -17,6 +17,7 @@ firmware_id = st.text(
 
 messages: st.SearchStrategy[c.Message] = st.one_of(
     st.just(c.Hello()),
+    st.builds(c.Hello, u8),
     st.just(c.GetStatus()),
     st.builds(c.SetMotorVelocity, i32),
     st.builds(c.SetHeaterDuty, duty_pair),
@@ -24,7 +25,9 @@ messages: st.SearchStrategy[c.Message] = st.one_of(
     st.builds(c.SetWatchdog, u16),
     st.builds(c.Command, i32, duty_pair),
     st.builds(c.HelloAck, u16, u16, i32, firmware_id),
+    st.builds(c.HelloAck, u16, u16, i32, firmware_id, u8, u8, u16),
     st.builds(c.Status, u16, u32, i32, i32, duty_pair, u16, u8, u16, u16),
+    st.builds(c.Status, u16, u32, i32, i32, duty_pair, u16, u8, u16, u16, i32, u32, u16),
     st.builds(c.ErrorReply, u16, u8, u8, u16),
 )
 packets = st.builds(c.Packet, seq=u16, message=messages)

@@ -25,13 +25,16 @@ from relaxgrip.hardware.protocol import codec as c
 class Rig:
     """Host client and emulated MCU on one virtual clock, MCU served while the host waits."""
 
-    def __init__(self, mcu_version: int = c.PROTOCOL_VERSION, host_version: int = 1) -> None:
+    def __init__(self, mcu_version: int = c.PROTOCOL_VERSION, host_version: int = 1,
+                 mcu_minor: int = c.PROTOCOL_MINOR, host_minor: int = c.PROTOCOL_MINOR) -> None:
         self.clock = VirtualClock()
         self.link = MemoryLink(self.clock)
-        core = McuCore(McuConfig(protocol_version=mcu_version))
+        core = McuCore(McuConfig(protocol_version=mcu_version, protocol_minor=mcu_minor,
+                                 load_cell=True))
         self.mcu = McuEndpoint(self.link.device, self.clock, core)
         self.link.host.set_service(self.mcu.poll)
-        self.client = McuClient(self.link.host, self.clock, protocol_version=host_version)
+        self.client = McuClient(self.link.host, self.clock, protocol_version=host_version,
+                                protocol_minor=host_minor)
 
     def start(self) -> None:
         self.client.handshake()
@@ -48,9 +51,29 @@ class Rig:
 def test_handshake_reports_mcu_identity() -> None:
     rig = Rig()
     ack = rig.client.handshake()
-    assert ack == c.HelloAck(0, 200, 20_000, "relaxgrip-emu 1")
+    assert ack == c.HelloAck(0, 200, 20_000, "relaxgrip-emu 1", 1, int(c.Feature.LOAD_CELL),
+                             10_000)
     assert rig.client.hello_ack == ack
+    assert rig.client.session_minor == 1
     assert rig.client.link_age_s == 0.0
+    rig.client.set_enabled(True)
+    assert rig.client.command(1.0, (0.0, 0.0)).layout_minor == 1
+
+
+@pytest.mark.parametrize(("mcu_minor", "host_minor"), [(0, 1), (1, 0), (0, 0)])
+def test_an_older_minor_on_either_side_runs_a_minor_0_session(mcu_minor: int,
+                                                              host_minor: int) -> None:
+    """docs/protocol.md §12: the session speaks the older minor; a minor-0 MCU answers the
+    minor-1 Hello WRONG_LENGTH and the host says the minor-0 one."""
+    rig = Rig(mcu_minor=mcu_minor, host_minor=host_minor)
+    ack = rig.client.handshake()
+    assert ack == c.HelloAck(1 if host_minor else 0, 200, 20_000, "relaxgrip-emu 1")
+    assert rig.client.session_minor == 0
+    rig.client.set_enabled(True)
+    st = rig.client.command(2.0, (0.5, 0.0))
+    assert st.layout_minor == 0
+    assert (st.velocity_mm_s, st.heater_duty) == (2.0, (0.5, 0.0))
+    assert rig.mcu.core.rx_error_count == (1 if (mcu_minor, host_minor) == (0, 1) else 0)
 
 
 def test_control_loop_at_30_hz() -> None:

@@ -92,7 +92,8 @@ def test_frame_layout(message: c.Message) -> None:
     assert raw[0] == c.PROTOCOL_VERSION
     assert raw[1] == int(message.TYPE)
     assert raw[2:4] == b"\x34\x12"  # little-endian seq
-    assert len(raw) == 4 + type(message).PAYLOAD_BYTES + 2
+    assert len(raw) == 4 + len(message.payload()) + 2
+    assert len(message.payload()) in type(message).PAYLOAD_LAYOUTS
     assert struct.unpack("<H", raw[-2:])[0] == crc16_bitwise(raw[:-2])
 
 

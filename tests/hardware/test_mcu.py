@@ -198,6 +198,49 @@ def test_config_validation() -> None:
         McuConfig(max_velocity_um_s=0)
     with pytest.raises(InputError, match=r"watchdog_default_ms 5 is outside 20\.\.2000"):
         McuConfig(watchdog_default_ms=5)
+    with pytest.raises(InputError, match=r"protocol_minor 2 is outside 0\.\.1"):
+        McuConfig(protocol_minor=2)
+    with pytest.raises(InputError, match=r"heater_duty_limit_permyriad 10001 is outside"):
+        McuConfig(heater_duty_limit_permyriad=10_001)
+
+
+def test_minor_1_session_reports_the_load_cell_and_clamps_to_the_duty_limit() -> None:
+    core = McuCore(McuConfig(load_cell=True, heater_duty_limit_permyriad=6_000))
+    (ack,) = core.receive(c.Packet(0, c.Hello(1)), 0.0)
+    assert ack == c.HelloAck(0, 200, 20_000, "relaxgrip-emu 1", 1, 1, 6_000)
+    (st,) = core.receive(c.Packet(1, c.SetEnable(True)), 0.0)
+    assert isinstance(st, c.Status)
+    assert (st.load_cell_counts, st.load_cell_time_us, st.load_cell_samples) == (0, 0, 0)
+    assert not st.state_flags & c.StateFlag.LOAD_CELL
+    core.load_cell_conversion(1 << 24, 0.1)  # saturates at the 24-bit maximum
+    (st,) = core.receive(c.Packet(2, c.Command(0, (7_000, 6_000))), 0.15)
+    assert isinstance(st, c.Status)
+    assert (st.load_cell_counts, st.load_cell_time_us, st.load_cell_samples) == (
+        (1 << 23) - 1, 100_000, 1)
+    assert st.state_flags & c.StateFlag.LOAD_CELL
+    assert st.heater_duty_permyriad == (6_000, 6_000)
+    assert st.faults == {"DUTY_CLAMPED"}
+    core.receive(c.Packet(3, c.Command(0, (6_000, 0))), 0.3)
+    core.receive(c.Packet(4, c.Command(0, (6_000, 0))), 0.45)
+    (st,) = core.receive(c.Packet(5, c.Command(0, (6_000, 0))), 0.6)
+    assert isinstance(st, c.Status)
+    assert st.fault_flags == 0
+    assert not st.state_flags & c.StateFlag.LOAD_CELL  # no conversion for 500 ms
+
+
+def test_a_minor_0_mcu_refuses_the_minor_1_hello_by_its_length() -> None:
+    from relaxgrip.clock import VirtualClock
+    from relaxgrip.hardware.protocol.mcu import McuEndpoint
+    from relaxgrip.hardware.protocol.transport import MemoryLink
+
+    clock = VirtualClock()
+    link = MemoryLink(clock)
+    mcu = McuEndpoint(link.device, clock, McuCore(McuConfig(protocol_minor=0)))
+    link.host.write(c.encode_frame(c.Hello(1), 7))
+    mcu.poll()
+    (reply,) = c.FrameDecoder().feed(link.host.read(0.0))
+    assert isinstance(reply, c.Packet)
+    assert reply.message == c.ErrorReply(7, c.ErrorCode.WRONG_LENGTH, 0x01, 1)
 
 
 def test_ideal_plant_integrates_velocity() -> None:

@@ -26,6 +26,7 @@ def build(vector: dict[str, Any]) -> c.Message:
 
 def test_header_of_the_file() -> None:
     assert VECTORS["protocol_version"] == c.PROTOCOL_VERSION
+    assert VECTORS["protocol_minor"] == c.PROTOCOL_MINOR
     crc = VECTORS["crc"]
     check = c.crc16_ccitt_false(crc["check_input_ascii"].encode("ascii"))
     assert check == int(crc["check"], 16)
@@ -51,6 +52,13 @@ def test_cobs_vectors(vector: dict[str, str]) -> None:
     assert c.cobs_decode(bytes.fromhex(vector["encoded"])).hex() == vector["decoded"]
 
 
+def test_every_minor_layout_has_vectors() -> None:
+    seen = {(v["type_id"], v["minor"]) for v in VECTORS["valid"]}
+    wanted = {(int(cls.TYPE), minor) for cls in c.MESSAGE_CLASSES.values()
+              for minor in range(len(cls.PAYLOAD_LAYOUTS))}
+    assert seen == wanted
+
+
 @pytest.mark.parametrize("vector", VECTORS["valid"], ids=lambda v: v["name"])
 def test_valid_vector_both_ways(vector: dict[str, Any]) -> None:
     message = build(vector)
@@ -58,12 +66,20 @@ def test_valid_vector_both_ways(vector: dict[str, Any]) -> None:
     assert c.encode_frame(message, vector["seq"]) == frame
     assert c.decode_frame(frame[:-1]) == c.Packet(vector["seq"], message)
     assert c.FrameDecoder().feed(frame) == [c.Packet(vector["seq"], message)]
+    # A receiver of the frame's own minor decodes it; an older one (if any) refuses it.
+    minor = vector["minor"]
+    assert c.decode_frame(frame[:-1], minor=minor) == c.Packet(vector["seq"], message)
+    if minor > 0:
+        (older,) = c.FrameDecoder(minor=minor - 1).feed(frame)
+        assert isinstance(older, c.FrameError)
+        assert older.code is c.ErrorCode.WRONG_LENGTH
 
 
 @pytest.mark.parametrize("vector", VECTORS["invalid"], ids=lambda v: v["name"])
 def test_invalid_vector(vector: dict[str, Any]) -> None:
     frame = bytes.fromhex(vector["frame"])
-    (result,) = c.FrameDecoder().feed(frame)
+    minor = vector.get("receiver_minor", VECTORS["protocol_minor"])
+    (result,) = c.FrameDecoder(minor=minor).feed(frame)
     assert isinstance(result, c.FrameError)
     assert result.code.name == vector["error"]
     if "seq" in vector:

@@ -8,6 +8,7 @@ from typing import Any
 from relaxgrip.bench import core
 from relaxgrip.bench.control import bench_control_hold
 from relaxgrip.bench.core import BenchResult
+from relaxgrip.bench.firmware import bench_firmware
 from relaxgrip.bench.learning import bench_estimation, bench_learning_pipeline
 from relaxgrip.bench.perception import bench_perception
 from relaxgrip.bench.twin import bench_twin_hold, bench_twin_step
@@ -22,6 +23,7 @@ BENCHMARKS: dict[str, Callable[[int], BenchResult]] = {
     "estimation": bench_estimation,
     "learning-pipeline": bench_learning_pipeline,
     "control-hold": bench_control_hold,
+    "firmware": bench_firmware,
 }
 #: What ``relaxgrip bench`` runs without names: everything that takes seconds, not minutes.
 DEFAULT_BENCHMARKS: tuple[str, ...] = ("twin-hold", "twin-step", "perception", "estimation")

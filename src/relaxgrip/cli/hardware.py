@@ -35,6 +35,9 @@ def emulator(
     duration_s: Annotated[float | None, float_option(
         "--duration-s", help="Stop after this long, at most a day (default: until Ctrl-C).",
         show_default=False)] = None,
+    mcu: Annotated[str, typer.Option(
+        "--mcu", help="python (the protocol's state machine) or firmware (the compiled "
+                      "firmware in simavr).")] = "python",
 ) -> None:
     """Run the twin behind a pseudo-terminal as an emulated MCU, in wall-clock time."""
     from relaxgrip.clock import WallClock
@@ -49,6 +52,8 @@ def emulator(
 
     if seed is not None and seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
+    if mcu not in ("python", "firmware"):
+        raise InputError(f"--mcu must be python or firmware, got {mcu!r}")
     if duration_s is not None and not 0 < duration_s <= MAX_DURATION_S:
         raise InputError(f"--duration-s must be > 0 and at most {MAX_DURATION_S:g} s (a day), "
                          f"got {duration_s}")
@@ -65,7 +70,7 @@ def emulator(
         check_parent_dir(port, "[serial] port")
     run_seed = seed if seed is not None else (
         spec.emulator.seed if spec is not None and spec.emulator is not None else 0)
-    emu = McuEmulator(config, run_seed, WallClock())
+    emu = McuEmulator(config, run_seed, WallClock(), firmware=mcu == "firmware")
     link: Path | None = None
     # Stopped as Ctrl-C does, its link and socket removed: by ``kill``, a closed terminal
     # (unless ``nohup`` ignores it: that stays), and Ctrl-C also where the shell started
@@ -82,8 +87,10 @@ def emulator(
             console.print(f"port: {emu.port}" + (f" (linked from {link})" if link else ""),
                           highlight=False, soft_wrap=True)
             console.print(f"frames: {socket_path}", highlight=False, soft_wrap=True)
-            console.print(f"seed {run_seed}; watchdog {emu.mcu_config.watchdog_default_ms} ms; "
-                          "Ctrl-C stops", highlight=False)
+            what = "firmware in simavr" if emu.firmware is not None else "Python MCU"
+            console.print(f"seed {run_seed}; {what}; watchdog "
+                          f"{emu.mcu_config.watchdog_default_ms} ms; Ctrl-C stops",
+                          highlight=False)
             deadline = None if duration_s is None else time.monotonic() + duration_s
             with contextlib.suppress(KeyboardInterrupt):
                 while deadline is None or time.monotonic() < deadline:

@@ -68,6 +68,9 @@ def hold(
     backend: Annotated[str, typer.Option(
         "--backend", help="twin, or emulator: the twin behind the MCU emulator over a pty "
                           "serial link (virtual time).")] = "twin",
+    mcu: Annotated[str, typer.Option(
+        "--mcu", help="The emulator's MCU: python (the protocol's state machine) or firmware "
+                      "(the compiled firmware in simavr).")] = "python",
     record: Annotated[Path | None, typer.Option(
         "--record", help="Record the run to this MCAP file (not with --compare).",
         show_default=False)] = None,
@@ -94,6 +97,7 @@ def hold(
         check_backend,
         check_hold_duration_s,
         check_hold_temp_c,
+        check_mcu,
         check_ramp_starts,
         check_scenario_times,
         compare_holds,
@@ -137,6 +141,9 @@ def hold(
     if backend not in ("twin", "emulator"):
         raise InputError(f"--backend must be twin or emulator, got {backend!r}")
     check_backend(backend, push)  # a push needs the twin, before --record opens its file
+    check_mcu(mcu, backend)
+    if mcu != "python" and seed_list is not None:
+        raise InputError("--mcu firmware runs one hold: give --seed, not --seeds")
     if compare and (temps, targets, push) != (None, None, None):
         raise InputError("--compare runs the standard hold: run each estimator with "
                          "--estimator NAME and the profiles instead")
@@ -204,7 +211,7 @@ def hold(
             result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
                               backend=backend, temp_profile=temps,
                               target_profile=targets, disturbance=push, observer=observer,
-                              budget=budget)
+                              budget=budget, mcu=mcu)
         else:
             from relaxgrip.recording import McapRecorder
 
@@ -215,7 +222,7 @@ def hold(
                 result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
                                   backend=backend, recorder=recorder,
                                   temp_profile=temps, target_profile=targets, disturbance=push,
-                                  observer=observer, budget=budget)
+                                  observer=observer, budget=budget, mcu=mcu)
     figure = None
     if plot is not None:
         from relaxgrip.plots.holding import plot_hold

@@ -335,6 +335,25 @@ def check_hold(estimator: EstimatorKind | str, target_n: float, temp_c: float,
 
 #: Backends a hold runs on: the twin itself, or the twin behind the MCU emulator.
 HOLD_BACKENDS = ("twin", "emulator")
+#: The MCU behind the emulator: the protocol's Python state machine, or the compiled
+#: firmware in simavr (docs/firmware.md).
+HOLD_MCUS = ("python", "firmware")
+
+
+def check_mcu(mcu: str, backend: str) -> str:
+    """``mcu`` if the emulator can run it for ``backend``.
+
+    Raises
+    ------
+    InputError
+        An unknown MCU, or the firmware asked of the twin backend (it has no MCU).
+    """
+    if mcu not in HOLD_MCUS:
+        raise InputError(f"--mcu must be python or firmware, got {mcu!r}")
+    if mcu == "firmware" and backend != "emulator":
+        raise InputError("--mcu firmware runs the firmware behind the emulator: use it with "
+                         "--backend emulator")
+    return mcu
 
 
 def check_backend(backend: str, disturbance: Profile | None = None) -> str:
@@ -352,13 +371,14 @@ def check_backend(backend: str, disturbance: Profile | None = None) -> str:
     return backend
 
 
-def _make_backend(backend: str, cfg: TwinConfig, seed: int, clock: VirtualClock) -> Gripper:
+def _make_backend(backend: str, cfg: TwinConfig, seed: int, clock: VirtualClock,
+                  mcu: str = "python") -> Gripper:
     """The twin, or the twin behind an in-process MCU emulator on a pty (reset, ready)."""
     if backend == "twin":
         return GripperTwin(cfg, seed=seed, clock=clock)
     from relaxgrip.hardware.emulator import ready_emulated_gripper
 
-    return ready_emulated_gripper(cfg, seed, clock)
+    return ready_emulated_gripper(cfg, seed, clock, firmware=mcu == "firmware")
 
 
 def run_hold(
@@ -377,6 +397,7 @@ def run_hold(
     observer: ObserverModel | None = None,
     budget: bool = False,
     locate_object: bool = True,
+    mcu: str = "python",
 ) -> HoldResult:
     """Close on the force ball to ``target_n`` at ``temp_c`` and hold it for ``duration_s``.
 
@@ -419,6 +440,9 @@ def run_hold(
         frame there (beyond the paper; ``ChainParams.ir_weight``).  False:
         the operator does not say what is grasped, and the chain guesses the
         other finger from the marker's.
+    mcu : {"python", "firmware"}
+        The emulator's MCU: the protocol's Python state machine, or the compiled
+        firmware in simavr (``backend="emulator"`` only).
 
     Returns
     -------
@@ -437,6 +461,7 @@ def run_hold(
                          disturbance=disturbance)
     check_ramp_starts(target_n, temp_c, temp_profile, target_profile)
     check_backend(backend, disturbance)
+    check_mcu(mcu, backend)
     if budget and (kind is not EstimatorKind.RELAX or backend != "twin"):
         raise InputError("an error budget splits relax's Eq. 10 on the twin: use --estimator "
                          "relax with the twin backend")
@@ -444,7 +469,7 @@ def run_hold(
     base = config if config is not None else TwinConfig()
     cfg = replace(base, initial_temp_c=temp_c)
     clock = VirtualClock()
-    twin = _make_backend(backend, cfg, seed, clock)
+    twin = _make_backend(backend, cfg, seed, clock, mcu)
     try:  # closed however it ends: the emulator's thread and pty with it
         controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
                                      heat=cfg.heat)

@@ -30,11 +30,15 @@ import tty
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from relaxgrip.backend import Command, Frame
+import numpy as np
+
+from relaxgrip.backend import Command, Frame, Truth
 from relaxgrip.clock import Clock, VirtualClock
 from relaxgrip.errors import InputError
 from relaxgrip.hardware.cameras import EmulatorChannel, EmulatorFrameSource
+from relaxgrip.hardware.force_ref import LinearCalibration, McuLoadCell
 from relaxgrip.hardware.frame_channel import (
     KIND_IR,
     KIND_RGB,
@@ -42,18 +46,26 @@ from relaxgrip.hardware.frame_channel import (
     encode_tick,
 )
 from relaxgrip.hardware.gripper import GuardedTransport, SerialGripper
+from relaxgrip.hardware.hx711 import Hx711Config, Hx711Model
 from relaxgrip.hardware.protocol.client import McuClient
 from relaxgrip.hardware.protocol.mcu import AppliedOutputs, McuConfig, McuCore, McuEndpoint
 from relaxgrip.hardware.protocol.transport import FdTransport, SerialTransport
 from relaxgrip.hardware.rig_file import LimitsSpec, RigFile
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
+from relaxgrip.twin.objects import get_object
+
+if TYPE_CHECKING:
+    from relaxgrip.hardware.firmware_emulator import FirmwareEndpoint
 
 __all__ = [
+    "DEFAULT_LOAD_CELL",
     "EMULATOR_DIR",
     "FramePublisher",
     "McuEmulator",
     "TwinPlant",
     "check_parent_dir",
+    "load_cell_force_n",
+    "load_cell_model",
     "open_emulated_gripper",
     "ready_emulated_gripper",
     "twin_config_for_rig",
@@ -70,6 +82,8 @@ _MAX_SOCKET_PATH = 107
 #: ``relaxgrip emulator`` makes (and removes), so that it runs with no rig file; any other
 #: folder must exist already (a typo in a rig file must not grow a tree of folders).
 EMULATOR_DIR = Path("/tmp/relaxgrip-emulator")
+#: The emulator's load cell: a 2 kg bar cell at 10 SPS (:class:`Hx711Config`'s defaults).
+DEFAULT_LOAD_CELL = Hx711Config()
 
 
 def check_parent_dir(path: Path, what: str) -> None:
@@ -228,12 +242,26 @@ class FramePublisher:
         self._release(*old)
 
 
+def load_cell_force_n(truth: Truth | None) -> float:
+    """Force on the calibration object's load cell (N): the contact force, if the held
+    object carries a load cell (the force ball), else nothing."""
+    if truth is None or truth.object_name is None:
+        return 0.0
+    return truth.contact_force_n if get_object(truth.object_name).force_sensor else 0.0
+
+
+def load_cell_model(config: Hx711Config, seed: int, start_s: float) -> Hx711Model:
+    """The emulator's HX711 for a twin seed (its own stream of the seed)."""
+    return Hx711Model(config, np.random.default_rng((seed, 0x711)), start_s)
+
+
 class TwinPlant:
     """The twin as the MCU's :class:`~relaxgrip.hardware.protocol.Plant`.
 
     Reading the encoder integrates the twin to that time and publishes the
     frames captured on the way and a tick (truth, force readings) on the
-    frame channel, before the MCU's answer goes out.
+    frame channel, before the MCU's answer goes out; the load cell reads the
+    force on the calibration object at the same times.
 
     Parameters
     ----------
@@ -241,15 +269,20 @@ class TwinPlant:
         The twin, on the emulator's clock.
     publisher : FramePublisher
         Frame channel.
+    load_cell : Hx711Model, optional
+        The load cell in the calibration object.
     """
 
-    def __init__(self, twin: GripperTwin, publisher: FramePublisher) -> None:
+    def __init__(self, twin: GripperTwin, publisher: FramePublisher,
+                 load_cell: Hx711Model | None = None) -> None:
         self.twin = twin
         self.publisher = publisher
+        self.load_cell = load_cell
         self._t_s = -float("inf")
         self._sent: dict[int, int] = {}
         self._ticks = 0
         self._position_um = 0
+        self._conversions: list[tuple[float, int]] = []
 
     def _publish(self, kind: int, frame: Frame | None) -> None:
         if frame is not None and self._sent.get(kind) != frame.seq:
@@ -266,7 +299,14 @@ class TwinPlant:
             self._ticks += 1
             self._t_s = now_s
             self._position_um = round(obs.motor_position_mm * 1000.0)
+            if self.load_cell is not None:
+                self._conversions += self.load_cell.feed(obs.t_s, load_cell_force_n(obs.truth))
         return self._position_um
+
+    def load_cell_conversions(self, now_s: float) -> list[tuple[float, int]]:
+        """Conversions the load cell completed since the last call."""
+        out, self._conversions = self._conversions, []
+        return out
 
     def apply(self, outputs: AppliedOutputs, now_s: float) -> None:
         """Drive the twin's motor and heaters with ``outputs`` from ``now_s`` on."""
@@ -325,23 +365,57 @@ class McuEmulator:
         Firmware constants (default: velocity limit of the twin's motor).
     poll_s : float
         Wall-clock poll period of the serving thread (s).
+    load_cell : Hx711Config or None
+        The calibration object's load cell and ADC; None: the MCU has none.
+    firmware : bool
+        Run the compiled firmware in simavr (:mod:`relaxgrip.hardware.firmware_emulator`)
+        instead of the Python MCU; ``mcu`` is then ignored (the firmware is built for
+        the twin's motor and encoder).
     """
 
     def __init__(self, config: TwinConfig | None = None, seed: int = 0,
                  clock: Clock | None = None, mcu: McuConfig | None = None,
-                 poll_s: float = 0.002) -> None:
+                 poll_s: float = 0.002,
+                 load_cell: Hx711Config | None = DEFAULT_LOAD_CELL,
+                 firmware: bool = False) -> None:
         self.config = config if config is not None else TwinConfig()
         self.clock: Clock = clock if clock is not None else VirtualClock()
-        self.twin = GripperTwin(self.config, seed=seed, clock=self.clock)
+        # The firmware's AVR keeps the twin's time, a step ahead of the host's at most.
+        twin_clock = VirtualClock(self.clock.now()) if firmware else self.clock
+        self.twin = GripperTwin(self.config, seed=seed, clock=twin_clock)
         max_um_s = round(self.config.motor.max_velocity_mm_s * 1000.0)
-        self.mcu_config = mcu if mcu is not None else McuConfig(max_velocity_um_s=max_um_s)
+        self.mcu_config = mcu if mcu is not None and not firmware else McuConfig(
+            max_velocity_um_s=max_um_s, load_cell=load_cell is not None)
         self.publisher = FramePublisher()
-        self.plant = TwinPlant(self.twin, self.publisher)
+        self.load_cell = None if load_cell is None else load_cell_model(
+            load_cell, seed, self.clock.now())
         self._pty = _open_pty()
         self.transport = _TamperableFd(self._pty.master)
-        self.endpoint = McuEndpoint(self.transport, self.clock,
-                                    McuCore(self.mcu_config, start_s=self.clock.now()),
-                                    self.plant)
+        self._python: McuEndpoint | None = None
+        self.firmware: FirmwareEndpoint | None = None
+        """The simulated firmware, with ``firmware=True``."""
+        if firmware:
+            from relaxgrip.hardware.firmware_emulator import (
+                FirmwareEndpoint,
+                MotorDrive,
+                firmware_for_twin,
+            )
+
+            assert isinstance(twin_clock, VirtualClock)
+            self.plant = TwinPlant(self.twin, self.publisher)
+            drive = MotorDrive()
+            try:
+                image = firmware_for_twin(self.config, drive, load_cell is not None)
+                self.firmware = FirmwareEndpoint(self.transport, self.clock, self.plant,
+                                                 twin_clock, image, drive, self.load_cell)
+            except BaseException:
+                self._close_pty()
+                raise
+        else:
+            self.plant = TwinPlant(self.twin, self.publisher, self.load_cell)
+            self._python = McuEndpoint(self.transport, self.clock,
+                                       McuCore(self.mcu_config, start_s=self.clock.now()),
+                                       self.plant)
         self.poll_s = poll_s
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -350,6 +424,19 @@ class McuEmulator:
         self._socket_lock: tuple[int, Path] | None = None
         self._accept_thread: threading.Thread | None = None
         self.error: BaseException | None = None
+
+    @property
+    def endpoint(self) -> McuEndpoint:
+        """The Python MCU and its state machine.
+
+        Raises
+        ------
+        InputError
+            If this emulator runs the firmware (see :attr:`firmware`).
+        """
+        if self._python is None:
+            raise InputError("this emulator runs the compiled firmware: see .firmware")
+        return self._python
 
     @property
     def port(self) -> str:
@@ -375,7 +462,8 @@ class McuEmulator:
 
     def _serve(self) -> None:
         try:
-            self.endpoint.serve(self._stop, self.poll_s)
+            server = self.firmware if self.firmware is not None else self.endpoint
+            server.serve(self._stop, self.poll_s)
         except BaseException as exc:  # reported by stop(); the host sees a dead link
             if not self._stop.is_set():
                 self.error = exc
@@ -472,6 +560,11 @@ class McuEmulator:
         if self._socket_lock is not None:
             _unlock_socket(self._socket_lock)
             self._socket_lock = None
+        self._close_pty()
+        if self.firmware is not None:
+            self.firmware.close()
+
+    def _close_pty(self) -> None:
         self.transport.close_fd()
         if self._pty.slave >= 0:  # once: a second stop must not close a reused descriptor
             with contextlib.suppress(OSError):
@@ -559,7 +652,8 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
                           clock: VirtualClock | None = None, *,
                           mcu: McuConfig | None = None,
                           grace_s: float = 2.0,
-                          reply_timeout_s: float = 0.1) -> tuple[SerialGripper, McuEmulator]:
+                          reply_timeout_s: float = 0.1,
+                          firmware: bool = False) -> tuple[SerialGripper, McuEmulator]:
     """An in-process emulator thread and a :class:`SerialGripper` on its pty, in lockstep.
 
     Parameters
@@ -576,6 +670,8 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
         Wall-clock wait after which silence counts as a timeout (s).
     reply_timeout_s : float
         Host reply timeout in virtual time (s).
+    firmware : bool
+        Run the compiled firmware in simavr instead of the Python MCU.
 
     Returns
     -------
@@ -583,7 +679,7 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
         The gripper (closing it stops the emulator) and the emulator.
     """
     clk = clock if clock is not None else VirtualClock()
-    emu = McuEmulator(config, seed, clk, mcu)
+    emu = McuEmulator(config, seed, clk, mcu, firmware=firmware)
     try:
         host_sock = emu.connect_host()
         emu.start()
@@ -598,17 +694,33 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
     rgb = EmulatorFrameSource(channel, "rgb", max(0.2, 3.0 / cfg.rig.rgb.rate_hz))
     ir = EmulatorFrameSource(channel, "ir", max(2.5, 2.5 / cfg.rig.ir.rate_hz))
     limits = LimitsSpec(max_motor_speed_mm_s=cfg.motor.max_velocity_mm_s)
+    force_ref = None
+    if emu.load_cell is not None and emu.mcu_config.load_cell:
+        # Calibrated as a rig file would give it: the unit's scale and zero.
+        cell = emu.load_cell
+        force_ref = McuLoadCell(client, LinearCalibration(1.0 / cell.config.counts_per_n,
+                                                          cell.offset_counts))
+    on_close = emu.stop
+    if cfg.rgb is None and cfg.ir is None:
+        # No camera starts the frame channel: start it here, or its ticks (the truth) would
+        # fill the socket until the emulator's thread blocks on it.
+        channel.start()
+
+        def on_close() -> None:
+            channel.close()
+            emu.stop()
+
     gripper = SerialGripper(client, rgb if cfg.rgb is not None else None,
                             ir if cfg.ir is not None else None, limits=limits,
                             name="emulator", truth_feed=channel.take_truth,
-                            twin_version=TWIN_VERSION, on_close=emu.stop)
+                            twin_version=TWIN_VERSION, on_close=on_close, force_ref=force_ref)
     return gripper, emu
 
 
 def ready_emulated_gripper(config: TwinConfig | None, seed: int,
-                           clock: VirtualClock) -> SerialGripper:
+                           clock: VirtualClock, firmware: bool = False) -> SerialGripper:
     """:func:`open_emulated_gripper`, then reset (handshake, first frames); closed if that fails."""
-    gripper, _ = open_emulated_gripper(config, seed, clock)
+    gripper, _ = open_emulated_gripper(config, seed, clock, firmware=firmware)
     try:
         gripper.reset()
     except BaseException:

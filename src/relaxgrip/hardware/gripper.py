@@ -6,6 +6,10 @@ the rig file names: live cameras or the emulator's frame channel).  Every
 :meth:`observe` asks the MCU for a Status (fresh encoder, link check; it does
 not feed the watchdog), every :meth:`act` sends one Command (which does).
 
+A :class:`~relaxgrip.hardware.force_ref.ForceReference` (the MCU's load
+cell, or another source) fills the observation's ``force_ref``; without one,
+an emulator's truth feed does.
+
 On any fault (a dead, corrupted or truncated link, a protocol version
 mismatch, an MCU fault, a stalled camera) the gripper stops the motor and
 switches the heaters off (a zero Command if the link still answers; the
@@ -26,6 +30,7 @@ from relaxgrip.backend import BackendInfo, Command, ForceSamples, Frame, Observa
 from relaxgrip.clock import Clock, VirtualClock
 from relaxgrip.errors import InputError
 from relaxgrip.hardware.cameras import CameraError, FrameSource
+from relaxgrip.hardware.force_ref import ForceReference
 from relaxgrip.hardware.protocol.client import McuClient
 from relaxgrip.hardware.protocol.codec import PROTOCOL_VERSION, FaultFlag, Status
 from relaxgrip.hardware.protocol.errors import (
@@ -152,13 +157,18 @@ class SerialGripper:
         answer (s): opening a USB-serial port raises DTR, which resets an
         Arduino-class MCU, and its bootloader answers nothing for a second or
         two.  0: one Hello.
+    force_ref : ForceReference, optional
+        The rig's reference force sensor (started by :meth:`reset`, after the
+        handshake); it fills ``Observation.force_ref``.
     """
 
     def __init__(self, client: McuClient, rgb: FrameSource | None, ir: FrameSource | None, *,
                  limits: LimitsSpec | None = None, name: str = "serial",
                  truth_feed: TruthFeed | None = None, twin_version: str | None = None,
-                 on_close: Callable[[], None] | None = None, boot_wait_s: float = 0.0) -> None:
+                 on_close: Callable[[], None] | None = None, boot_wait_s: float = 0.0,
+                 force_ref: ForceReference | None = None) -> None:
         self.client = client
+        self.force_ref = force_ref
         self.boot_wait_s = boot_wait_s
         self.clock: Clock = client.clock
         self.rgb = rgb
@@ -182,7 +192,8 @@ class SerialGripper:
         """Name, protocol and firmware (and the emulated twin's version)."""
         ack = self.client.hello_ack
         firmware = ack.firmware_id if ack is not None else "not connected"
-        version = f"protocol {PROTOCOL_VERSION}; firmware {firmware}"
+        minor = self.client.session_minor
+        version = f"protocol {PROTOCOL_VERSION}.{minor}; firmware {firmware}"
         if self.twin_version is not None:
             version += f"; {self.twin_version}"
         return BackendInfo(self.name, version, has_truth=self.truth_feed is not None)
@@ -223,6 +234,8 @@ class SerialGripper:
                         raise type(exc)(f"{exc} (Hello said for {self.boot_wait_s:g} s: "
                                         "the MCU did not boot)") from None
                     raise
+        if self.force_ref is not None:
+            self.force_ref.start()
         self.client.set_enabled(True)
 
     def observe(self) -> Observation:
@@ -242,6 +255,8 @@ class SerialGripper:
         if self._overtemp:
             faults.add("HOST_OVERTEMP")
         truth, force = (None, None) if self.truth_feed is None else self.truth_feed()
+        if self.force_ref is not None:
+            force = self.force_ref.read(now)
         return Observation(
             t_s=now,
             motor_position_mm=status.encoder_position_um / 1000.0,
@@ -291,10 +306,64 @@ class SerialGripper:
             for source in (self.rgb, self.ir):
                 if source is not None:
                     source.close()
+            if self.force_ref is not None:
+                self.force_ref.close()
             self.client.close()
         finally:
             if self._on_close is not None:
                 self._on_close()
+
+    def tare_force_ref(self, duration_s: float = 0.5, min_readings: int = 3) -> float:
+        """Zero the force reference: its mean over ``duration_s`` becomes 0 N.
+
+        Nothing may touch the load cell meanwhile.  The motor is held stopped
+        and the heaters off (zero Commands at 30 Hz keep the MCU's watchdog
+        fed), and the time passes on the gripper's clock.
+
+        Parameters
+        ----------
+        duration_s : float
+            How long to average (s), 0.1..10.
+        min_readings : int
+            Fewest readings the mean may rest on.
+
+        Returns
+        -------
+        float
+            The force the reference read before the tare (N): what was taken off.
+
+        Raises
+        ------
+        InputError
+            Without a force reference, before :meth:`reset`, or with fewer
+            than ``min_readings`` readings in ``duration_s``.
+        GripperFaultError
+            If the link or the MCU fails meanwhile.
+        """
+        ref = self.force_ref
+        if ref is None:
+            raise InputError("this gripper has no force reference to tare")
+        if not 0.1 <= duration_s <= 10.0:
+            raise InputError(f"tare duration_s must be 0.1..10 s, got {duration_s}")
+        self._check_alive()
+        if self.client.hello_ack is None:
+            raise InputError("tare the force reference after reset(): the MCU is not connected")
+        clock = self.clock
+        ref.read(clock.now())  # readings from before the tare are not part of it
+        readings: list[float] = []
+        end = clock.now() + duration_s
+        while clock.now() < end:
+            self._guard(lambda: self.client.command(0.0, (0.0, 0.0)))
+            clock.sleep_until(min(end, clock.now() + 1.0 / 30.0))
+            got = ref.read(clock.now())
+            if got is not None:
+                readings.extend(float(f) for f in got.force_n)
+        if len(readings) < min_readings:
+            raise InputError(f"tare: the force reference gave {len(readings)} reading(s) in "
+                             f"{duration_s:g} s, {min_readings} needed: is it connected?")
+        mean_n = float(np.mean(readings))
+        ref.shift_zero(mean_n)
+        return mean_n
 
     # -- faults ---------------------------------------------------------------
     @property
@@ -363,7 +432,9 @@ def _hottest_c(frame: Frame) -> float:
 
 
 def open_rig_gripper(rig: RigFile, clock: Clock, *,
-                     sources: tuple[FrameSource, FrameSource] | None = None) -> SerialGripper:
+                     sources: tuple[FrameSource, FrameSource] | None = None,
+                     force_ref: Callable[[McuClient], ForceReference] | None = None,
+                     ) -> SerialGripper:
     """A :class:`SerialGripper` on the port and cameras a rig file names (not yet reset).
 
     Parameters
@@ -374,6 +445,10 @@ def open_rig_gripper(rig: RigFile, clock: Clock, *,
         Host clock (a wall clock on hardware).
     sources : (FrameSource, FrameSource), optional
         RGB and thermal sources (default: those the rig file names).
+    force_ref : callable, optional
+        Makes the rig's force reference from the MCU's client (e.g. an
+        :class:`~relaxgrip.hardware.force_ref.McuLoadCell` with the rig's
+        calibration); default: none.
 
     Returns
     -------
@@ -386,4 +461,5 @@ def open_rig_gripper(rig: RigFile, clock: Clock, *,
     rgb, ir = sources if sources is not None else open_frame_sources(rig, clock)
     return SerialGripper(client, rgb, ir, limits=rig.limits,
                          name="emulator" if rig.rgb.source == "emulator" else "serial",
-                         boot_wait_s=rig.serial.boot_wait_s)
+                         boot_wait_s=rig.serial.boot_wait_s,
+                         force_ref=None if force_ref is None else force_ref(client))

@@ -285,6 +285,12 @@ class GripperTwin:
         return self._force_n
 
     @property
+    def motor_position_mm(self) -> float:
+        """Closing motor's position, exact (mm from fully open; observations read it
+        through the encoder's quantum)."""
+        return self._motor_mm
+
+    @property
     def aperture_m(self) -> float:
         """Distance between the undeflected finger contact faces (m)."""
         return self.config.rig.aperture_m(self._motor_mm)

@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from relaxgrip.clock import Clock
 from relaxgrip.errors import InputError
 from relaxgrip.hardware.protocol.codec import (
+    PROTOCOL_MINOR,
     PROTOCOL_VERSION,
     SEQ_MODULUS,
     TRIP_FAULTS,
@@ -108,6 +110,10 @@ class McuClient:
         Version this host speaks (tests change it to provoke a mismatch).
     first_seq : int
         Sequence number of the first frame (0..65535).
+    protocol_minor : int
+        Newest minor version this host speaks; the session runs at the
+        smaller of this and the MCU's (0 emulates a host from before the
+        load cell).
     """
 
     def __init__(
@@ -118,22 +124,30 @@ class McuClient:
         reply_timeout_s: float = 0.1,
         protocol_version: int = PROTOCOL_VERSION,
         first_seq: int = 0,
+        protocol_minor: int = PROTOCOL_MINOR,
     ) -> None:
         timeout = check_finite(reply_timeout_s, "reply_timeout_s")
         if not 0.0 < timeout <= 1.0:
             raise InputError(f"reply_timeout_s must be in (0, 1] s, got {reply_timeout_s}")
         if not 0 <= first_seq < SEQ_MODULUS:
             raise InputError(f"first_seq {first_seq} is outside 0..65535")
+        if not 0 <= protocol_minor <= PROTOCOL_MINOR:
+            raise InputError(f"protocol_minor {protocol_minor} is outside 0..{PROTOCOL_MINOR}")
         self.transport = transport
         self.clock = clock
         self.reply_timeout_s = timeout
         self.protocol_version = protocol_version
-        self.decoder = FrameDecoder(protocol_version)
+        self.protocol_minor = protocol_minor
+        self.session_minor = 0
+        """Minor version agreed in the last handshake."""
+        self.decoder = FrameDecoder(protocol_version, protocol_minor)
         self.stats = LinkStats()
         self.hello_ack: HelloAck | None = None
         self.last_status: Status | None = None
         self.recent_errors: deque[FrameError] = deque(maxlen=32)
         self._telemetry: deque[Status] = deque(maxlen=256)
+        self.status_listeners: list[Callable[[Status, float], None]] = []
+        """Called with every valid Status received and the host time it arrived."""
         self._seq = first_seq
         self._rx_seq: int | None = None
         self._last_rx_s: float | None = None
@@ -141,12 +155,17 @@ class McuClient:
     # ------------------------------------------------------------------ public API
 
     def handshake(self) -> HelloAck:
-        """Open a session: send Hello, check the MCU's protocol version.
+        """Open a session: send Hello, check the MCU's protocol version, agree the minor.
+
+        A host of minor 1 or later says the Hello that names its minor; an MCU
+        of minor 0 answers that with WRONG_LENGTH, and the host says the
+        minor-0 Hello instead (docs/protocol.md §12).
 
         Returns
         -------
         HelloAck
-            Firmware id, velocity limit and watchdog period of the MCU.
+            Firmware id, velocity limit and watchdog period of the MCU (and,
+            in a session of minor 1, its minor, features and duty limit).
 
         Raises
         ------
@@ -157,9 +176,20 @@ class McuClient:
         """
         self.decoder.reset()
         self._rx_seq = None  # a rebooted MCU counts from 0 again: no frames were lost
-        reply = self._exchange(Hello())
+        self.session_minor = 0
+        if self.protocol_minor == 0:
+            reply = self._exchange(Hello())
+        else:
+            try:
+                reply = self._exchange(Hello(self.protocol_minor))
+            except McuRejectedError as exc:
+                if exc.code != ErrorCode.WRONG_LENGTH:
+                    raise
+                reply = self._exchange(Hello())  # an MCU of minor 0
         assert isinstance(reply, HelloAck)
         self.hello_ack = reply
+        if reply.mcu_minor is not None:
+            self.session_minor = min(self.protocol_minor, reply.mcu_minor)
         return reply
 
     def command(self, velocity_mm_s: float, heater_duty: tuple[float, float]) -> Status:
@@ -280,7 +310,7 @@ class McuClient:
                 self.recent_errors.append(item)
                 continue
             self.stats.frames_received += 1
-            self._last_rx_s = self.clock.now()
+            rx_s = self._last_rx_s = self.clock.now()
             if self._rx_seq is not None:
                 self.stats.mcu_frames_lost += (item.seq - self._rx_seq - 1) % SEQ_MODULUS
             self._rx_seq = item.seq
@@ -288,6 +318,8 @@ class McuClient:
                 self.last_status = item.message
                 if item.message.unsolicited:
                     self.stats.unsolicited += 1
+                for listener in self.status_listeners:
+                    listener(item.message, rx_s)
             packets.append(item)
         return packets
 
@@ -326,10 +358,10 @@ class McuClient:
             raise McuFaultError(
                 f"MCU refused {what}: outputs stopped by fault "
                 f"{_fault_names(reply.detail & int(TRIP_FAULTS))}; call set_enabled(True) "
-                "to clear it"
+                "to clear it", reply.code
             )
         detail = f" (detail {reply.detail})" if reply.detail else ""
-        raise McuRejectedError(f"MCU rejected {what}: {reply.code_name}{detail}")
+        raise McuRejectedError(f"MCU rejected {what}: {reply.code_name}{detail}", reply.code)
 
     def _raise_timeout(self, what: str, n_corrupt: int, unreadable: list[str]) -> None:
         ms = round(self.reply_timeout_s * 1000)

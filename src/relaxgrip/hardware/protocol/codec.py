@@ -1,9 +1,13 @@
 """MCU protocol codec: bytes <-> message dataclasses, pure (no I/O, no clock).
 
 A frame on the wire is ``COBS(version | type | seq | payload | crc16) 0x00``
-(see ``docs/protocol.md``).  All integers are little-endian; the CRC is
-CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor,
-check value 0x29B1 for ``b"123456789"``) over the unencoded bytes before it.
+(see ``docs/protocol.md``).  The version byte is the protocol's major
+version; a minor version only appends fields to payloads, so each message
+type has one payload layout per minor version (``PAYLOAD_LAYOUTS``), and a
+receiver accepts the layouts of every minor version up to its own.  All
+integers are little-endian; the CRC is CRC-16/CCITT-FALSE (poly 0x1021,
+init 0xFFFF, no reflection, no final xor, check value 0x29B1 for
+``b"123456789"``) over the unencoded bytes before it.
 
 Layers, bottom up: :func:`crc16_ccitt_false`, :func:`cobs_encode` /
 :func:`cobs_decode`, the message dataclasses (``payload()`` /
@@ -29,6 +33,7 @@ __all__ = [
     "HEADER_BYTES",
     "MAX_ENCODED_FRAME_BYTES",
     "MAX_RAW_FRAME_BYTES",
+    "PROTOCOL_MINOR",
     "PROTOCOL_VERSION",
     "SEQ_MODULUS",
     "WATCHDOG_DEFAULT_MS",
@@ -39,6 +44,7 @@ __all__ = [
     "ErrorCode",
     "ErrorReply",
     "FaultFlag",
+    "Feature",
     "FieldValueError",
     "FrameDecoder",
     "FrameError",
@@ -64,7 +70,9 @@ __all__ = [
 ]
 
 PROTOCOL_VERSION = 1
-"""Version of this protocol; byte 0 of every frame."""
+"""Major version of this protocol; byte 0 of every frame."""
+PROTOCOL_MINOR = 1
+"""Minor version of this protocol, agreed in the handshake (docs/protocol.md §12)."""
 HEADER_BYTES = 4
 """version (u8), type (u8), seq (u16)."""
 CRC_BYTES = 2
@@ -149,6 +157,15 @@ class StateFlag(IntFlag):
 
     ENABLED = 1 << 0
     UNSOLICITED = 1 << 1
+    LOAD_CELL = 1 << 2
+    """Minor 1: the load-cell ADC delivered a conversion within the last 500 ms."""
+
+
+class Feature(IntFlag):
+    """Bits of ``HelloAck.features`` (minor 1): what the firmware was built with."""
+
+    LOAD_CELL = 1 << 0
+    """An HX711-class load-cell ADC is read and reported in Status."""
 
 
 # --------------------------------------------------------------------------- CRC and COBS
@@ -313,23 +330,56 @@ def duty_from_permyriad(value: int) -> float:
 class _Empty:
     """Mix-in for messages without a payload."""
 
-    PAYLOAD_BYTES: ClassVar[int] = 0
+    PAYLOAD_LAYOUTS: ClassVar[tuple[int, ...]] = (0,)
 
     def payload(self) -> bytes:
         """The payload bytes (none)."""
         return b""
 
 
+def _all_or_none(msg: object, names: tuple[str, ...], minor: int) -> bool:
+    """Whether the fields ``names`` (those of minor ``minor``'s layout) are all set.
+
+    Raises
+    ------
+    InputError
+        If some are set and others are None: a layout is whole or absent.
+    """
+    given = [getattr(msg, name) is not None for name in names]
+    if any(given) and not all(given):
+        missing = [n for n, g in zip(names, given, strict=True) if not g]
+        raise InputError(f"{type(msg).__name__}: the minor-{minor} fields come together; "
+                         f"missing {', '.join(missing)}")
+    return all(given)
+
+
 @dataclass(frozen=True)
-class Hello(_Empty):
-    """Host -> MCU 0x01: open a session; the MCU answers :class:`HelloAck`."""
+class Hello:
+    """Host -> MCU 0x01: open a session; the MCU answers :class:`HelloAck`.
+
+    Attributes
+    ----------
+    host_minor : int or None
+        Newest protocol minor version the host speaks (u8; the minor-1
+        layout); None is the minor-0 Hello, without payload.
+    """
 
     TYPE: ClassVar[MsgType] = MsgType.HELLO
+    PAYLOAD_LAYOUTS: ClassVar[tuple[int, ...]] = (0, 1)
+    host_minor: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.host_minor is not None:
+            _check_int(self.host_minor, "host_minor", _U8)
+
+    def payload(self) -> bytes:
+        """The payload bytes (none in the minor-0 layout)."""
+        return b"" if self.host_minor is None else bytes([self.host_minor])
 
     @classmethod
     def from_payload(cls, payload: bytes) -> Hello:
-        """Decode a payload of :attr:`PAYLOAD_BYTES` bytes."""
-        return cls()
+        """Decode a payload of one of :attr:`PAYLOAD_LAYOUTS` bytes."""
+        return cls(payload[0] if payload else None)
 
 
 @dataclass(frozen=True)
@@ -340,7 +390,7 @@ class GetStatus(_Empty):
 
     @classmethod
     def from_payload(cls, payload: bytes) -> GetStatus:
-        """Decode a payload of :attr:`PAYLOAD_BYTES` bytes."""
+        """Decode a payload of one of :attr:`PAYLOAD_LAYOUTS` bytes."""
         return cls()
 
 
@@ -355,7 +405,7 @@ class SetMotorVelocity:
     """
 
     TYPE: ClassVar[MsgType] = MsgType.SET_MOTOR_VELOCITY
-    PAYLOAD_BYTES: ClassVar[int] = 4
+    PAYLOAD_LAYOUTS: ClassVar[tuple[int, ...]] = (4,)
     _S: ClassVar[struct.Struct] = struct.Struct("<i")
     velocity_um_s: int
 
@@ -368,7 +418,7 @@ class SetMotorVelocity:
 
     @classmethod
     def from_payload(cls, payload: bytes) -> SetMotorVelocity:
-        """Decode a payload of :attr:`PAYLOAD_BYTES` bytes."""
+        """Decode a payload of one of :attr:`PAYLOAD_LAYOUTS` bytes."""
         (v,) = cls._S.unpack(payload)
         return cls(v)
 
@@ -390,7 +440,7 @@ class SetHeaterDuty:
     """
 
     TYPE: ClassVar[MsgType] = MsgType.SET_HEATER_DUTY
-    PAYLOAD_BYTES: ClassVar[int] = 4
+    PAYLOAD_LAYOUTS: ClassVar[tuple[int, ...]] = (4,)
     _S: ClassVar[struct.Struct] = struct.Struct("<HH")
     heater_duty_permyriad: tuple[int, int]
 
@@ -403,7 +453,7 @@ class SetHeaterDuty:
 
     @classmethod
     def from_payload(cls, payload: bytes) -> SetHeaterDuty:
-        """Decode a payload of :attr:`PAYLOAD_BYTES` bytes."""
+        """Decode a payload of one of :attr:`PAYLOAD_LAYOUTS` bytes."""
         d0, d1 = cls._S.unpack(payload)
         return cls((d0, d1))
 
@@ -425,7 +475,7 @@ class SetEnable:
     """
 
     TYPE: ClassVar[MsgType] = MsgType.SET_ENABLE
-    PAYLOAD_BYTES: ClassVar[int] = 1
+    PAYLOAD_LAYOUTS: ClassVar[tuple[int, ...]] = (1,)
     enabled: bool
 
     def __post_init__(self) -> None:
@@ -438,7 +488,7 @@ class SetEnable:
 
     @classmethod
     def from_payload(cls, payload: bytes) -> SetEnable:
-        """Decode a payload of :attr:`PAYLOAD_BYTES` bytes."""
+        """Decode a payload of one of :attr:`PAYLOAD_LAYOUTS` bytes."""
         if payload[0] > 1:
             raise FieldValueError(f"SetEnable value {payload[0]} is neither 0 nor 1", payload[0])
         return cls(payload[0] == 1)
@@ -455,7 +505,7 @@ class SetWatchdog:
     """
 
     TYPE: ClassVar[MsgType] = MsgType.SET_WATCHDOG
-    PAYLOAD_BYTES: ClassVar[int] = 2
+    PAYLOAD_LAYOUTS: ClassVar[tuple[int, ...]] = (2,)
     _S: ClassVar[struct.Struct] = struct.Struct("<H")
     period_ms: int
 
@@ -468,7 +518,7 @@ class SetWatchdog:
 
     @classmethod
     def from_payload(cls, payload: bytes) -> SetWatchdog:
-        """Decode a payload of :attr:`PAYLOAD_BYTES` bytes."""
+        """Decode a payload of one of :attr:`PAYLOAD_LAYOUTS` bytes."""
         (ms,) = cls._S.unpack(payload)
         return cls(ms)
 
@@ -486,7 +536,7 @@ class Command:
     """
 
     TYPE: ClassVar[MsgType] = MsgType.COMMAND
-    PAYLOAD_BYTES: ClassVar[int] = 8
+    PAYLOAD_LAYOUTS: ClassVar[tuple[int, ...]] = (8,)
     _S: ClassVar[struct.Struct] = struct.Struct("<iHH")
     velocity_um_s: int
     heater_duty_permyriad: tuple[int, int] = (0, 0)
@@ -534,7 +584,7 @@ class Command:
 
     @classmethod
     def from_payload(cls, payload: bytes) -> Command:
-        """Decode a payload of :attr:`PAYLOAD_BYTES` bytes."""
+        """Decode a payload of one of :attr:`PAYLOAD_LAYOUTS` bytes."""
         v, d0, d1 = cls._S.unpack(payload)
         return cls(v, (d0, d1))
 
@@ -568,15 +618,28 @@ class HelloAck:
     firmware_id : str
         Firmware name and version, printable ASCII, at most 16 characters
         (NUL-padded on the wire).
+    mcu_minor : int or None
+        Minor-1 layout: newest protocol minor version the MCU speaks (u8);
+        the session runs at the smaller of the host's and this.
+    features : int or None
+        Minor-1 layout: :class:`Feature` bits of the firmware build (u8).
+    heater_duty_limit_permyriad : int or None
+        Minor-1 layout: the MCU clamps every heater duty to this (u16, at
+        most 10000).
     """
 
     TYPE: ClassVar[MsgType] = MsgType.HELLO_ACK
-    PAYLOAD_BYTES: ClassVar[int] = 24
+    PAYLOAD_LAYOUTS: ClassVar[tuple[int, ...]] = (24, 28)
     _S: ClassVar[struct.Struct] = struct.Struct("<HHi16s")
+    _S1: ClassVar[struct.Struct] = struct.Struct("<BBH")
+    _MINOR1: ClassVar[tuple[str, ...]] = ("mcu_minor", "features", "heater_duty_limit_permyriad")
     ack_seq: int
     watchdog_ms: int
     max_velocity_um_s: int
     firmware_id: str
+    mcu_minor: int | None = None
+    features: int | None = None
+    heater_duty_limit_permyriad: int | None = None
 
     def __post_init__(self) -> None:
         _check_int(self.ack_seq, "ack_seq", _U16)
@@ -587,21 +650,38 @@ class HelloAck:
             raise InputError(f"firmware_id must be a str of at most 16 characters, got {fid!r}")
         if not all(0x20 <= ord(c) < 0x7F for c in fid):
             raise InputError(f"firmware_id must be printable ASCII, got {fid!r}")
+        if _all_or_none(self, self._MINOR1, 1):
+            _check_int(self.mcu_minor, "mcu_minor", _U8)  # type: ignore[arg-type]
+            _check_int(self.features, "features", _U8)  # type: ignore[arg-type]
+            _check_int(self.heater_duty_limit_permyriad,  # type: ignore[arg-type]
+                       "heater_duty_limit_permyriad", _U16)
+
+    @property
+    def layout_minor(self) -> int:
+        """Minor version of this message's payload layout (0 or 1)."""
+        return 0 if self.mcu_minor is None else 1
 
     def payload(self) -> bytes:
         """The payload bytes."""
-        return self._S.pack(
+        head = self._S.pack(
             self.ack_seq, self.watchdog_ms, self.max_velocity_um_s, self.firmware_id.encode("ascii")
         )
+        if self.mcu_minor is None:
+            return head
+        return head + self._S1.pack(self.mcu_minor, self.features,
+                                    self.heater_duty_limit_permyriad)
 
     @classmethod
     def from_payload(cls, payload: bytes) -> HelloAck:
-        """Decode a payload of :attr:`PAYLOAD_BYTES` bytes."""
-        ack, wd, vmax, raw = cls._S.unpack(payload)
+        """Decode a payload of one of :attr:`PAYLOAD_LAYOUTS` bytes."""
+        ack, wd, vmax, raw = cls._S.unpack(payload[: cls._S.size])
         text = raw.rstrip(b"\x00")
         if not all(0x20 <= b < 0x7F for b in text):
             raise InputError(f"firmware_id {raw!r} is not NUL-padded printable ASCII")
-        return cls(ack, wd, vmax, text.decode("ascii"))
+        if len(payload) == cls._S.size:
+            return cls(ack, wd, vmax, text.decode("ascii"))
+        minor, features, duty_limit = cls._S1.unpack(payload[cls._S.size :])
+        return cls(ack, wd, vmax, text.decode("ascii"), minor, features, duty_limit)
 
 
 @dataclass(frozen=True)
@@ -629,11 +709,22 @@ class Status:
         Host frames rejected since the MCU started (u16, wraps).
     rx_gap_count : int
         Host frames missed according to sequence numbers (u16, wraps).
+    load_cell_counts : int or None
+        Minor-1 layout: the latest load-cell conversion, raw signed 24-bit
+        ADC counts sign-extended (i32); 0 before the first.
+    load_cell_time_us : int or None
+        Minor-1 layout: MCU clock when that conversion was read (µs, u32).
+    load_cell_samples : int or None
+        Minor-1 layout: conversions read since power-up (u16, wraps): a new
+        value means a new conversion.
     """
 
     TYPE: ClassVar[MsgType] = MsgType.STATUS
-    PAYLOAD_BYTES: ClassVar[int] = 25
+    PAYLOAD_LAYOUTS: ClassVar[tuple[int, ...]] = (25, 35)
     _S: ClassVar[struct.Struct] = struct.Struct("<HIiiHHHBHH")
+    _S1: ClassVar[struct.Struct] = struct.Struct("<iIH")
+    _MINOR1: ClassVar[tuple[str, ...]] = ("load_cell_counts", "load_cell_time_us",
+                                          "load_cell_samples")
     ack_seq: int
     mcu_time_us: int
     encoder_position_um: int
@@ -643,6 +734,9 @@ class Status:
     state_flags: int
     rx_error_count: int = 0
     rx_gap_count: int = 0
+    load_cell_counts: int | None = None
+    load_cell_time_us: int | None = None
+    load_cell_samples: int | None = None
 
     def __post_init__(self) -> None:
         _check_int(self.ack_seq, "ack_seq", _U16)
@@ -654,10 +748,19 @@ class Status:
         _check_int(self.state_flags, "state_flags", _U8)
         _check_int(self.rx_error_count, "rx_error_count", _U16)
         _check_int(self.rx_gap_count, "rx_gap_count", _U16)
+        if _all_or_none(self, self._MINOR1, 1):
+            _check_int(self.load_cell_counts, "load_cell_counts", _I32)  # type: ignore[arg-type]
+            _check_int(self.load_cell_time_us, "load_cell_time_us", _U32)  # type: ignore[arg-type]
+            _check_int(self.load_cell_samples, "load_cell_samples", _U16)  # type: ignore[arg-type]
+
+    @property
+    def layout_minor(self) -> int:
+        """Minor version of this message's payload layout (0 or 1)."""
+        return 0 if self.load_cell_counts is None else 1
 
     def payload(self) -> bytes:
         """The payload bytes."""
-        return self._S.pack(
+        head = self._S.pack(
             self.ack_seq,
             self.mcu_time_us,
             self.encoder_position_um,
@@ -668,12 +771,20 @@ class Status:
             self.rx_error_count,
             self.rx_gap_count,
         )
+        if self.load_cell_counts is None:
+            return head
+        return head + self._S1.pack(self.load_cell_counts, self.load_cell_time_us,
+                                    self.load_cell_samples)
 
     @classmethod
     def from_payload(cls, payload: bytes) -> Status:
-        """Decode a payload of :attr:`PAYLOAD_BYTES` bytes."""
-        ack, t, pos, vel, d0, d1, faults, state, errs, gaps = cls._S.unpack(payload)
-        return cls(ack, t, pos, vel, (d0, d1), faults, state, errs, gaps)
+        """Decode a payload of one of :attr:`PAYLOAD_LAYOUTS` bytes."""
+        ack, t, pos, vel, d0, d1, faults, state, errs, gaps = cls._S.unpack(
+            payload[: cls._S.size])
+        if len(payload) == cls._S.size:
+            return cls(ack, t, pos, vel, (d0, d1), faults, state, errs, gaps)
+        counts, t_cell, n_cell = cls._S1.unpack(payload[cls._S.size :])
+        return cls(ack, t, pos, vel, (d0, d1), faults, state, errs, gaps, counts, t_cell, n_cell)
 
     @property
     def enabled(self) -> bool:
@@ -732,7 +843,7 @@ class ErrorReply:
     """
 
     TYPE: ClassVar[MsgType] = MsgType.ERROR
-    PAYLOAD_BYTES: ClassVar[int] = 6
+    PAYLOAD_LAYOUTS: ClassVar[tuple[int, ...]] = (6,)
     _S: ClassVar[struct.Struct] = struct.Struct("<HBBH")
     ack_seq: int
     code: int
@@ -751,7 +862,7 @@ class ErrorReply:
 
     @classmethod
     def from_payload(cls, payload: bytes) -> ErrorReply:
-        """Decode a payload of :attr:`PAYLOAD_BYTES` bytes."""
+        """Decode a payload of one of :attr:`PAYLOAD_LAYOUTS` bytes."""
         ack, code, typ, detail = cls._S.unpack(payload)
         return cls(ack, code, typ, detail)
 
@@ -899,7 +1010,7 @@ def encode_frame(
     return DELIMITER + encoded if leading_delimiter else encoded
 
 
-def _decode(encoded: bytes, expected_version: int) -> DecodeResult:
+def _decode(encoded: bytes, expected_version: int, minor: int) -> DecodeResult:
     raw_kept = encoded[:MAX_ENCODED_FRAME_BYTES]
     if len(encoded) > MAX_ENCODED_FRAME_BYTES:
         return FrameError(
@@ -940,10 +1051,12 @@ def _decode(encoded: bytes, expected_version: int) -> DecodeResult:
     cls = MESSAGE_CLASSES.get(msg_type)
     if cls is None:
         return err(ErrorCode.UNKNOWN_TYPE, f"unknown message type 0x{msg_type:02X}", msg_type)
-    if len(payload) != cls.PAYLOAD_BYTES:
+    lengths = cls.PAYLOAD_LAYOUTS[: minor + 1]
+    if len(payload) not in lengths:
+        expected = " or ".join(str(n) for n in sorted(set(lengths)))
         return err(
             ErrorCode.WRONG_LENGTH,
-            f"{cls.__name__} payload of {len(payload)} bytes, expected {cls.PAYLOAD_BYTES}",
+            f"{cls.__name__} payload of {len(payload)} bytes, expected {expected}",
             len(payload),
         )
     try:
@@ -954,7 +1067,8 @@ def _decode(encoded: bytes, expected_version: int) -> DecodeResult:
     return Packet(seq, message, version)
 
 
-def decode_frame(encoded: bytes, *, expected_version: int = PROTOCOL_VERSION) -> Packet:
+def decode_frame(encoded: bytes, *, expected_version: int = PROTOCOL_VERSION,
+                 minor: int = PROTOCOL_MINOR) -> Packet:
     """Decode one COBS-encoded frame (without its 0x00 delimiter).
 
     Checks in this order: size, COBS, minimum length, CRC, version, type,
@@ -965,7 +1079,10 @@ def decode_frame(encoded: bytes, *, expected_version: int = PROTOCOL_VERSION) ->
     encoded : bytes
         The frame as received, delimiter stripped.
     expected_version : int
-        Protocol version the receiver speaks.
+        Protocol (major) version the receiver speaks.
+    minor : int
+        Newest minor version the receiver speaks: payloads of the layouts of
+        minor versions up to it are accepted.
 
     Returns
     -------
@@ -977,7 +1094,7 @@ def decode_frame(encoded: bytes, *, expected_version: int = PROTOCOL_VERSION) ->
     FrameDecodeError
         Naming the first check that failed; its ``error`` is the :class:`FrameError`.
     """
-    result = _decode(bytes(encoded), expected_version)
+    result = _decode(bytes(encoded), expected_version, minor)
     if isinstance(result, FrameError):
         raise FrameDecodeError(result)
     return result
@@ -995,11 +1112,15 @@ class FrameDecoder:
     Parameters
     ----------
     expected_version : int
-        Protocol version the receiver speaks.
+        Protocol (major) version the receiver speaks.
+    minor : int
+        Newest minor version the receiver speaks (see :func:`decode_frame`).
     """
 
-    def __init__(self, expected_version: int = PROTOCOL_VERSION) -> None:
+    def __init__(self, expected_version: int = PROTOCOL_VERSION,
+                 minor: int = PROTOCOL_MINOR) -> None:
         self.expected_version = expected_version
+        self.minor = minor
         self._buf = bytearray()
         self._skipping = False
 
@@ -1039,7 +1160,7 @@ class FrameDecoder:
             if self._skipping:
                 self._skipping = False
             elif self._buf:
-                out.append(_decode(bytes(self._buf), self.expected_version))
+                out.append(_decode(bytes(self._buf), self.expected_version, self.minor))
             self._buf.clear()
             start = end + 1
         return out

@@ -59,7 +59,11 @@ class LinkCorruptedError(LinkError):
 
 
 class McuRejectedError(ProtocolError):
-    """The MCU answered a frame with an Error reply."""
+    """The MCU answered a frame with an Error reply; ``code`` is its error code."""
+
+    def __init__(self, message: str, code: int | None = None) -> None:
+        super().__init__(message)
+        self.code = code
 
 
 class McuFaultError(McuRejectedError):

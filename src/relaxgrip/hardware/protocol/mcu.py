@@ -19,6 +19,7 @@ from relaxgrip.clock import Clock
 from relaxgrip.errors import InputError
 from relaxgrip.hardware.protocol.codec import (
     DUTY_FULL_SCALE,
+    PROTOCOL_MINOR,
     PROTOCOL_VERSION,
     SEQ_MODULUS,
     TRIP_FAULTS,
@@ -29,6 +30,7 @@ from relaxgrip.hardware.protocol.codec import (
     ErrorCode,
     ErrorReply,
     FaultFlag,
+    Feature,
     FrameDecoder,
     FrameError,
     GetStatus,
@@ -46,9 +48,14 @@ from relaxgrip.hardware.protocol.codec import (
 )
 from relaxgrip.hardware.protocol.transport import Transport
 
-__all__ = ["AppliedOutputs", "IdealMotorPlant", "McuConfig", "McuCore", "McuEndpoint", "Plant"]
+__all__ = ["LOAD_CELL_FRESH_US", "AppliedOutputs", "IdealMotorPlant", "McuConfig", "McuCore",
+           "McuEndpoint", "Plant"]
 
 _U16_MAX = 0xFFFF
+#: Status's LOAD_CELL state bit stays set this long after a conversion (µs): at 10 SPS
+#: five conversions in a row may be missed before the host is told.
+LOAD_CELL_FRESH_US = 500_000
+_COUNTS_24 = (-(1 << 23), (1 << 23) - 1)
 
 
 @dataclass(frozen=True)
@@ -65,16 +72,31 @@ class McuConfig:
         Velocity limit (µm/s); commands beyond it are clamped.
     watchdog_default_ms : int
         Watchdog period after reset and after each Hello (ms).
+    protocol_minor : int
+        Newest minor version the MCU speaks (0 emulates an MCU from before
+        the load cell).
+    heater_duty_limit_permyriad : int
+        Every heater duty is clamped to this (permyriad, at most 10000).
+    load_cell : bool
+        A load-cell ADC is fitted (reported in HelloAck's features).
     """
 
     firmware_id: str = "relaxgrip-emu 1"
     protocol_version: int = PROTOCOL_VERSION
     max_velocity_um_s: int = 20_000
     watchdog_default_ms: int = WATCHDOG_DEFAULT_MS
+    protocol_minor: int = PROTOCOL_MINOR
+    heater_duty_limit_permyriad: int = DUTY_FULL_SCALE
+    load_cell: bool = False
 
     def __post_init__(self) -> None:
         if self.max_velocity_um_s <= 0:
             raise InputError(f"max_velocity_um_s must be > 0, got {self.max_velocity_um_s}")
+        if not 0 <= self.protocol_minor <= PROTOCOL_MINOR:
+            raise InputError(f"protocol_minor {self.protocol_minor} is outside 0..{PROTOCOL_MINOR}")
+        if not 0 <= self.heater_duty_limit_permyriad <= DUTY_FULL_SCALE:
+            raise InputError(f"heater_duty_limit_permyriad {self.heater_duty_limit_permyriad} "
+                             f"is outside 0..{DUTY_FULL_SCALE}")
         if not WATCHDOG_MIN_MS <= self.watchdog_default_ms <= WATCHDOG_MAX_MS:
             raise InputError(
                 f"watchdog_default_ms {self.watchdog_default_ms} is outside "
@@ -137,6 +159,11 @@ class McuCore:
         self._setpoint = _OFF
         self.rx_error_count = 0
         self.rx_gap_count = 0
+        self.session_minor = 0
+        self.load_cell_counts = 0
+        self.load_cell_time_us = 0
+        self.load_cell_samples = 0
+        self._load_cell_read_us: int | None = None
 
     # ------------------------------------------------------------------ state
 
@@ -150,15 +177,24 @@ class McuCore:
         self._now_us = max(self._now_us, t_us)
         return self._now_us
 
+    def _mcu_time_us(self, t_us: int) -> int:
+        return (t_us - self._start_us) % (1 << 32)
+
     def status(self, ack_seq: int, unsolicited: bool = False) -> Status:
-        """The Status the MCU would send now."""
+        """The Status the MCU would send now (in the session's minor layout)."""
         out = self.outputs
         state = (StateFlag.ENABLED if self.enabled else 0) | (
             StateFlag.UNSOLICITED if unsolicited else 0
         )
+        cell: tuple[int | None, int | None, int | None] = (None, None, None)
+        if self.session_minor >= 1:
+            read = self._load_cell_read_us
+            if read is not None and self._now_us - read < LOAD_CELL_FRESH_US:
+                state |= StateFlag.LOAD_CELL
+            cell = (self.load_cell_counts, self.load_cell_time_us, self.load_cell_samples)
         return Status(
             ack_seq=ack_seq,
-            mcu_time_us=(self._now_us - self._start_us) % (1 << 32),
+            mcu_time_us=self._mcu_time_us(self._now_us),
             encoder_position_um=max(-(1 << 31), min((1 << 31) - 1, self.encoder_position_um)),
             velocity_um_s=out.velocity_um_s,
             heater_duty_permyriad=out.heater_duty_permyriad,
@@ -166,7 +202,24 @@ class McuCore:
             state_flags=int(state),
             rx_error_count=self.rx_error_count,
             rx_gap_count=self.rx_gap_count,
+            load_cell_counts=cell[0],
+            load_cell_time_us=cell[1],
+            load_cell_samples=cell[2],
         )
+
+    def load_cell_conversion(self, counts: int, now_s: float) -> None:
+        """Record a load-cell conversion read at ``now_s`` (raw 24-bit counts, saturated).
+
+        Ignored unless the config has a load cell.
+        """
+        if not self.config.load_cell:
+            return
+        t_us = round(now_s * 1e6)
+        lo, hi = _COUNTS_24
+        self.load_cell_counts = max(lo, min(hi, int(counts)))
+        self.load_cell_time_us = self._mcu_time_us(t_us)
+        self.load_cell_samples = (self.load_cell_samples + 1) & _U16_MAX
+        self._load_cell_read_us = t_us
 
     def _trip(self, flag: FaultFlag) -> list[Message]:
         self.fault_flags |= int(flag)
@@ -239,14 +292,20 @@ class McuCore:
         msg, seq = packet.message, packet.seq
         typ = int(msg.TYPE)
         if isinstance(msg, Hello):
+            cfg = self.config
             self.handshaken = True
             self.enabled = False
             self._setpoint = _OFF
-            self.watchdog_ms = self.config.watchdog_default_ms
+            self.watchdog_ms = cfg.watchdog_default_ms
             self._last_seq = seq
-            return HelloAck(
-                seq, self.watchdog_ms, self.config.max_velocity_um_s, self.config.firmware_id
-            )
+            # The session speaks the older of the two minor versions (docs/protocol.md §12).
+            self.session_minor = min(msg.host_minor or 0, cfg.protocol_minor)
+            if self.session_minor == 0:
+                return HelloAck(seq, self.watchdog_ms, cfg.max_velocity_um_s, cfg.firmware_id)
+            return HelloAck(seq, self.watchdog_ms, cfg.max_velocity_um_s, cfg.firmware_id,
+                            mcu_minor=cfg.protocol_minor,
+                            features=int(Feature.LOAD_CELL) if cfg.load_cell else 0,
+                            heater_duty_limit_permyriad=cfg.heater_duty_limit_permyriad)
         if isinstance(msg, HelloAck | Status | ErrorReply):
             return self._reject(ErrorCode.UNKNOWN_TYPE, seq, typ, typ)
         if not self.handshaken:
@@ -292,7 +351,8 @@ class McuCore:
         return clamped
 
     def _clamp_duty(self, duty: tuple[int, int]) -> tuple[int, int]:
-        d0, d1 = (min(d, DUTY_FULL_SCALE) for d in duty)
+        limit = self.config.heater_duty_limit_permyriad
+        d0, d1 = (min(d, limit) for d in duty)
         self._set_flag(FaultFlag.DUTY_CLAMPED, (d0, d1) != duty)
         return d0, d1
 
@@ -304,7 +364,7 @@ class McuCore:
 
 
 class Plant(Protocol):
-    """What the MCU drives and reads: a motor with an encoder, two heaters."""
+    """What the MCU drives and reads: a motor with an encoder, two heaters, a load cell."""
 
     def apply(self, outputs: AppliedOutputs, now_s: float) -> None:
         """Drive ``outputs`` from ``now_s`` on."""
@@ -312,6 +372,17 @@ class Plant(Protocol):
 
     def encoder_position_um(self, now_s: float) -> int:
         """Encoder reading at ``now_s`` (µm from fully open)."""
+        ...
+
+    def load_cell_conversions(self, now_s: float) -> list[tuple[float, int]]:
+        """Load-cell conversions completed since the last call, up to ``now_s``.
+
+        Returns
+        -------
+        list of (float, int)
+            Completion time (s) and raw 24-bit counts of each, oldest first;
+            empty without a load cell.
+        """
         ...
 
 
@@ -340,6 +411,10 @@ class IdealMotorPlant:
         """Position at ``now_s`` (µm)."""
         self._advance(now_s)
         return round(self._position_um)
+
+    def load_cell_conversions(self, now_s: float) -> list[tuple[float, int]]:
+        """No load cell: nothing."""
+        return []
 
     @property
     def outputs(self) -> AppliedOutputs:
@@ -373,7 +448,8 @@ class McuEndpoint:
         self.clock = clock
         self.core = core if core is not None else McuCore(start_s=clock.now())
         self.plant: Plant = plant if plant is not None else IdealMotorPlant(clock.now())
-        self.decoder = FrameDecoder(self.core.config.protocol_version)
+        self.decoder = FrameDecoder(self.core.config.protocol_version,
+                                    self.core.config.protocol_minor)
         self._tx_seq = 0
         self.frames_sent = 0
 
@@ -390,6 +466,8 @@ class McuEndpoint:
         now = self.clock.now()
         core = self.core
         core.encoder_position_um = self.plant.encoder_position_um(now)
+        for t_s, counts in self.plant.load_cell_conversions(now):
+            core.load_cell_conversion(counts, t_s)
         replies = core.tick(now)
         for item in self.decoder.feed(data):
             replies += core.receive(item, now)
