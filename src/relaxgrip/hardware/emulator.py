@@ -28,7 +28,7 @@ import stat
 import threading
 import tty
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 from relaxgrip.backend import Command, Frame
@@ -45,7 +45,7 @@ from relaxgrip.hardware.gripper import GuardedTransport, SerialGripper
 from relaxgrip.hardware.protocol.client import McuClient
 from relaxgrip.hardware.protocol.mcu import AppliedOutputs, McuConfig, McuCore, McuEndpoint
 from relaxgrip.hardware.protocol.transport import FdTransport, SerialTransport
-from relaxgrip.hardware.rig_file import LimitsSpec, RigFile
+from relaxgrip.hardware.rig_file import LimitsSpec
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
 
 __all__ = [
@@ -56,7 +56,6 @@ __all__ = [
     "check_parent_dir",
     "open_emulated_gripper",
     "ready_emulated_gripper",
-    "twin_config_for_rig",
 ]
 
 #: Messages that may wait for a slow wall-clock host (a third of a second of RGB
@@ -540,19 +539,6 @@ def _answers(path: Path) -> bool:
                 " ".join(parts[7:]) in (target, str(path)):
             return True
     return False
-
-
-def twin_config_for_rig(rig: RigFile, base: TwinConfig | None = None) -> TwinConfig:
-    """The twin an emulator runs for a rig file: its geometry and motor speed limit.
-
-    Raises
-    ------
-    InputError
-        If the rig's finger does not match the twin's beam model (length).
-    """
-    cfg = base if base is not None else TwinConfig()
-    motor = replace(cfg.motor, max_velocity_mm_s=rig.limits.max_motor_speed_mm_s)
-    return replace(cfg, rig=rig.geometry, motor=motor)
 
 
 def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
