@@ -12,6 +12,7 @@ import relaxgrip.experiments.controlled_hold as controlled_hold
 from relaxgrip.control import EstimatorKind
 from relaxgrip.experiments.tasks import TASKS
 from relaxgrip.reproduce import SECTIONS, holding_section
+from relaxgrip.twin import TwinConfig
 from tests.clitools import run_main
 
 
@@ -60,7 +61,7 @@ def test_the_holding_section_holds_what_hold_compare_holds(monkeypatch: pytest.M
         return real(*args, **{**kwargs, "duration_s": 6.0})
 
     monkeypatch.setattr(controlled_hold, "compare_holds", short)
-    section = holding_section(tmp_path, quick=True, seed=0)
+    section = holding_section(tmp_path, quick=True, seed=0, config=TwinConfig())
     holds = section.results["holds"]
     assert list(holds) == list(compared) == [kind.value for kind in EstimatorKind]
     for name, hold in holds.items():

@@ -280,7 +280,7 @@ class _Scenario:
     """The orchestration: one twin, one controller, the stages in turn."""
 
     def __init__(self, seed: int, hot_side: Side, settings: CupDemoSettings,
-                 models: ModelBundle) -> None:
+                 models: ModelBundle, config: TwinConfig) -> None:
         self.s = settings
         self.hot_side = hot_side
         self.clock = VirtualClock()
@@ -291,7 +291,7 @@ class _Scenario:
         self.cool_y_m = cool_y
         scene = tuple(SceneObject(self.cup_name[side], (settings.cup_x_m, y, 0.0))
                       for side, y in self.cup_y_m.items())
-        self.config = TwinConfig(object_name=None, scene=scene)
+        self.config = replace(config, object_name=None, scene=scene)
         self.twin = GripperTwin(self.config, seed=seed, clock=self.clock)
         self.models = models
         self.controller = GraspController(
@@ -467,7 +467,8 @@ class _Scenario:
 
 def run_cup_demo(seed: int = 0, quick: bool = False, hot_side: Side | None = None,
                  models: ModelBundle | None = None,
-                 settings: CupDemoSettings | None = None) -> CupDemoResult:
+                 settings: CupDemoSettings | None = None,
+                 config: TwinConfig | None = None) -> CupDemoResult:
     """Run the integrated cup demonstration on the twin.
 
     Parameters
@@ -482,6 +483,8 @@ def run_cup_demo(seed: int = 0, quick: bool = False, hot_side: Side | None = Non
         ICFN and RCFN (default: the shipped models).
     settings : CupDemoSettings, optional
         Layout, targets and timings (default: ``CupDemoSettings.for_run(quick)``).
+    config : TwinConfig, optional
+        The twin (default: our gripper); its object and scene are the demo's.
 
     Returns
     -------
@@ -501,7 +504,7 @@ def run_cup_demo(seed: int = 0, quick: bool = False, hot_side: Side | None = Non
         raise InputError(f"hot_side must be 'left' or 'right', got {side!r}")
     s = settings if settings is not None else CupDemoSettings.for_run(quick)
     bundle = models if models is not None else load_default_models()
-    sc = _Scenario(seed, side, s, bundle)
+    sc = _Scenario(seed, side, s, bundle, config if config is not None else TwinConfig())
     c = sc.controller
     twin = sc.twin
     stages: list[float] = [sc.clock.now()]
@@ -609,6 +612,8 @@ def run_cup_demo(seed: int = 0, quick: bool = False, hot_side: Side | None = Non
     series = sc.rec.series()
     bounds = tuple((stages[k], stages[k + 1]) for k in range(5))
     figures.update(_figures(series, bounds, s, sc.events))
+    smp = sc.config.finger.smp  # S4's stiffness is read against this finger's SMP
+    figures["modulus_glassy_pa"], figures["modulus_rubbery_pa"] = smp.e_glassy_pa, smp.e_rubbery_pa
     return CupDemoResult(seed, side, chosen, ir_temps, background, bounds, series, figures,
                          sc.events, s)
 
@@ -713,7 +718,7 @@ S3_BAND_N = (0.5, 1.5)
 S5_BAND_N = (4.5, 7.5)
 
 
-def cup_task(seed: int = 0) -> TaskResult:
+def cup_task(seed: int = 0, config: TwinConfig | None = None) -> TaskResult:
     """The integrated cup demonstration as a task (quick settings): did every stage succeed?
 
     Criteria: ``right_cup_identified`` (S1 chose the room-temperature cup),
@@ -727,14 +732,14 @@ def cup_task(seed: int = 0) -> TaskResult:
     hand-over), ``handover_detected`` (within 1.5 s of the push), ``released`` (the
     true force under 0.05 N before the hand took the glass).
     """
-    return score_cup_demo(run_cup_demo(seed=seed, quick=True))
+    return score_cup_demo(run_cup_demo(seed=seed, quick=True, config=config))
 
 
 def score_cup_demo(r: CupDemoResult) -> TaskResult:
     """The task's criteria and figures for one run (see :func:`cup_task`)."""
     f = r.figures
-    smp = TwinConfig().finger.smp
-    stiff_share = (f["modulus_s5_pa"] - smp.e_rubbery_pa) / (smp.e_glassy_pa - smp.e_rubbery_pa)
+    glassy, rubbery = f["modulus_glassy_pa"], f["modulus_rubbery_pa"]
+    stiff_share = (f["modulus_s5_pa"] - rubbery) / (glassy - rubbery)
     approach_err = _approach_error_m(r)
     criteria = {
         "right_cup_identified": r.right_cup,

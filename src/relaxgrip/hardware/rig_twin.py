@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+from relaxgrip.errors import InputError
 from relaxgrip.hardware.rig_file import RigFile, load_rig
 from relaxgrip.twin import TwinConfig
 
@@ -36,8 +37,18 @@ def twin_config_for_rig(rig: RigFile, base: TwinConfig | None = None) -> TwinCon
     Returns
     -------
     TwinConfig
+
+    Raises
+    ------
+    InputError
+        The rig's RGB camera has distortion coefficients: the twin renders a
+        pinhole camera (``[rgb] dist = []`` for its twin).
     """
     cfg = base if base is not None else TwinConfig()
+    if cfg.rgb is not None and rig.rgb.mount.intrinsics.dist:
+        raise InputError(f"{rig.path}: [rgb] dist: the twin renders an undistorted pinhole "
+                         "camera; its twin needs dist = [] (undistort the frames, or leave "
+                         "the twin out of this rig)")
     sensor = None if cfg.force_sensor is None else rig.force_ref.sensor
     return replace(cfg, finger=rig.stiffness, heat=rig.heat, relax=rig.relax, motor=rig.motor,
                    rig=rig.geometry, contact_position_m=rig.finger.contact_m,

@@ -14,8 +14,8 @@ from relaxgrip.twin.objects import CATALOGUE, ObjectSpec, get_object
 from relaxgrip.twin.sensors import ForceSensorConfig, IrSensorConfig, RgbSensorConfig, SceneObject
 from relaxgrip.validate import check_positive, check_temp_c
 
-__all__ = ["MODELS_FROM", "SAME_RUNS_AS", "TWIN_VERSION", "MotorParams", "ScatterParams",
-           "TwinConfig"]
+__all__ = ["MODELS_FROM", "PAPER_FINGER_LENGTH_M", "SAME_RUNS_AS", "TWIN_VERSION",
+           "MotorParams", "ScatterParams", "TwinConfig"]
 
 #: Bumped whenever the twin's behaviour changes; every result records it.
 TWIN_VERSION = "relaxgrip-twin-v7"
@@ -30,6 +30,9 @@ SAME_RUNS_AS: tuple[str, ...] = ()
 #: shipped ICFN's force by +0.003 ± 0.030 N, its MAE 0.133 -> 0.136 N.  Retraining on
 #: this twin takes that back (docs/hold-experiments.md, session 57).
 MODELS_FROM: tuple[str, ...] = ("relaxgrip-twin-v6",)
+#: The paper's finger (m): experiments place their contacts where the paper did on it, at
+#: the same share of another rig's finger (:meth:`TwinConfig.paper_position_m`).
+PAPER_FINGER_LENGTH_M = 0.110
 
 
 @dataclass(frozen=True)
@@ -225,6 +228,14 @@ class TwinConfig:
     def object(self) -> ObjectSpec | None:
         """The object's catalogue entry (this twin's force ball for ``"force_ball"``), if any."""
         return None if self.object_name is None else self.object_spec(self.object_name)
+
+    def paper_position_m(self, position_m: float) -> float:
+        """Where ``position_m`` along the paper's finger falls on this twin's finger (m).
+
+        At the same share of the finger's length: the paper's contacts at 50-95 mm of
+        its 110 mm finger are at 57-108 mm of a 125 mm one, and where they are on ours.
+        """
+        return position_m * (self.finger.length_m / PAPER_FINGER_LENGTH_M)
 
     def object_spec(self, name: str) -> ObjectSpec:
         """A catalogue object by name; ``"force_ball"`` is this twin's :attr:`force_ball`.
