@@ -41,6 +41,7 @@ from relaxgrip.clock import Clock, VirtualClock
 from relaxgrip.control import (
     EstimatorKind,
     EventKind,
+    ForceControlConfig,
     GraspController,
     GraspPhase,
     GraspPlan,
@@ -534,6 +535,7 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
         try:
             gripper.reset()
             controller = GraspController(rig.geometry, bundle_estimator(kind, bundle, observer),
+                                         ForceControlConfig(stroke_mm=rig.motor.stroke_mm),
                                          heat=rig.heat)
         except BaseException:  # the port and the camera threads are not left open
             gripper.close()
@@ -543,6 +545,7 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
     cfg = replace(config if config is not None else TwinConfig(), object_name=object_name)
     virtual = VirtualClock(clock.now())
     controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
+                                 ForceControlConfig(stroke_mm=cfg.motor.stroke_mm),
                                  heat=cfg.heat)
     if backend == "emulator":
         from relaxgrip.hardware.emulator import ready_emulated_gripper

@@ -32,6 +32,7 @@ from relaxgrip.clock import VirtualClock
 from relaxgrip.control import (
     EstimatorKind,
     EventKind,
+    ForceControlConfig,
     GraspController,
     GraspPlan,
     LoopResult,
@@ -447,6 +448,7 @@ def run_hold(
     twin = _make_backend(backend, cfg, seed, clock)
     try:  # closed however it ends: the emulator's thread and pty with it
         controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
+                                     ForceControlConfig(stroke_mm=cfg.motor.stroke_mm),
                                      heat=cfg.heat)
         plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False,
                          grasped=_as_known(cfg) if locate_object else None)
@@ -484,7 +486,8 @@ def run_hold(
 def _as_known(config: TwinConfig) -> ProximityTarget | None:
     """The held object as the operator knows it: its width and colour (the rig's force ball's)."""
     spec = config.object
-    return None if spec is None else ProximityTarget(spec.width_m, spec.color_rgb)
+    return None if spec is None else ProximityTarget(spec.width_m, spec.color_rgb,
+                                                     grasp_position_m=config.contact_position_m)
 
 
 def _copy_at_onset(twin: GripperTwin, into: list[GripperTwin],

@@ -39,6 +39,7 @@ from relaxgrip.backend import Command, Observation
 from relaxgrip.clock import VirtualClock
 from relaxgrip.control import (
     EstimatorKind,
+    ForceControlConfig,
     GraspController,
     GraspPlan,
     bundle_estimator,
@@ -296,7 +297,7 @@ class _Scenario:
         self.models = models
         self.controller = GraspController(
             self.config.rig, bundle_estimator(settings.cup_estimator, models),
-            heat=self.config.heat)
+            ForceControlConfig(stroke_mm=self.config.motor.stroke_mm), heat=self.config.heat)
         self.controller.temperature.set_mode(StiffnessMode.STIFF)
         self.rec = _Recorder(self.config.finger.smp)
         self.events: list[dict[str, Any]] = []
@@ -390,9 +391,10 @@ class _Scenario:
         ``until`` ends the grasp part; ``during`` is called each step once in
         Sustain with the time since entering it.
         """
-        obj = get_object(name)
+        obj = self.config.object_spec(name)
         c = self.controller
-        c.perception.set_target(ProximityTarget(obj.width_m, obj.color_rgb))
+        c.perception.set_target(ProximityTarget(obj.width_m, obj.color_rgb,
+                                                grasp_position_m=self.config.contact_position_m))
         c.start(plan, self.clock.now())
         self.target_n = plan.target_n
         approached = False

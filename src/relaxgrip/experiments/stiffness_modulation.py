@@ -780,11 +780,11 @@ def run_grasp(
     clock = VirtualClock()
     twin = GripperTwin(cfg, seed=seed, clock=clock)
     recorder = _TruthRecorder(twin)
-    controller = GraspController(cfg.rig, bundle_estimator(est_kind, bundle),
+    cc = ForceControlConfig(stroke_mm=cfg.motor.stroke_mm)
+    controller = GraspController(cfg.rig, bundle_estimator(est_kind, bundle), cc,
                                  heat=cfg.heat)
     plan = GraspPlan(target_n=target_n, mode=kind, hold_s=hold_s, lift_mm=lift_mm,
                      sustain_s=sustain_s, release=False)
-    cc = ForceControlConfig()
     # Settling and re-zeroing, the full closing stroke at the approach speed, the
     # climb to the target, the lift: all bounded, with a margin for the force loop.
     budget = (cc.temp_settle_s + 5.0 + cc.stroke_mm / cc.approach_mm_s + 15.0 + hold_s
