@@ -75,7 +75,7 @@ def test_report_escapes_table_cells(tmp_path: Path):
 def test_a_failing_section_is_reported_and_the_others_kept(monkeypatch, capsys, tmp_path: Path):
     from relaxgrip import reproduce
 
-    def boom(out_dir: Path, quick: bool, seed: int) -> Section:
+    def boom(out_dir: Path, quick: bool, seed: int, config: object) -> Section:
         raise RuntimeError("the twin caught fire\nsecond line")
 
     monkeypatch.setitem(reproduce.SECTIONS, "boom", boom)

@@ -335,3 +335,25 @@ def test_unreadable_files(tmp_path: Path) -> None:
     bad.write_text("[serial\nport = 1\n", encoding="utf-8")
     with pytest.raises(InputError, match="is not valid TOML"):
         load_rig(bad)
+
+
+def test_an_emulator_rig_takes_what_it_gives_and_leaves_the_rest_to_the_twin() -> None:
+    emu = _load(DOCS / "rig-emulator.toml")
+    lab = _load(LAB)
+    for table in ("marker", "finger", "motor", "heaters", "force_ball"):
+        emu[table] = lab[table]
+    emu["rgb"].update({k: v for k, v in lab["rgb"].items() if k not in ("source", "device")})
+    rig = parse_rig(emu, "emu.toml")
+    assert rig.finger == load_rig(LAB).finger
+    assert rig.stiffness == load_rig(LAB).stiffness
+    assert rig.force_ref.source == "twin"
+    assert set(rig.from_twin) == {"force_ref"}
+    longer = _load(DOCS / "rig-emulator.toml")
+    longer["finger"] = {"length_mm": 125.0}  # the twin's beams are along a 110 mm finger
+    with pytest.raises(InputError, match=r"\[finger\] lacks beam_positions_mm \(mm\)"):
+        parse_rig(longer, "emu.toml")
+    narrow = _load(DOCS / "rig-emulator.toml")
+    narrow["rig"]["open_aperture_mm"] = 100.0
+    with pytest.raises(InputError, match=r"open_aperture_mm 100 is less than the twin's stroke "
+                                         r"of 148 mm: give the rig's \[motor\]"):
+        parse_rig(narrow, "emu.toml")

@@ -427,7 +427,7 @@ class ForceRefSpec:
         Conversion ``force_n = reading * scale + offset_n`` (N per reading
         unit; ``mcu``: per ADC count).
     offset_n : float
-        Offset of that conversion (N); the tare step zeroes the force.
+        Offset of that conversion (N).
     port : str or None
         The gauge's serial port (``serial`` only).
     baud : int or None
@@ -969,7 +969,10 @@ def parse_rig(data: dict[str, Any], where: str = "rig file") -> RigFile:
     left: list[str] = []
     smp, relax, twin_smp = _material(tables["finger"])
     stiffness, twin_stiffness = _stiffness(tables["finger"], finger.length_m, smp)
-    left += ["material"] * twin_smp + ["finger stiffness"] * twin_stiffness
+    if twin_smp:
+        left.append("material")
+    if twin_stiffness:
+        left.append("finger stiffness")
     gripper: dict[str, _Table | None] = {}
     for key, holds in _GRIPPER_TABLES.items():
         if key in data:
@@ -984,6 +987,9 @@ def parse_rig(data: dict[str, Any], where: str = "rig file") -> RigFile:
     left += thermal_left
     motor_t, ref_t, ball_t = gripper["motor"], gripper["force_ref"], gripper["force_ball"]
     motor = twin.motor if motor_t is None else _motor(motor_t, aperture)
+    if motor_t is None and motor.stroke_mm * 1e-3 > aperture:
+        raise InputError(f"{where}: [rig] open_aperture_mm {aperture * 1e3:g} is less than the "
+                         f"twin's stroke of {motor.stroke_mm:g} mm: give the rig's [motor]")
     force_ref = (ForceRefSpec("twin", *_twin_sensor()) if ref_t is None
                  else _force_ref(ref_t, emulated))
     force_ball = twin.force_ball if ball_t is None else _force_ball(ball_t)
