@@ -12,6 +12,7 @@ import relaxgrip.experiments.controlled_hold as controlled_hold
 from relaxgrip.control import EstimatorKind
 from relaxgrip.experiments.tasks import TASKS
 from relaxgrip.reproduce import SECTIONS, holding_section
+from relaxgrip.twin import TwinConfig
 from tests.clitools import run_main
 
 
@@ -60,7 +61,7 @@ def test_the_holding_section_holds_what_hold_compare_holds(monkeypatch: pytest.M
         return real(*args, **{**kwargs, "duration_s": 6.0})
 
     monkeypatch.setattr(controlled_hold, "compare_holds", short)
-    section = holding_section(tmp_path, quick=True, seed=0)
+    section = holding_section(tmp_path, quick=True, seed=0, config=TwinConfig())
     holds = section.results["holds"]
     assert list(holds) == list(compared) == [kind.value for kind in EstimatorKind]
     for name, hold in holds.items():
@@ -82,3 +83,18 @@ def test_the_scenarios_finding_says_whether_the_observer_is_ahead() -> None:
     assert "1.0 times the observer's" in alike
     assert "Eq. 10 assumes" not in alike
     assert "branch states" in _scenarios_finding([1.0, 1.3], 140.0)  # one apart: not alike
+
+
+def test_reproduce_runs_on_the_twin_of_the_rig_given(monkeypatch, capsys, tmp_path: Path):
+    from tests.rigs import RIG_FILES
+
+    out = tmp_path / "lab"
+    code, _, err = run_main(["reproduce", "--quick", "--section", "characterization",
+                             "--out", out, "--rig", RIG_FILES["lab"], "--jobs", "1"],
+                            monkeypatch, capsys)
+    assert code == 0, err
+    results = json.loads((out / "results.json").read_text())
+    assert results["rig"] == str(RIG_FILES["lab"])
+    assert f"of the rig `{RIG_FILES['lab']}`" in (out / "report.md").read_text()
+    drops = results["sections"]["characterization"]["results"]["k80_drop_pct"].values()
+    assert all(abs(d - 36.6) < 0.5 for d in drops)  # the lab's finger, not ours (about 40 %)

@@ -35,7 +35,7 @@ from relaxgrip.fileio import (
     write_text_atomically,
 )
 from relaxgrip.serialize import json_safe
-from relaxgrip.twin import TWIN_VERSION
+from relaxgrip.twin import TWIN_VERSION, TwinConfig
 from relaxgrip.validate import check_jobs
 
 __all__ = ["REPORT_FILES", "SECTIONS", "TITLES", "Row", "Section", "check_request", "reproduce",
@@ -107,12 +107,12 @@ TITLES: dict[str, str] = {
 # --- sections ---------------------------------------------------------------------------
 
 
-def characterization_section(out_dir: Path, quick: bool, seed: int) -> Section:
+def characterization_section(out_dir: Path, quick: bool, seed: int, config: TwinConfig) -> Section:
     """Stiffness characterization (Fig. "deform"): k80, z(80 mm), A_z, local stiffness."""
     from relaxgrip.experiments.characterization import characterize
     from relaxgrip.plots.characterization import plot_characterization
 
-    result = characterize()
+    result = characterize(config.finger)
     figure = "characterization.png"
     plot_characterization(result, out_dir / figure)
     d = result.to_dict()
@@ -137,7 +137,7 @@ def characterization_section(out_dir: Path, quick: bool, seed: int) -> Section:
                    finding, figure, d)
 
 
-def accuracy_section(out_dir: Path, quick: bool, seed: int) -> Section:
+def accuracy_section(out_dir: Path, quick: bool, seed: int, config: TwinConfig) -> Section:
     """Force perception and relaxation accuracy (Fig. "acc") of the shipped models.
 
     A fresh dataset is generated on a seed the shipped models never saw, and
@@ -157,7 +157,7 @@ def accuracy_section(out_dir: Path, quick: bool, seed: int) -> Section:
                        rcfn_sequences=repeats + (18 if quick else 180), seed=1000 + seed,
                        hold_s=140.0 if quick else 280.0)
     with tempfile.TemporaryDirectory(prefix="relaxgrip-reproduce-") as tmp:
-        build_dataset(Path(tmp) / "data", spec, jobs=1)
+        build_dataset(Path(tmp) / "data", spec, jobs=1, config=config)
         data = load_dataset(Path(tmp) / "data")
     result = evaluate(data, load_default_models(), split="all")
     figure = "accuracy.png"
@@ -188,7 +188,7 @@ def accuracy_section(out_dir: Path, quick: bool, seed: int) -> Section:
                    finding, figure, d)
 
 
-def holding_section(out_dir: Path, quick: bool, seed: int) -> Section:
+def holding_section(out_dir: Path, quick: bool, seed: int, config: TwinConfig) -> Section:
     """The 280 s relaxation-aware hold (Fig. "sphere"): every estimator on one seed.
 
     The paper's three (fixed, icfn, relax) and the observer, as ``relaxgrip
@@ -198,7 +198,7 @@ def holding_section(out_dir: Path, quick: bool, seed: int) -> Section:
     from relaxgrip.plots.holding import plot_hold_comparison
 
     duration = 140.0 if quick else 280.0
-    result = compare_holds(duration_s=duration, seed=seed)
+    result = compare_holds(duration_s=duration, seed=seed, config=config)
     figure = "holding.png"
     plot_hold_comparison(result, out_dir / figure)
     d = result.to_dict()
@@ -223,12 +223,12 @@ def holding_section(out_dir: Path, quick: bool, seed: int) -> Section:
                    finding, figure, d)
 
 
-def timing_section(out_dir: Path, quick: bool, seed: int) -> Section:
+def timing_section(out_dir: Path, quick: bool, seed: int, config: TwinConfig) -> Section:
     """Latency per stage (Fig. "network" b)."""
     from relaxgrip.experiments.timing import PAPER_LATENCY_MS, run_timing
     from relaxgrip.plots.timing import plot_timing
 
-    result = run_timing(seed=seed, quick=quick)
+    result = run_timing(seed=seed, quick=quick, config=config)
     figure = "timing.png"
     plot_timing(result, out_dir / figure)
     m = result.median_ms
@@ -250,13 +250,13 @@ def timing_section(out_dir: Path, quick: bool, seed: int) -> Section:
                    result.to_dict())
 
 
-def scenarios_section(out_dir: Path, quick: bool, seed: int) -> Section:
+def scenarios_section(out_dir: Path, quick: bool, seed: int, config: TwinConfig) -> Section:
     """``relax`` and ``observer`` where Eq. 10's assumptions break during the hold."""
     from relaxgrip.experiments.scenarios import SCENARIOS, compare_scenarios
     from relaxgrip.plots.scenarios import plot_scenarios
 
     duration = 140.0 if quick else 280.0
-    result = compare_scenarios(seed=seed, duration_s=duration)
+    result = compare_scenarios(seed=seed, duration_s=duration, config=config)
     figure = "scenarios.png"
     plot_scenarios(result, out_dir / figure)
     d = result.to_dict()
@@ -310,18 +310,18 @@ def _merge_verdicts(into: dict[str, dict[str, Any]], more: dict[str, dict[str, A
         into.setdefault(name, {}).update(by_seed)
 
 
-def modulation_section(out_dir: Path, quick: bool, seed: int) -> Section:
+def modulation_section(out_dir: Path, quick: bool, seed: int, config: TwinConfig) -> Section:
     """Real-time force perception under stiffness modulation (Fig. "grasp")."""
     from relaxgrip.experiments.stiffness_modulation import run_stiffness_modulation
     from relaxgrip.plots.stiffness_modulation import plot_stiffness_modulation
 
-    result = run_stiffness_modulation(seed, quick=quick)
+    result = run_stiffness_modulation(seed, quick=quick, config=config)
     figure = "stiffness_modulation.png"
     plot_stiffness_modulation(result, out_dir / figure)
     d = result.to_dict()
     verdicts = _verdicts({**result.contact_tasks(), **result.grasp_tasks()}, seed)
     for extra in _extra_seeds(quick, seed):
-        more = run_stiffness_modulation(extra, quick=quick)
+        more = run_stiffness_modulation(extra, quick=quick, config=config)
         _merge_verdicts(verdicts, _verdicts({**more.contact_tasks(), **more.grasp_tasks()},
                                             extra))
     d["task_verdicts"] = verdicts
@@ -352,18 +352,19 @@ def modulation_section(out_dir: Path, quick: bool, seed: int) -> Section:
     return Section("modulation", TITLES["modulation"], rows, finding, figure, d)
 
 
-def multimode_section(out_dir: Path, quick: bool, seed: int) -> Section:
+def multimode_section(out_dir: Path, quick: bool, seed: int, config: TwinConfig) -> Section:
     """Multi-mode grasping (Fig. "modes"): 1 kg pinch, aluminium can, adhesive flat box."""
     from relaxgrip.experiments.multimode import run_multimode
     from relaxgrip.plots.multimode import plot_multimode
 
-    result = run_multimode(seed, quick=quick)
+    result = run_multimode(seed, quick=quick, config=config)
     figure = "multimode.png"
     plot_multimode(result, out_dir / figure)
     d = result.to_dict()
     verdicts = _verdicts(result.tasks(), seed)
     for extra in _extra_seeds(quick, seed):
-        _merge_verdicts(verdicts, _verdicts(run_multimode(extra, quick=quick).tasks(), extra))
+        _merge_verdicts(verdicts, _verdicts(run_multimode(extra, quick=quick, config=config)
+                                            .tasks(), extra))
     d["task_verdicts"] = verdicts
     pinch = {m: r.to_dict() for m, r in result.pinch.items()}
     can = {m: r.to_dict() for m, r in result.can.items()}
@@ -388,12 +389,12 @@ def multimode_section(out_dir: Path, quick: bool, seed: int) -> Section:
     return Section("multimode", TITLES["multimode"], rows, finding, figure, d)
 
 
-def cup_section(out_dir: Path, quick: bool, seed: int) -> Section:
+def cup_section(out_dir: Path, quick: bool, seed: int, config: TwinConfig) -> Section:
     """The integrated demo (Fig. "cup"): identify, approach, pour, cool, hand over."""
     from relaxgrip.experiments.cup_demo import run_cup_demo, score_cup_demo
     from relaxgrip.plots.cup_demo import plot_cup_demo
 
-    result = run_cup_demo(seed=seed, quick=quick)
+    result = run_cup_demo(seed=seed, quick=quick, config=config)
     figure = "cup_demo.png"
     plot_cup_demo(result, out_dir / figure)
     d = result.to_dict()
@@ -401,7 +402,7 @@ def cup_section(out_dir: Path, quick: bool, seed: int) -> Section:
     verdicts = _verdicts({"cup": task}, seed)
     for extra in _extra_seeds(quick, seed):
         _merge_verdicts(verdicts, _verdicts({"cup": score_cup_demo(
-            run_cup_demo(seed=extra, quick=quick))}, extra))
+            run_cup_demo(seed=extra, quick=quick, config=config))}, extra))
     d["task_verdicts"] = verdicts
     d["task"] = task.to_dict()
     f = task.figures
@@ -430,7 +431,7 @@ def cup_section(out_dir: Path, quick: bool, seed: int) -> Section:
 
 
 #: Section key -> runner, in the report's (the paper's) order.
-SECTIONS: dict[str, Callable[[Path, bool, int], Section]] = {
+SECTIONS: dict[str, Callable[[Path, bool, int, TwinConfig], Section]] = {
     "characterization": characterization_section,
     "accuracy": accuracy_section,
     "holding": holding_section,
@@ -459,13 +460,14 @@ def _is_report_dir(directory: Path) -> bool:
     return not names or any((directory / name).is_file() for name in REPORT_FILES)
 
 
-def _run_section(key: str, out_dir: Path, quick: bool, seed: int) -> Section:
+def _run_section(key: str, out_dir: Path, quick: bool, seed: int,
+                 config: TwinConfig) -> Section:
     import cv2
 
     cv2.setNumThreads(1)
     start = time.perf_counter()
     try:
-        section = SECTIONS[key](out_dir, quick, seed)
+        section = SECTIONS[key](out_dir, quick, seed, config)
     except Exception as exc:  # one broken experiment must not cost the others' results
         message = f"{type(exc).__name__}: {exc}".splitlines()[0]
         return Section(key, TITLES[key], [], f"FAILED: {message}", None, {"error": message},
@@ -509,6 +511,8 @@ def reproduce(
     jobs: int = 2,
     only: Sequence[str] | None = None,
     progress: Callable[[Section, int, int], None] | None = None,
+    config: TwinConfig | None = None,
+    rig: str | None = None,
 ) -> list[Section]:
     """Run the experiments, draw their figures into ``out_dir`` and write the report.
 
@@ -526,6 +530,10 @@ def reproduce(
         Run these sections only (default: all).
     progress : callable, optional
         Called as ``progress(section, done, total)`` when a section finishes.
+    config : TwinConfig, optional
+        The twin every experiment runs on (default: our gripper).
+    rig : str, optional
+        The rig file it is the twin of, for the report (default: ours).
 
     Returns
     -------
@@ -547,7 +555,9 @@ def reproduce(
     # beside the old report and no half-written file.
     with tempfile.TemporaryDirectory(prefix="relaxgrip-reproduce-") as scratch:
         work = Path(scratch)
-        for section in parallel(delayed(_run_section)(k, work, quick, seed) for k in ordered):
+        cfg = config if config is not None else TwinConfig()
+        for section in parallel(delayed(_run_section)(k, work, quick, seed, cfg)
+                                for k in ordered):
             done[section.key] = section
             if progress is not None:
                 progress(section, len(done), len(ordered))
@@ -558,7 +568,7 @@ def reproduce(
             write_files_atomically(out_dir,
                                    [(name, (work / name).read_bytes()) for name in figures])
             write_report(out_dir, sections, quick=quick, seed=seed,
-                         seconds=time.perf_counter() - start)
+                         seconds=time.perf_counter() - start, rig=rig)
     return sections
 
 
@@ -567,13 +577,15 @@ def _cell(text: str) -> str:
 
 
 def write_report(out_dir: Path, sections: Sequence[Section], quick: bool, seed: int,
-                 seconds: float) -> None:
-    """Write ``report.md`` and ``results.json`` for ``sections`` into ``out_dir``."""
+                 seconds: float, rig: str | None = None) -> None:
+    """Write ``report.md`` and ``results.json`` for ``sections`` into ``out_dir`` (the twin of
+    ``rig``, our gripper if None)."""
     mode = "quick" if quick else "full"
+    of_rig = "" if rig is None else f" of the rig `{rig}`"
     lines = [
         "# relaxgrip: the paper's experiments, reproduced on the twin",
         "",
-        f"Twin `{TWIN_VERSION}`, seed {seed}, {mode} run "
+        f"Twin `{TWIN_VERSION}`{of_rig}, seed {seed}, {mode} run "
         f"(`relaxgrip reproduce{' --quick' if quick else ''}`), {seconds:.0f} s on "
         f"{os.cpu_count()} cores. Each section states what the paper reports beside what we "
         "measured in this run.",
@@ -601,6 +613,7 @@ def write_report(out_dir: Path, sections: Sequence[Section], quick: bool, seed: 
     write_text_atomically(out_dir / "report.md", "\n".join(lines))
     payload = {
         "twin_version": TWIN_VERSION,
+        **({} if rig is None else {"rig": rig}),
         "seed": seed,
         "quick": quick,
         "seconds": seconds,

@@ -88,7 +88,7 @@ def test_the_sheet_takes_the_marker_from_the_rig_and_the_paper_asked(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
     rig = tmp_path / "rig.toml"
-    rig.write_text((DOCS / "rig-example.toml").read_text(encoding="utf-8")
+    rig.write_text((DOCS / "rigs" / "relaxgrip.toml").read_text(encoding="utf-8")
                    .replace("id = 0", "id = 7").replace("size_mm = 12.0", "size_mm = 15.0"),
                    encoding="utf-8")
     code, out, err = run_main(["make-board", "--out", tmp_path / "s", "--rig", rig,
@@ -109,7 +109,7 @@ def test_the_sheet_takes_the_marker_from_the_rig_and_the_paper_asked(
      "270 x 210 mm) and the 12 mm finger marker need 294 x 294 mm, more than A5 "
      "(148 x 210 mm) holds"),
     (["--paper", "B5"], "--paper must be one of A3, A4, A5, letter, legal"),
-    (["--rig", str(DOCS / "rig-example.toml"), "--marker-id", "3"], "not both"),
+    (["--rig", str(DOCS / "rigs" / "relaxgrip.toml"), "--marker-id", "3"], "not both"),
     (["--marker-id", "50"], "--marker-id must be 0 to 49 for DICT_4X4_50"),
     (["--squares", "9by7"], "--squares must be COLUMNSxROWS"),
     (["--marker-mm", "12"], "board marker must be 20-95 % of the square"),
@@ -143,7 +143,7 @@ def views_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def _rig(tmp_path: Path, zero_pose: bool = False) -> Path:
     rig = tmp_path / "rig.toml"
-    text = (DOCS / "rig-example.toml").read_text(encoding="utf-8")
+    text = (DOCS / "rigs" / "relaxgrip.toml").read_text(encoding="utf-8")
     if zero_pose:
         text += ("\n[zero_pose]\nposition_mm = [1.0, 2.0, 80.0]\nrotation_deg = [0, 0, 0]\n"
                  "frames = 30\nspread_mm = 0.01\n")
@@ -202,13 +202,15 @@ def test_calibrate_camera_bad_input(views_dir: Path, tmp_path: Path,
     (broken / "a.png").write_bytes((views_dir / "view-00.png").read_bytes())
     (broken / "b.png").write_bytes(b"\x89PNG\r\n\x1a\n truncated")
     no_rgb = tmp_path / "no-rgb.toml"
-    text = (DOCS / "rig-example.toml").read_text(encoding="utf-8")
+    text = (DOCS / "rigs" / "relaxgrip.toml").read_text(encoding="utf-8")
     no_rgb.write_text(re.sub(r"\[rgb\].*?(?=\[ir\])", "", text, flags=re.S), encoding="utf-8")
     small = tmp_path / "small.toml"
     small.write_text(text.replace("width_px = 640\nheight_px = 480",
                                   "width_px = 320\nheight_px = 240")
                      .replace("cx_px = 319.5", "cx_px = 159.5")
-                     .replace("cy_px = 239.5", "cy_px = 119.5"), encoding="utf-8")
+                     .replace("cy_px = 239.5", "cy_px = 119.5")
+                     .replace("fx_px = 600.0\nfy_px = 600.0", "fx_px = 300.0\nfy_px = 300.0"),
+                     encoding="utf-8")
     cases: list[tuple[list[str | Path], str]] = [
         ([empty], "empty: no image files (.png"),
         ([tmp_path / "missing"], "no such folder of board images"),

@@ -75,7 +75,7 @@ def test_report_escapes_table_cells(tmp_path: Path):
 def test_a_failing_section_is_reported_and_the_others_kept(monkeypatch, capsys, tmp_path: Path):
     from relaxgrip import reproduce
 
-    def boom(out_dir: Path, quick: bool, seed: int) -> Section:
+    def boom(out_dir: Path, quick: bool, seed: int, config: object) -> Section:
         raise RuntimeError("the twin caught fire\nsecond line")
 
     monkeypatch.setitem(reproduce.SECTIONS, "boom", boom)
@@ -118,7 +118,7 @@ def test_a_failed_task_exits_1(monkeypatch, capsys, json_flag):
     import relaxgrip.experiments.tasks as tasks
 
     failed = TaskResult("hammer", 0, {"lifted_and_held": False}, {"peak_true_n": 1.0})
-    monkeypatch.setattr(tasks, "task_function", lambda name: lambda seed: failed)
+    monkeypatch.setattr(tasks, "task_function", lambda name: lambda seed, config: failed)
     code, out, err = run_main(["task", "hammer", *json_flag], monkeypatch, capsys)
     assert code == 1, err
     assert "Traceback" not in err
@@ -144,7 +144,7 @@ def test_reproduce_refuses_a_directory_that_is_not_a_report(monkeypatch, capsys,
 
 def _fake_section(name: str, interrupt: bool = False):
     """A section that draws a small figure, then returns or is interrupted (Ctrl-C)."""
-    def section(out_dir: Path, quick: bool, seed: int) -> Section:
+    def section(out_dir: Path, quick: bool, seed: int, config: object) -> Section:
         (out_dir / name).write_bytes(b"figure")
         if interrupt:
             raise KeyboardInterrupt

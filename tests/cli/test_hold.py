@@ -9,17 +9,19 @@ import numpy as np
 import pytest
 
 from tests.clitools import run_main
+from tests.rigs import RIG_FILES, RIGS
 
 KEYS = {"twin_version", "estimator", "target_n", "temp_c", "seed", "mae_n", "rmse_n",
         "mean_signed_error_n", "median_signed_error_n", "iqr_n", "est_error_mean_n",
         "est_rmse_n", "onset_error_n", "abs_error_iqr_n"}
 
 
-def test_hold_json_has_the_paper_statistics(monkeypatch, capsys, tmp_path: Path):
+@pytest.mark.parametrize("rig", RIGS)
+def test_hold_json_has_the_paper_statistics(monkeypatch, capsys, tmp_path: Path, rig: str):
     plot = tmp_path / "hold.png"
     code, out, err = run_main(["hold", "--estimator", "icfn", "--duration-s", "14",
-                               "--target-n", "3", "--seed", "1", "--plot", plot, "--json"],
-                              monkeypatch, capsys)
+                               "--target-n", "3", "--seed", "1", "--plot", plot, "--json",
+                               "--rig", RIG_FILES[rig]], monkeypatch, capsys)
     assert code == 0, err
     d = json.loads(out)
     assert d.keys() >= KEYS

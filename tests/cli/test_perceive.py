@@ -14,6 +14,7 @@ from relaxgrip.rig import RigGeometry
 from relaxgrip.twin.render_rgb import RgbRenderer
 from relaxgrip.twin.sensors import RgbSensorConfig
 from tests.clitools import assert_one_error_line, run_cli, run_main
+from tests.rigs import RIG_FILES, twin_of
 
 if TYPE_CHECKING:
     from PIL import Image
@@ -41,6 +42,29 @@ def test_json_pose_matches_the_rendered_pose(marker_png: tuple[Path, np.ndarray]
     assert np.allclose(marker["tvec_m"], pose[:3, 3], atol=5e-5)
     rot, _ = cv2.Rodrigues(np.asarray(marker["rvec"]))
     assert np.allclose(rot, pose[:3, :3], atol=2e-3)
+
+
+def test_the_rigs_camera_and_marker_read_a_frame_of_its_twin(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    rig = twin_of("lab").rig
+    pose = rig.marker2cam(0.004, 0.05)
+    image = RgbRenderer(rig, RgbSensorConfig(), 0).render(0, pose)
+    path = tmp_path / "lab.png"
+    cv2.imwrite(str(path), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+    code, out, err = run_main(["perceive", path, "--rig", RIG_FILES["lab"], "--json"],
+                              monkeypatch, capsys)
+    assert code == 0, err
+    got = json.loads(out)
+    assert (got["dictionary"], got["marker_m"]) == ("4X4_50", rig.marker.size_m)
+    (marker,) = got["markers"]
+    assert marker["id"] == 7
+    assert np.allclose(marker["tvec_m"], pose[:3, 3], atol=5e-5)
+    code, out, err = run_main(["perceive", path, "--rig", RIG_FILES["lab"], "--fx", "600"],
+                              monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "--rig gives the camera and the marker: leave out --fx")
+    code, out, err = run_main(["perceive", path, "--rig", RIG_FILES["ours"]], monkeypatch, capsys)
+    assert_one_error_line(code, out, err, "is 800x600 pixels, the rig's RGB camera 640x480")
 
 
 def test_image_without_markers_is_an_empty_list(

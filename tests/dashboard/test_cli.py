@@ -226,3 +226,24 @@ def test_a_decoding_error_of_the_application_keeps_its_traceback() -> None:
     assert record.exc_info is not None
     assert record.levelno == logging.ERROR
     assert record.getMessage() == "Exception in ASGI application\n"
+
+
+def test_the_session_runs_the_twin_of_the_rig_given(make_session) -> None:
+    from relaxgrip.clock import WallClock
+    from relaxgrip.dashboard.session import open_session
+    from relaxgrip.twin import GripperTwin
+    from tests.rigs import twin_of
+
+    lab = twin_of("lab")
+    session = make_session(config=lab)
+    try:
+        assert isinstance(session.backend, GripperTwin)
+        assert session.backend.config.rig == lab.rig
+        assert session.backend.config.finger == lab.finger
+        assert session.controller.rig == lab.rig
+        assert session.controller.temperature.heat == lab.heat
+        assert session.controller.config.stroke_mm == lab.motor.stroke_mm
+    finally:
+        session.close()
+    with pytest.raises(InputError, match="--rig chooses the twin's gripper; a serial backend"):
+        open_session("serial:rig.toml", clock=WallClock(), config=lab)

@@ -16,6 +16,7 @@ from relaxgrip.experiments.tasks import run_task
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.plots.stiffness_modulation import plot_stiffness_modulation
 from relaxgrip.twin import GripperTwin, TwinConfig, get_object
+from tests.rigs import twin_of
 
 
 @pytest.fixture(scope="module")
@@ -88,9 +89,10 @@ def test_scoring_fails_when_the_stiffness_effect_is_reversed(wrench_runs):
     assert not result.criteria["stiffer_larger_peak_est_n"]
 
 
-@pytest.mark.parametrize(("name", "seed"), [("feather", 1), ("brush", 0)])
-def test_weak_contacts_are_detected_and_amplified_when_compliant(name, seed):
-    result = run_task(name, seed)
+@pytest.mark.parametrize(("name", "seed", "rig"), [("feather", 1, "ours"), ("brush", 0, "ours"),
+                                                 ("feather", 1, "lab")])
+def test_weak_contacts_are_detected_and_amplified_when_compliant(name, seed, rig):
+    result = run_task(name, seed, twin_of(rig))
     assert result.success, result.criteria
     f = result.figures
     for mode in ("stiff", "medium", "compliant"):

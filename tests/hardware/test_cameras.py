@@ -76,7 +76,7 @@ def _wait_frame(source: Any, clock: VirtualClock) -> Frame:
 
 
 def test_rgb_source_sets_the_camera_converts_to_rgb_and_detects_a_stall() -> None:
-    rig = load_rig(DOCS / "rig-example.toml")
+    rig = load_rig(DOCS / "rigs" / "relaxgrip.toml")
     clock = VirtualClock(5.0)
     bgr = np.zeros((480, 640, 3), np.uint8)
     bgr[..., 0] = 200  # blue in OpenCV's order
@@ -102,7 +102,7 @@ def test_rgb_source_sets_the_camera_converts_to_rgb_and_detects_a_stall() -> Non
 
 
 def test_thermal_source_asks_for_y16_and_converts_centikelvin() -> None:
-    rig = load_rig(DOCS / "rig-example.toml")
+    rig = load_rig(DOCS / "rigs" / "relaxgrip.toml")
     clock = VirtualClock()
     raw = np.full((192, 256), 31315, np.uint16)  # 40.00 °C in centi-kelvin
     as_bytes = np.frombuffer(raw.tobytes(), np.uint8).reshape(1, -1)  # how some backends hand Y16
@@ -128,7 +128,7 @@ def test_thermal_source_asks_for_y16_and_converts_centikelvin() -> None:
 
 
 def test_thermal_source_rejects_8_bit_frames() -> None:
-    rig = load_rig(DOCS / "rig-example.toml")
+    rig = load_rig(DOCS / "rigs" / "relaxgrip.toml")
     cap = FakeCapture([np.zeros((192, 256, 3), np.uint8)])
     source = UvcThermalSource(rig.ir, VirtualClock(), capture_factory=lambda dev: cap)
     source.start()
@@ -141,7 +141,7 @@ def test_thermal_source_rejects_8_bit_frames() -> None:
 
 
 def test_camera_that_does_not_open_and_a_stall_before_any_frame() -> None:
-    rig = load_rig(DOCS / "rig-example.toml")
+    rig = load_rig(DOCS / "rigs" / "relaxgrip.toml")
     closed = OpenCvRgbSource(rig.rgb, VirtualClock(),
                              capture_factory=lambda dev: FakeCapture([], opened=False))
     with pytest.raises(CameraError, match="cannot open RGB camera 0"):
@@ -157,7 +157,7 @@ def test_camera_that_does_not_open_and_a_stall_before_any_frame() -> None:
 
 
 def test_rig_file_names_the_sources() -> None:
-    rig = load_rig(DOCS / "rig-example.toml")
+    rig = load_rig(DOCS / "rigs" / "relaxgrip.toml")
     rgb, ir = open_frame_sources(rig, VirtualClock())
     assert isinstance(rgb, OpenCvRgbSource)
     assert isinstance(ir, UvcThermalSource)
@@ -283,7 +283,7 @@ def test_a_camera_stuck_in_read_is_released_after_the_read_not_beside_it() -> No
             super().release()
 
     cap = StuckCapture()
-    source = OpenCvRgbSource(load_rig(DOCS / "rig-example.toml").rgb, VirtualClock(),
+    source = OpenCvRgbSource(load_rig(DOCS / "rigs" / "relaxgrip.toml").rgb, VirtualClock(),
                              capture_factory=lambda dev: cap)
     source.start()
     assert cap.in_read.wait(5.0)
@@ -320,7 +320,7 @@ def test_starting_a_running_camera_opens_nothing_and_a_given_up_reader_still_sto
         caps.append(StuckCapture() if not caps else FakeCapture([]))
         return caps[-1]
 
-    source = OpenCvRgbSource(load_rig(DOCS / "rig-example.toml").rgb, VirtualClock(),
+    source = OpenCvRgbSource(load_rig(DOCS / "rigs" / "relaxgrip.toml").rgb, VirtualClock(),
                              capture_factory=factory)
     source.start()
     source.start()
@@ -345,7 +345,7 @@ def test_starting_a_running_camera_opens_nothing_and_a_given_up_reader_still_sto
 
 @pytest.mark.parametrize("channels", [2, 4])
 def test_an_rgb_frame_with_another_channel_count_is_named(channels: int) -> None:
-    rig = load_rig(DOCS / "rig-example.toml")
+    rig = load_rig(DOCS / "rigs" / "relaxgrip.toml")
     clock = VirtualClock()
     grey = FakeCapture([np.full((480, 640, 1), 90, np.uint8)])
     source = OpenCvRgbSource(rig.rgb, clock, capture_factory=lambda dev: grey)
@@ -374,7 +374,7 @@ def test_a_camera_whose_read_raises_is_reported_not_stalled() -> None:
             raise cv2.error("(-2:Unspecified error) in function 'read'\n> driver gone")
 
     cap = BrokenCapture([])
-    source = OpenCvRgbSource(load_rig(DOCS / "rig-example.toml").rgb, VirtualClock(),
+    source = OpenCvRgbSource(load_rig(DOCS / "rigs" / "relaxgrip.toml").rgb, VirtualClock(),
                              capture_factory=lambda dev: cap)
     source.start()
     try:

@@ -19,14 +19,18 @@ from relaxgrip.hardware.protocol.codec import FaultFlag
 from relaxgrip.hardware.rig_file import load_rig
 from relaxgrip.perception.rig_check import check_rig
 from relaxgrip.twin import GripperTwin, TwinConfig
+from tests.rigs import RIGS, twin_of
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
 
 
-@pytest.fixture
-def emulated() -> Iterator[tuple[SerialGripper, McuEmulator, VirtualClock]]:
+@pytest.fixture(params=RIGS)
+def emulated(request: pytest.FixtureRequest
+             ) -> Iterator[tuple[SerialGripper, McuEmulator, VirtualClock]]:
+    """The twin of each example rig behind the emulator."""
     clock = VirtualClock()
-    gripper, emu = open_emulated_gripper(seed=3, clock=clock, grace_s=1.0)
+    gripper, emu = open_emulated_gripper(twin_of(request.param), seed=3, clock=clock,
+                                         grace_s=1.0)
     yield gripper, emu, clock
     gripper.close()
     emu.stop()
@@ -45,9 +49,9 @@ def test_serial_gripper_on_the_emulator_passes_check_backend(
 
 def test_lockstep_sees_exactly_what_the_twin_sees(
         emulated: tuple[SerialGripper, McuEmulator, VirtualClock]) -> None:
-    gripper, _, clock = emulated
+    gripper, emu, clock = emulated
     twin_clock = VirtualClock()
-    twin = GripperTwin(TwinConfig(), seed=3, clock=twin_clock)
+    twin = GripperTwin(emu.config, seed=3, clock=twin_clock)
     obs_e, obs_t = gripper.reset(), twin.observe()
     for k in range(45):  # 1.5 s at 30 Hz: 45 RGB frames and two IR frames
         cmd = Command(motor_velocity_mm_s=8.0 if k < 30 else -4.0, heater_duty=(0.25, 0.5))

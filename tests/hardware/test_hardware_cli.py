@@ -15,6 +15,7 @@ import relaxgrip.hardware.emulator as emulator_module
 from tests.clitools import assert_one_error_line, run_main
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
+OURS = DOCS / "rigs" / "relaxgrip.toml"
 
 
 def _run(*args: str) -> subprocess.CompletedProcess[str]:
@@ -24,7 +25,7 @@ def _run(*args: str) -> subprocess.CompletedProcess[str]:
 
 def test_check_rig_bad_file_and_missing_device(tmp_path: Path) -> None:
     bad = tmp_path / "bad.toml"
-    bad.write_text((DOCS / "rig-example.toml").read_text(encoding="utf-8")
+    bad.write_text(OURS.read_text(encoding="utf-8")
                    .replace("fps = 30.0", "fps = -1.0"), encoding="utf-8")
     out = _run("check-rig", str(bad))
     assert out.returncode == 2
@@ -32,7 +33,7 @@ def test_check_rig_bad_file_and_missing_device(tmp_path: Path) -> None:
     assert "[rgb] fps must be > 0" in out.stderr
     if Path("/dev/ttyACM0").exists():  # a real MCU is plugged in: nothing is missing
         return
-    out = _run("check-rig", str(DOCS / "rig-example.toml"))
+    out = _run("check-rig", str(OURS))
     assert out.returncode == 2
     assert "cannot open serial port /dev/ttyACM0" in out.stderr
 
@@ -47,11 +48,11 @@ def test_check_rig_exits_1_when_the_files_marker_is_not_on_the_frame(
                                   float("nan"), float("nan"), [0])
 
     monkeypatch.setattr(rig_check, "check_rig", missing)
-    code, out, err = run_main(["check-rig", DOCS / "rig-example.toml"], monkeypatch, capsys)
+    code, out, err = run_main(["check-rig", OURS], monkeypatch, capsys)
     assert code == 1, err
     assert "marker id 3" in out
     assert "NOT FOUND (the frame shows id 0" in " ".join(out.split())
-    code, out, err = run_main(["check-rig", DOCS / "rig-example.toml", "--json"], monkeypatch,
+    code, out, err = run_main(["check-rig", OURS, "--json"], monkeypatch,
                               capsys)
     assert code == 1
     assert '"marker_ids_seen": [' in out

@@ -27,7 +27,7 @@ CAMERA = CameraIntrinsics(640, 480, 612.0312345, 608.01, 324.4567, 236.0,
 ZERO = ZeroPoseSpec((0.0012, -0.0021, 0.0843), (0.1, -0.2, 0.3), 30, 1.2e-5)
 
 
-def _copy(tmp_path: Path, name: str = "rig-example.toml") -> Path:
+def _copy(tmp_path: Path, name: str = "rigs/relaxgrip.toml") -> Path:
     rig = tmp_path / "rig.toml"
     rig.write_bytes((DOCS / name).read_bytes())
     return rig
@@ -101,7 +101,8 @@ def test_a_read_only_rig_file_is_refused_untouched(tmp_path: Path) -> None:
 def test_a_rig_file_changed_since_it_was_read_is_not_overwritten(tmp_path: Path) -> None:
     rig = _copy(tmp_path)
     before = read_rig_text(rig)
-    edited = before.replace('name = "lab gripper, twin geometry"', 'name = "edited meanwhile"')
+    edited = before.replace("[rig]\n", "[rig]\n# edited meanwhile\n", 1)
+    assert edited != before
     rig.write_text(edited, encoding="utf-8")
     with pytest.raises(InputError, match="changed since it was read: nothing written"):
         update_rig_file(rig, before, lambda doc: set_rgb_intrinsics(doc, CAMERA))
@@ -145,7 +146,7 @@ def test_permissions_line_ends_and_links_are_kept(tmp_path: Path) -> None:
     ("position_mm = [0.0, 0.0, 80.0]\nrotation_deg = [200, 0, 0]\nframes = 30\nspread_mm = 0.0",
      r"\[zero_pose\] rotation_deg must be a rotation vector of at most 180"),
     ("position_mm = [0.0, 0.0, 80.0]\nrotation_deg = [0, 0, 0]\nspread_mm = 0.0",
-     r"\[zero_pose\] frames is missing"),
+     r"\[zero_pose\] lacks frames \(a count\)"),
     ("position_mm = [0.0, 80.0]\nrotation_deg = [0, 0, 0]\nframes = 3\nspread_mm = 0.0",
      r"\[zero_pose\] position_mm needs 3 numbers"),
     ("position_mm = [0.0, 0.0, 80.0]\nrotation_deg = [0, 0, 0]\nframes = 3\nspread_mm = 0.0\n"

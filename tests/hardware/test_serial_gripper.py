@@ -160,7 +160,7 @@ def test_a_reset_that_fails_on_the_thermal_camera_releases_the_rgb_one() -> None
     from relaxgrip.hardware.protocol import McuClient, McuEndpoint, MemoryLink
     from relaxgrip.hardware.rig_file import load_rig
 
-    rig = load_rig(Path(__file__).resolve().parents[2] / "docs" / "rig-example.toml")
+    rig = load_rig(Path(__file__).resolve().parents[2] / "docs" / "rigs" / "relaxgrip.toml")
     busy: set[int | str] = set()
     plugged = {rig.rgb.device}
     caps: list[Any] = []

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 from pathlib import Path
 
@@ -11,6 +12,7 @@ import pytest
 from relaxgrip.errors import InputError
 from relaxgrip.learning.datastore import Dataset, load_dataset
 from relaxgrip.learning.training import train_models
+from tests.rigs import twin_of
 
 
 def _split(tiny: Path, icfn_train_rows: int) -> Dataset:
@@ -48,3 +50,25 @@ def test_a_hold_whose_force_rose_is_left_out_of_the_rcfn(tiny: Path) -> None:
     assert record["rows_left_out"] == frames > 0
     assert record["train_rows"] == int((data.rcfn_features["sequence"] == 1).sum())
     assert np.isfinite(trained.rcfn.predict(data.rcfn_xy("val")[0])).all()
+
+
+def test_a_dataset_of_another_rigs_twin_builds_and_trains(tiny: Path, lab_tiny: Path) -> None:
+    """On the second example rig's twin: contacts along its 125 mm finger, its gripper in the
+    manifest, and the models train (how well is bring-up's question, on more data)."""
+    ours, lab = json.loads((tiny / "manifest.json").read_text()), json.loads(
+        (lab_tiny / "manifest.json").read_text())
+    assert lab["gripper"]["digest"] != ours["gripper"]["digest"]
+    assert lab["gripper"]["finger_length_m"] == 0.125
+    assert lab["gripper"]["marker"] == {"dictionary": "4X4_50", "id": 7}
+    assert ours["gripper"]["marker"]["id"] == 0
+    data = load_dataset(lab_tiny)
+    cfg = twin_of("lab")
+    # The repeatability holds at the paper's 80 mm, at its share of this finger.
+    assert set(data.sequences["contact_set_m"]) == {cfg.paper_position_m(0.080)}
+    assert len(data.sequences) == 4
+    assert (data.sequences["k_n"] > 0).all()
+    assert data.icfn["force_n"].max() > 1.0
+    assert np.isfinite(data.icfn_xy("train")[0]).all()
+    trained = train_models(_split(lab_tiny, 20))
+    assert np.isfinite(trained.icfn.predict(data.icfn_xy("test")[0])).all()
+    assert np.isfinite(trained.rcfn.predict(data.rcfn_xy("test")[0])).all()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -22,7 +23,9 @@ from relaxgrip.perception import (
 )
 from relaxgrip.perception.marker import MarkerState
 from relaxgrip.perception.thermal import FingerThermal, ThermalFeatures
+from relaxgrip.physics.beam import deflection_share
 from relaxgrip.twin import GripperTwin, TwinConfig, get_object
+from tests.rigs import RIGS, twin_of
 
 
 def run(perception: Perception, twin: GripperTwin, clock: VirtualClock, seconds: float,
@@ -65,9 +68,12 @@ def test_features_fill_missing_beams_and_need_a_pose() -> None:
     assert build_icfn_features(lost, thermal) is None
 
 
-def test_grasp_features_track_the_bending_and_temperatures() -> None:
+@pytest.mark.parametrize("rig", RIGS)
+def test_grasp_features_track_the_bending_and_temperatures(rig: str) -> None:
+    cfg = replace(twin_of(rig), initial_temp_c=45.0)
+    j = cfg.rig.marker_finger
     clock = VirtualClock()
-    twin = GripperTwin(TwinConfig(initial_temp_c=45.0), seed=0, clock=clock)
+    twin = GripperTwin(cfg, seed=0, clock=clock)
     perception = Perception(twin.config.rig)
     run(perception, twin, clock, 1.0, Command(0.0, (0.4, 0.4)))
     rows = run(perception, twin, clock, 5.0, Command(20.0, (0.4, 0.4)))
@@ -77,11 +83,17 @@ def test_grasp_features_track_the_bending_and_temperatures() -> None:
     assert percept.marker.status is TrackStatus.TRACKING
     assert percept.features is not None
     f = dict(zip(ICFN_SCHEMA.names, percept.features, strict=True))
+    # The rendered finger bends as the rig's beam model: the marker's share of the contact's
+    # deflection is the beam's (at its effective temperature; the field is not uniform).
+    deflection = obs.truth.marker_deflection_m[j]
+    share = deflection_share(cfg.rig.marker.position_m, obs.truth.contact_position_m,
+                             obs.truth.finger_effective_temp_c[j], cfg.finger)
+    assert deflection == pytest.approx(share * obs.truth.finger_deflection_m[j], rel=0.03)
     # The camera's x is the finger's bending direction (less the toe-in's cosine).
-    deflection = obs.truth.marker_deflection_m[0]
-    assert f["marker_dx_m"] == pytest.approx(deflection * math.cos(math.radians(10)), rel=0.05)
+    toe = math.radians(cfg.rig.rgb.toe_in_deg)
+    assert f["marker_dx_m"] == pytest.approx(deflection * math.cos(toe), rel=0.05)
     assert abs(f["marker_dy_m"]) < 2e-5
-    assert abs(f["marker_ry_rad"]) == pytest.approx(obs.truth.marker_slope_rad[0], rel=0.05)
+    assert abs(f["marker_ry_rad"]) == pytest.approx(obs.truth.marker_slope_rad[j], rel=0.05)
     true_mean = float(np.mean(obs.truth.finger_temps_c[0]))
     assert f["f0_temp_mean_c"] == pytest.approx(true_mean, abs=1.5)  # ±1 K camera offset
     assert percept.ir_age_s < 1.0

@@ -17,6 +17,7 @@ from typing import Annotated, Any
 import typer
 
 from relaxgrip.cli._app import app, console, int_option
+from relaxgrip.cli._twin import RigOption, twin_config
 from relaxgrip.errors import InputError
 
 
@@ -81,6 +82,7 @@ def dashboard(
     observer_dir: Annotated[Path | None, typer.Option(
         "--observer", help="Observer directory (relaxgrip fit-observer; default: the shipped "
                            "observer).", show_default=False)] = None,
+    rig: RigOption = None,
 ) -> None:
     """Serve the live dashboard and run the gripper loop in real time (30 Hz) behind it."""
     from relaxgrip.dashboard import require_web_stack
@@ -100,11 +102,12 @@ def dashboard(
     from relaxgrip.dashboard.app import create_app
     from relaxgrip.dashboard.session import open_session
 
+    config = None if rig is None else twin_config(rig)
     listener = _bind(address, host, port)  # a port in use is known before anything starts
     try:
         session = open_session(backend, clock=WallClock(), seed=seed, estimator=estimator,
                                record_dir=record_dir, models_dir=models,
-                               observer_dir=observer_dir)
+                               observer_dir=observer_dir, config=config)
     except BaseException:
         listener.close()
         raise

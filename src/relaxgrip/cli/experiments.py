@@ -10,6 +10,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedCo
 from rich.table import Table
 
 from relaxgrip.cli._app import app, console, emit_json, err_console, int_option
+from relaxgrip.cli._twin import RigOption, twin_config
 from relaxgrip.errors import InputError
 
 if TYPE_CHECKING:
@@ -23,6 +24,7 @@ def task(
         show_default=False)],
     seed: Annotated[int, int_option("--seed", help="Twin seed.")] = 0,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    rig: RigOption = None,
 ) -> None:
     """Run one of the paper's grasping tasks on the twin and check its success criteria.
 
@@ -32,7 +34,8 @@ def task(
 
     if seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
-    result = task_function(name)(seed=seed)
+    run = task_function(name)
+    result = run(seed=seed, config=twin_config(rig))
     if json_out:
         emit_json(result.to_dict())
     else:
@@ -63,6 +66,7 @@ def reproduce(
     jobs: Annotated[int, int_option("--jobs", help="Sections run at once.")] = 2,
     section: Annotated[list[str] | None, typer.Option(
         "--section", help="Run only this section (repeatable).", show_default=False)] = None,
+    rig: RigOption = None,
 ) -> None:
     """Run every experiment of the paper, write DIR/report.md, DIR/results.json and figures."""
     from relaxgrip.reproduce import Section, check_request
@@ -71,6 +75,7 @@ def reproduce(
     if seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
     check_request(out, jobs, section)  # before the progress bar: a bad flag prints one line
+    config = twin_config(rig)
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), console=err_console) as bar:
         job = bar.add_task("experiments", total=None)
@@ -80,7 +85,8 @@ def reproduce(
                        description=f"{done_section.key} done ({done_section.seconds:.0f} s)")
 
         sections = run_all(out, quick=quick, seed=seed, jobs=jobs, only=section,
-                           progress=progress)
+                           progress=progress, config=config,
+                           rig=None if rig is None else str(rig))
     for s in sections:
         console.print(f"[bold]{s.title}[/bold] ({s.seconds:.0f} s)")
         if not s.rows:

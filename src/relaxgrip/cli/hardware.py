@@ -45,9 +45,9 @@ def emulator(
         EMULATOR_DIR,
         McuEmulator,
         check_parent_dir,
-        twin_config_for_rig,
     )
     from relaxgrip.hardware.rig_file import load_rig
+    from relaxgrip.hardware.rig_twin import twin_config_for_rig
     from relaxgrip.twin import TwinConfig
 
     if seed is not None and seed < 0:

@@ -12,6 +12,7 @@ import typer
 from rich.table import Table
 
 from relaxgrip.cli._app import app, console, emit_json, err_console, float_option, int_option
+from relaxgrip.cli._twin import RigOption, twin_config
 from relaxgrip.errors import InputError
 
 if TYPE_CHECKING:
@@ -90,6 +91,7 @@ def hold(
                          "relaxation and the added closure, against a copy of the twin held "
                          "at the onset's aperture, and the calibration and closed chain of "
                          "models that have them (relax, twin backend).")] = False,
+    rig: RigOption = None,
 ) -> None:
     """Close on the force ball to the target and hold it, scoring the steady state (100-280 s)."""
     from relaxgrip.control import EstimatorKind, check_target_n
@@ -163,6 +165,7 @@ def hold(
     if observer_dir is not None and not (compare or estimator == "observer"):
         raise InputError("--observer sets the observer estimator's parameters: use it with "
                          "--estimator observer or --compare")
+    config = twin_config(rig)
     bundle = load_default_models() if models is None else load_models(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
     observer = None if observer_dir is None else load_observer(observer_dir)
@@ -178,7 +181,7 @@ def hold(
             survey = survey_holds(names, seed_list, target_n, temp_c, duration_s, bundle,
                                   observer, backend, temps, targets, push,
                                   profile_text={k: v for k, v in given.items() if v is not None},
-                                  n_jobs=jobs)
+                                  n_jobs=jobs, config=config)
         if json_out:
             emit_json(survey.to_dict())
             return
@@ -189,7 +192,7 @@ def hold(
                 else nullcontext():
             comparison = compare_holds(target_n=target_n, duration_s=duration_s, temp_c=temp_c,
                                        seed=seed, models=bundle, n_jobs=jobs,
-                                       observer=observer)
+                                       observer=observer, config=config)
         figure = None
         if plot is not None:
             from relaxgrip.plots.holding import plot_hold_comparison
@@ -209,7 +212,7 @@ def hold(
     with console.status(f"holding with {estimator} …") if not json_out else nullcontext():
         if record is None:
             result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
-                              backend=backend, temp_profile=temps,
+                              config=config, backend=backend, temp_profile=temps,
                               target_profile=targets, disturbance=push, observer=observer,
                               budget=budget, mcu=mcu)
         else:
@@ -220,7 +223,7 @@ def hold(
             scenario = {k: v for k, v in given.items() if v is not None}
             with McapRecorder(record, scenario=scenario) as recorder:
                 result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
-                                  backend=backend, recorder=recorder,
+                                  config=config, backend=backend, recorder=recorder,
                                   temp_profile=temps, target_profile=targets, disturbance=push,
                                   observer=observer, budget=budget, mcu=mcu)
     figure = None

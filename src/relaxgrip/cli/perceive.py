@@ -168,25 +168,44 @@ def _parse_dist(text: str | None) -> tuple[float, ...]:
 def perceive(
     image: Annotated[Path, typer.Argument(metavar="IMAGE", help="Any image file (PNG, JPEG, ...).",
                                           show_default=False)],
-    fx: Annotated[float, float_option("--fx", help="Focal length x (pixels).")] = 600.0,
+    fx: Annotated[float | None, float_option(
+        "--fx", help="Focal length x (pixels; default 600).", show_default=False)] = None,
     fy: Annotated[float | None, float_option("--fy", help="Focal length y (pixels; default fx).",
                                              show_default=False)] = None,
     cx: Annotated[float | None, float_option("--cx", help="Principal point x (default centre).",
                                              show_default=False)] = None,
     cy: Annotated[float | None, float_option("--cy", help="Principal point y (default centre).",
                                              show_default=False)] = None,
-    marker_mm: Annotated[float, float_option("--marker-mm", help="Marker side (mm).")] = 12.0,
-    dictionary: Annotated[str, typer.Option("--dict", help="ArUco dictionary, e.g. 4X4_50.")] = (
-        "4X4_50"
-    ),
+    marker_mm: Annotated[float | None, float_option(
+        "--marker-mm", help="Marker side (mm; default 12).", show_default=False)] = None,
+    dictionary: Annotated[str | None, typer.Option(
+        "--dict", help="ArUco dictionary, e.g. 4X4_50 (the default).", show_default=False)
+    ] = None,
     dist: Annotated[str | None, typer.Option(
         "--dist", help="Distortion coefficients k1,k2,p1,p2[,k3...].", show_default=False)] = None,
     edge_refine: Annotated[bool, typer.Option(
         "--edge-refine/--no-edge-refine",
         help="Refine corners by fitting lines to the marker's edges.")] = True,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    rig: Annotated[Path | None, typer.Option(
+        "--rig", help="Take the camera's intrinsics and the marker from this rig file "
+                      "(instead of --fx ... --dict).", show_default=False)] = None,
 ) -> None:
     """Detect ArUco markers in an image and estimate each one's pose (SOLVEPNP_IPPE_SQUARE)."""
+    rig_camera: CameraIntrinsics | None = None
+    if rig is not None:
+        from relaxgrip.hardware.rig_file import load_rig
+
+        given = [flag for flag, value in (("--fx", fx), ("--fy", fy), ("--cx", cx), ("--cy", cy),
+                                          ("--dist", dist), ("--marker-mm", marker_mm),
+                                          ("--dict", dictionary)) if value is not None]
+        if given:
+            raise InputError(f"--rig gives the camera and the marker: leave out {given[0]}")
+        spec = load_rig(rig)
+        rig_camera = spec.rgb.mount.intrinsics
+        dictionary, marker_mm = spec.marker.dictionary, spec.marker.size_m * 1e3
+    dictionary = "4X4_50" if dictionary is None else dictionary
+    marker_mm = 12.0 if marker_mm is None else marker_mm
     name = dictionary.upper().removeprefix("DICT_")
     if name not in ARUCO_DICTIONARIES:
         raise InputError(f"--dict {dictionary!r} is not an ArUco dictionary; "
@@ -195,11 +214,18 @@ def perceive(
         raise InputError(f"--marker-mm must be 0.1-10000 mm, got {marker_mm}")
     gray = _read_gray(image)
     h, w = gray.shape
-    intrinsics = CameraIntrinsics(
-        w, h, fx, fx if fy is None else fy,
-        (w - 1) / 2.0 if cx is None else cx, (h - 1) / 2.0 if cy is None else cy,
-        _parse_dist(dist),
-    )
+    if rig_camera is not None:
+        if rig_camera.shape != (h, w):
+            raise InputError(f"{image} is {w}x{h} pixels, the rig's RGB camera "
+                             f"{rig_camera.width_px}x{rig_camera.height_px}")
+        intrinsics = rig_camera
+    else:
+        focal = 600.0 if fx is None else fx
+        intrinsics = CameraIntrinsics(
+            w, h, focal, focal if fy is None else fy,
+            (w - 1) / 2.0 if cx is None else cx, (h - 1) / 2.0 if cy is None else cy,
+            _parse_dist(dist),
+        )
     marker = MarkerMount(dictionary=name, size_m=marker_mm * 1e-3)
     solver = PoseSolver(marker.size_m, intrinsics)
     found = []

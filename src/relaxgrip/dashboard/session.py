@@ -29,9 +29,9 @@ import datetime as dt
 import math
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -41,6 +41,7 @@ from relaxgrip.clock import Clock, VirtualClock
 from relaxgrip.control import (
     EstimatorKind,
     EventKind,
+    ForceControlConfig,
     GraspController,
     GraspPhase,
     GraspPlan,
@@ -53,6 +54,9 @@ from relaxgrip.errors import InputError
 from relaxgrip.fileio import check_writable
 from relaxgrip.perception.marker import MarkerState
 from relaxgrip.rig import RigGeometry
+
+if TYPE_CHECKING:
+    from relaxgrip.twin import TwinConfig
 
 __all__ = ["DEFAULT_LIFT_MM", "OPEN_TOLERANCE_MM", "FramePair", "LiveSession", "open_session"]
 
@@ -461,7 +465,8 @@ class LiveSession:
 def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
                  estimator: str = "observer", object_name: str = "force_ball",
                  record_dir: Path = Path("."), models_dir: Path | None = None,
-                 observer_dir: Path | None = None) -> LiveSession:
+                 observer_dir: Path | None = None,
+                 config: TwinConfig | None = None) -> LiveSession:
     """A session on the twin, the MCU emulator (twin behind a pty) or a rig file's gripper.
 
     Parameters
@@ -484,6 +489,9 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
         Model directory (default: the shipped models).
     observer_dir : Path, optional
         The ``observer`` estimator's directory (default: the shipped one).
+    config : TwinConfig, optional
+        The twin of ``twin`` and ``emulator`` (default: our gripper); a serial rig
+        is its rig file's gripper.
 
     Returns
     -------
@@ -506,6 +514,9 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
         raise InputError(f"seed must be >= 0, got {seed}")
     if not (backend in ("twin", "emulator") or backend.startswith("serial:")):
         raise InputError(f"--backend must be twin, emulator or serial:RIG.toml, got {backend!r}")
+    if config is not None and backend.startswith("serial:"):
+        raise InputError("--rig chooses the twin's gripper; a serial backend is the gripper of "
+                         "its own rig file (serial:RIG.toml): give one of them")
     get_object(object_name)
     if not record_dir.is_dir():
         raise InputError(f"recording directory {record_dir} "
@@ -523,15 +534,18 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
         gripper = open_rig_gripper(rig, clock)
         try:
             gripper.reset()
-            controller = GraspController(rig.geometry, bundle_estimator(kind, bundle, observer))
+            controller = GraspController(rig.geometry, bundle_estimator(kind, bundle, observer),
+                                         ForceControlConfig(stroke_mm=rig.motor.stroke_mm),
+                                         heat=rig.heat)
         except BaseException:  # the port and the camera threads are not left open
             gripper.close()
             raise
         return LiveSession(gripper, controller, clock, record_dir=record_dir,
                            rearm=gripper.reset)
-    cfg = TwinConfig(object_name=object_name)
+    cfg = replace(config if config is not None else TwinConfig(), object_name=object_name)
     virtual = VirtualClock(clock.now())
     controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
+                                 ForceControlConfig(stroke_mm=cfg.motor.stroke_mm),
                                  heat=cfg.heat)
     if backend == "emulator":
         from relaxgrip.hardware.emulator import ready_emulated_gripper

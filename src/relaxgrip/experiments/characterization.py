@@ -133,23 +133,24 @@ def characterize(
     loads_n: tuple[float, ...] = PAPER_LOADS_N,
     temps_c: tuple[float, ...] = PAPER_TEMPS_C,
     contact_m: float = 0.080,
-    positions_m: tuple[float, ...] = tuple(np.linspace(0.04, 0.11, 15)),
+    positions_m: tuple[float, ...] | None = None,
     position_load_n: float = 8.0,
 ) -> Characterization:
-    """Run the stiffness characterization on the twin's finger.
+    """Run the stiffness characterization on a finger.
 
     Parameters
     ----------
     finger : FingerParams, optional
-        The finger (the twin's default design).
+        The finger (default: our gripper's; a rig's is its ``TwinConfig.finger``).
     loads_n : tuple of float
         Loads (N), > 0.
     temps_c : tuple of float
         Uniform temperatures (°C); drops and ratios compare the last to the first.
     contact_m : float
         Where the load acts for the profiles (m).
-    positions_m : tuple of float
-        Contact positions of the local-stiffness sweep (m).
+    positions_m : tuple of float, optional
+        Contact positions of the local-stiffness sweep (m; default: 15 from
+        40 mm to the tip).
     position_load_n : float
         Load of the position sweep (N).
 
@@ -173,7 +174,8 @@ def characterize(
     )
     z80 = np.array([[np.interp(0.080, x, p) for p in row] for row in profiles])
     area = np.array([[deflection_area_m2(f, t, finger, contact_m) for t in temps] for f in loads])
-    positions = np.asarray(positions_m, dtype=np.float64)
+    positions = (np.linspace(0.04, finger.length_m, 15) if positions_m is None
+                 else np.asarray(positions_m, dtype=np.float64))
     local = np.array(
         [
             [

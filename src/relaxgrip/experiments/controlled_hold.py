@@ -32,6 +32,7 @@ from relaxgrip.clock import VirtualClock
 from relaxgrip.control import (
     EstimatorKind,
     EventKind,
+    ForceControlConfig,
     GraspController,
     GraspPlan,
     LoopResult,
@@ -48,7 +49,6 @@ from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.perception.proximity import ProximityTarget
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
-from relaxgrip.twin.objects import get_object
 from relaxgrip.validate import check_positive
 
 FloatArray = NDArray[np.float64]
@@ -417,7 +417,8 @@ def run_hold(
     models : ModelBundle, optional
         ICFN and RCFN (default: the shipped models).
     config : TwinConfig, optional
-        Twin (default: the force ball at 80 mm, cameras on).
+        Twin (default: our gripper, the force ball at its usual contact, cameras on;
+        :func:`relaxgrip.hardware.rig_twin.twin_config_for_rig` gives any rig's).
     backend : {"twin", "emulator"}
         ``twin`` drives the twin directly; ``emulator`` puts the same twin
         behind the MCU emulator, so that every command and frame crosses a
@@ -472,9 +473,10 @@ def run_hold(
     twin = _make_backend(backend, cfg, seed, clock, mcu)
     try:  # closed however it ends: the emulator's thread and pty with it
         controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
+                                     ForceControlConfig(stroke_mm=cfg.motor.stroke_mm),
                                      heat=cfg.heat)
         plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False,
-                         grasped=_as_known(cfg.object_name) if locate_object else None)
+                         grasped=_as_known(cfg) if locate_object else None)
         on_step = _scenario(twin, temp_profile, target_profile, disturbance, temp_c, target_n)
         frozen: list[GripperTwin] = []
         if budget:
@@ -506,12 +508,11 @@ def run_hold(
                       target_series_n=targets, fixed_aperture_n=fixed, twin_scatter=scatter)
 
 
-def _as_known(object_name: str | None) -> ProximityTarget | None:
-    """The held object as the operator knows it: its catalogue width and colour."""
-    if object_name is None:
-        return None
-    spec = get_object(object_name)
-    return ProximityTarget(spec.width_m, spec.color_rgb)
+def _as_known(config: TwinConfig) -> ProximityTarget | None:
+    """The held object as the operator knows it: its width and colour (the rig's force ball's)."""
+    spec = config.object
+    return None if spec is None else ProximityTarget(spec.width_m, spec.color_rgb,
+                                                     grasp_position_m=config.contact_position_m)
 
 
 def _copy_at_onset(twin: GripperTwin, into: list[GripperTwin],
@@ -620,10 +621,11 @@ def map_holds(run: Callable[[_Job], _Out], jobs: Sequence[_Job],
     return [_one_thread(run, job) for job in jobs]
 
 
-def _run_one(args: tuple[str, float, float, float, int, ModelBundle, ObserverModel | None]
-             ) -> HoldResult:
-    kind, target, duration, temp, seed, models, observer = args
-    return run_hold(kind, target, duration, temp, seed, models, observer=observer)
+def _run_one(args: tuple[str, float, float, float, int, ModelBundle, ObserverModel | None,
+                         TwinConfig | None]) -> HoldResult:
+    kind, target, duration, temp, seed, models, observer, config = args
+    return run_hold(kind, target, duration, temp, seed, models, config=config,
+                    observer=observer)
 
 
 def compare_holds(
@@ -635,12 +637,14 @@ def compare_holds(
     models: ModelBundle | None = None,
     n_jobs: int = 1,
     observer: ObserverModel | None = None,
+    config: TwinConfig | None = None,
 ) -> HoldComparison:
     """Run each estimator (every one by default) on the same seed (in parallel with
-    ``n_jobs`` > 1)."""
+    ``n_jobs`` > 1), on the twin ``config`` (our gripper by default)."""
     for kind in estimators:
         check_hold(kind, target_n, temp_c, duration_s)
     bundle = models if models is not None else load_default_models()
-    jobs = [(k, target_n, duration_s, temp_c, seed, bundle, observer) for k in estimators]
+    jobs = [(k, target_n, duration_s, temp_c, seed, bundle, observer, config)
+            for k in estimators]
     results = map_holds(_run_one, jobs, n_jobs)
     return HoldComparison({r.estimator: r for r in results})

@@ -39,6 +39,7 @@ from relaxgrip.backend import Command, Observation
 from relaxgrip.clock import VirtualClock
 from relaxgrip.control import (
     EstimatorKind,
+    ForceControlConfig,
     GraspController,
     GraspPlan,
     bundle_estimator,
@@ -280,7 +281,7 @@ class _Scenario:
     """The orchestration: one twin, one controller, the stages in turn."""
 
     def __init__(self, seed: int, hot_side: Side, settings: CupDemoSettings,
-                 models: ModelBundle) -> None:
+                 models: ModelBundle, config: TwinConfig) -> None:
         self.s = settings
         self.hot_side = hot_side
         self.clock = VirtualClock()
@@ -291,12 +292,12 @@ class _Scenario:
         self.cool_y_m = cool_y
         scene = tuple(SceneObject(self.cup_name[side], (settings.cup_x_m, y, 0.0))
                       for side, y in self.cup_y_m.items())
-        self.config = TwinConfig(object_name=None, scene=scene)
+        self.config = replace(config, object_name=None, scene=scene)
         self.twin = GripperTwin(self.config, seed=seed, clock=self.clock)
         self.models = models
         self.controller = GraspController(
             self.config.rig, bundle_estimator(settings.cup_estimator, models),
-            heat=self.config.heat)
+            ForceControlConfig(stroke_mm=self.config.motor.stroke_mm), heat=self.config.heat)
         self.controller.temperature.set_mode(StiffnessMode.STIFF)
         self.rec = _Recorder(self.config.finger.smp)
         self.events: list[dict[str, Any]] = []
@@ -390,9 +391,10 @@ class _Scenario:
         ``until`` ends the grasp part; ``during`` is called each step once in
         Sustain with the time since entering it.
         """
-        obj = get_object(name)
+        obj = self.config.object_spec(name)
         c = self.controller
-        c.perception.set_target(ProximityTarget(obj.width_m, obj.color_rgb))
+        c.perception.set_target(ProximityTarget(obj.width_m, obj.color_rgb,
+                                                grasp_position_m=self.config.contact_position_m))
         c.start(plan, self.clock.now())
         self.target_n = plan.target_n
         approached = False
@@ -467,7 +469,8 @@ class _Scenario:
 
 def run_cup_demo(seed: int = 0, quick: bool = False, hot_side: Side | None = None,
                  models: ModelBundle | None = None,
-                 settings: CupDemoSettings | None = None) -> CupDemoResult:
+                 settings: CupDemoSettings | None = None,
+                 config: TwinConfig | None = None) -> CupDemoResult:
     """Run the integrated cup demonstration on the twin.
 
     Parameters
@@ -482,6 +485,8 @@ def run_cup_demo(seed: int = 0, quick: bool = False, hot_side: Side | None = Non
         ICFN and RCFN (default: the shipped models).
     settings : CupDemoSettings, optional
         Layout, targets and timings (default: ``CupDemoSettings.for_run(quick)``).
+    config : TwinConfig, optional
+        The twin (default: our gripper); its object and scene are the demo's.
 
     Returns
     -------
@@ -501,7 +506,7 @@ def run_cup_demo(seed: int = 0, quick: bool = False, hot_side: Side | None = Non
         raise InputError(f"hot_side must be 'left' or 'right', got {side!r}")
     s = settings if settings is not None else CupDemoSettings.for_run(quick)
     bundle = models if models is not None else load_default_models()
-    sc = _Scenario(seed, side, s, bundle)
+    sc = _Scenario(seed, side, s, bundle, config if config is not None else TwinConfig())
     c = sc.controller
     twin = sc.twin
     stages: list[float] = [sc.clock.now()]
@@ -609,6 +614,8 @@ def run_cup_demo(seed: int = 0, quick: bool = False, hot_side: Side | None = Non
     series = sc.rec.series()
     bounds = tuple((stages[k], stages[k + 1]) for k in range(5))
     figures.update(_figures(series, bounds, s, sc.events))
+    smp = sc.config.finger.smp  # S4's stiffness is read against this finger's SMP
+    figures["modulus_glassy_pa"], figures["modulus_rubbery_pa"] = smp.e_glassy_pa, smp.e_rubbery_pa
     return CupDemoResult(seed, side, chosen, ir_temps, background, bounds, series, figures,
                          sc.events, s)
 
@@ -713,7 +720,7 @@ S3_BAND_N = (0.5, 1.5)
 S5_BAND_N = (4.5, 7.5)
 
 
-def cup_task(seed: int = 0) -> TaskResult:
+def cup_task(seed: int = 0, config: TwinConfig | None = None) -> TaskResult:
     """The integrated cup demonstration as a task (quick settings): did every stage succeed?
 
     Criteria: ``right_cup_identified`` (S1 chose the room-temperature cup),
@@ -727,14 +734,14 @@ def cup_task(seed: int = 0) -> TaskResult:
     hand-over), ``handover_detected`` (within 1.5 s of the push), ``released`` (the
     true force under 0.05 N before the hand took the glass).
     """
-    return score_cup_demo(run_cup_demo(seed=seed, quick=True))
+    return score_cup_demo(run_cup_demo(seed=seed, quick=True, config=config))
 
 
 def score_cup_demo(r: CupDemoResult) -> TaskResult:
     """The task's criteria and figures for one run (see :func:`cup_task`)."""
     f = r.figures
-    smp = TwinConfig().finger.smp
-    stiff_share = (f["modulus_s5_pa"] - smp.e_rubbery_pa) / (smp.e_glassy_pa - smp.e_rubbery_pa)
+    glassy, rubbery = f["modulus_glassy_pa"], f["modulus_rubbery_pa"]
+    stiff_share = (f["modulus_s5_pa"] - rubbery) / (glassy - rubbery)
     approach_err = _approach_error_m(r)
     criteria = {
         "right_cup_identified": r.right_cup,

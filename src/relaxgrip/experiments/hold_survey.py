@@ -40,6 +40,7 @@ from relaxgrip.experiments.controlled_hold import (
 from relaxgrip.experiments.profiles import Profile
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
+from relaxgrip.twin import TwinConfig
 
 __all__ = ["SURVEY_FIGURES", "HoldSurvey", "mean_interval", "reduction_interval", "survey_holds"]
 
@@ -163,18 +164,19 @@ class HoldSurvey:
 
 
 #: One hold: estimator, seed, target, duration, temperature, models, observer, backend,
-#: and the temperature, target and push profiles.
+#: the temperature, target and push profiles, and the twin.
 _Job = tuple[str, int, float, float, float, ModelBundle | None, ObserverModel | None, str,
-             tuple[Profile | None, Profile | None, Profile | None]]
+             tuple[Profile | None, Profile | None, Profile | None], TwinConfig | None]
 
 
 def _one(job: _Job) -> tuple[dict[str, Any], str]:
     """One hold's figures (the loop itself is dropped in the worker: 48 of them add up)."""
-    estimator, seed, target_n, duration_s, temp_c, models, observer, backend, profiles = job
+    (estimator, seed, target_n, duration_s, temp_c, models, observer, backend, profiles,
+     config) = job
     temps, targets, push = profiles
-    hold = run_hold(estimator, target_n, duration_s, temp_c, seed, models, backend=backend,
-                    observer=observer, temp_profile=temps, target_profile=targets,
-                    disturbance=push)
+    hold = run_hold(estimator, target_n, duration_s, temp_c, seed, models, config=config,
+                    backend=backend, observer=observer, temp_profile=temps,
+                    target_profile=targets, disturbance=push)
     return {"seed": seed, **hold.metrics()}, hold.twin_version
 
 
@@ -183,7 +185,8 @@ def survey_holds(estimators: Sequence[str], seeds: Sequence[int], target_n: floa
                  models: ModelBundle | None = None, observer: ObserverModel | None = None,
                  backend: str = "twin", temp_profile: Profile | None = None,
                  target_profile: Profile | None = None, disturbance: Profile | None = None,
-                 profile_text: dict[str, str] | None = None, n_jobs: int = 1) -> HoldSurvey:
+                 profile_text: dict[str, str] | None = None, n_jobs: int = 1,
+                 config: TwinConfig | None = None) -> HoldSurvey:
     """Run each estimator's hold on every seed (``n_jobs`` holds at once).
 
     Parameters
@@ -200,6 +203,8 @@ def survey_holds(estimators: Sequence[str], seeds: Sequence[int], target_n: floa
         The profiles as the user wrote them, kept in the survey's record.
     n_jobs : int
         Holds in parallel.
+    config : TwinConfig, optional
+        The twin (default: our gripper).
 
     Raises
     ------
@@ -219,7 +224,7 @@ def survey_holds(estimators: Sequence[str], seeds: Sequence[int], target_n: floa
     check_backend(backend, disturbance)
     profiles = (temp_profile, target_profile, disturbance)
     jobs: list[_Job] = [(est, int(s), target_n, duration_s, temp_c, models, observer, backend,
-                         profiles) for est in estimators for s in seeds]
+                         profiles, config) for est in estimators for s in seeds]
     results = map_holds(_one, jobs, n_jobs)
     runs: dict[str, list[dict[str, Any]]] = {est: [] for est in estimators}
     for (est, *_), (figures, _) in zip(jobs, results, strict=True):

@@ -35,7 +35,7 @@ add their pull-off and hold it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -103,8 +103,8 @@ def _sustain_s(quick: bool) -> float:
 
 
 def run_pinch(object_name: str, target_n: float, mode: StiffnessMode | str, seed: int = 0,
-              models: ModelBundle | None = None, contact_position_m: float = PINCH_CONTACT_M,
-              quick: bool = False) -> GraspRun:
+              models: ModelBundle | None = None, contact_position_m: float | None = None,
+              quick: bool = False, config: TwinConfig | None = None) -> GraspRun:
     """One force-controlled grasp, lift and sustain of ``object_name`` (``icfn`` estimator).
 
     Parameters
@@ -119,27 +119,35 @@ def run_pinch(object_name: str, target_n: float, mode: StiffnessMode | str, seed
         Twin seed.
     models : ModelBundle, optional
         The shipped models by default.
-    contact_position_m : float
-        Contact position along the fingers (m).
+    contact_position_m : float, optional
+        Contact position along the fingers (m; default: :data:`PINCH_CONTACT_M` on the
+        paper's finger, at its share of the twin's).
     quick : bool
         Shorter Sustain.
+    config : TwinConfig, optional
+        The twin (default: our gripper).
 
     Returns
     -------
     GraspRun
         With the whole loop, the truth flags and the criteria of a grasp.
     """
+    base = config if config is not None else TwinConfig()
+    at = base.paper_position_m(PINCH_CONTACT_M) if contact_position_m is None \
+        else contact_position_m
     # The paper's contrast: the warm finger's grip decays under the per-frame ICFN.
     return run_grasp(object_name, target_n, mode, seed, models, estimator=EstimatorKind.ICFN,
-                     contact_position_m=contact_position_m, hold_s=HOLD_S, lift_mm=LIFT_MM,
-                     sustain_s=_sustain_s(quick))
+                     contact_position_m=at, hold_s=HOLD_S, lift_mm=LIFT_MM,
+                     sustain_s=_sustain_s(quick), config=base)
 
 
 def run_adhesive(mode: StiffnessMode | str, seed: int = 0, models: ModelBundle | None = None,
-                 quick: bool = False) -> GraspRun:
-    """Grasp, lift and sustain the flat box at :data:`ADHESIVE_TARGET_N` in ``mode``."""
+                 quick: bool = False, config: TwinConfig | None = None) -> GraspRun:
+    """Grasp, lift and sustain the flat box at :data:`ADHESIVE_TARGET_N` in ``mode``, at
+    the twin's usual contact (80 mm on our gripper)."""
+    base = config if config is not None else TwinConfig()
     return run_pinch("flat_box", ADHESIVE_TARGET_N, mode, seed, models,
-                     contact_position_m=0.080, quick=quick)
+                     contact_position_m=base.contact_position_m, quick=quick, config=base)
 
 
 @dataclass(frozen=True)
@@ -231,7 +239,8 @@ class SqueezeRun:
 def run_squeeze(object_name: str, mode: StiffnessMode | str, seed: int = 0,
                 models: ModelBundle | None = None,
                 aperture_share: float = SQUEEZE_APERTURE_SHARE,
-                contact_position_m: float = 0.080, quick: bool = False) -> SqueezeRun:
+                contact_position_m: float | None = None, quick: bool = False,
+                config: TwinConfig | None = None) -> SqueezeRun:
     """Close to ``aperture_share`` of the object's width, hold, lift and sustain.
 
     The gripper is position-controlled (the encoder only): the fingers close
@@ -252,10 +261,12 @@ def run_squeeze(object_name: str, mode: StiffnessMode | str, seed: int = 0,
         The ICFN for the displayed estimate (default: the shipped models).
     aperture_share : float
         Closed aperture as a share of the object's width, in (0, 1).
-    contact_position_m : float
-        Contact position along the fingers (m).
+    contact_position_m : float, optional
+        Contact position along the fingers (m; default: the twin's usual contact).
     quick : bool
         Shorter Sustain.
+    config : TwinConfig, optional
+        The twin (default: our gripper).
 
     Returns
     -------
@@ -264,11 +275,14 @@ def run_squeeze(object_name: str, mode: StiffnessMode | str, seed: int = 0,
     kind = StiffnessMode(mode)
     if not 0.0 < aperture_share < 1.0:
         raise InputError(f"aperture share must be in (0, 1), got {aperture_share}")
-    obj = get_object(object_name)
     bundle = models if models is not None else load_default_models()
     setpoint = MODE_SETPOINTS_C[kind]
-    cfg = TwinConfig(object_name=object_name, contact_position_m=contact_position_m,
-                     ambient_c=ROOM_C, initial_temp_c=setpoint)
+    base = config if config is not None else TwinConfig()
+    cfg = replace(base, object_name=object_name,
+                  contact_position_m=(base.contact_position_m if contact_position_m is None
+                                      else contact_position_m),
+                  ambient_c=ROOM_C, initial_temp_c=setpoint)
+    obj = cfg.object_spec(object_name)
     clock = VirtualClock()
     twin = GripperTwin(cfg, seed=seed, clock=clock)
     perception = Perception(cfg.rig)
@@ -431,23 +445,27 @@ class MultimodeResult:
         })
 
 
-def _pinch_runs(seed: int, models: ModelBundle, quick: bool) -> dict[str, GraspRun]:
-    return {m.value: run_pinch("weight_1kg", PINCH_TARGET_N, m, seed, models, quick=quick)
+def _pinch_runs(seed: int, models: ModelBundle, quick: bool,
+                config: TwinConfig | None = None) -> dict[str, GraspRun]:
+    return {m.value: run_pinch("weight_1kg", PINCH_TARGET_N, m, seed, models, quick=quick,
+                               config=config)
             for m in (StiffnessMode.STIFF, StiffnessMode.COMPLIANT)}
 
 
-def _can_runs(seed: int, models: ModelBundle, quick: bool) -> dict[str, SqueezeRun]:
-    return {m.value: run_squeeze("aluminium_can", m, seed, models, quick=quick)
+def _can_runs(seed: int, models: ModelBundle, quick: bool,
+              config: TwinConfig | None = None) -> dict[str, SqueezeRun]:
+    return {m.value: run_squeeze("aluminium_can", m, seed, models, quick=quick, config=config)
             for m in (StiffnessMode.STIFF, StiffnessMode.COMPLIANT)}
 
 
-def _adhesive_runs(seed: int, models: ModelBundle, quick: bool) -> dict[str, GraspRun]:
-    return {m.value: run_adhesive(m, seed, models, quick=quick)
+def _adhesive_runs(seed: int, models: ModelBundle, quick: bool,
+                   config: TwinConfig | None = None) -> dict[str, GraspRun]:
+    return {m.value: run_adhesive(m, seed, models, quick=quick, config=config)
             for m in (StiffnessMode.ADHESIVE, StiffnessMode.STIFF)}
 
 
-def run_multimode(seed: int = 0, quick: bool = False,
-                  models: ModelBundle | None = None) -> MultimodeResult:
+def run_multimode(seed: int = 0, quick: bool = False, models: ModelBundle | None = None,
+                  config: TwinConfig | None = None) -> MultimodeResult:
     """Run the three contrasts of Fig. "modes" b.
 
     Parameters
@@ -458,29 +476,32 @@ def run_multimode(seed: int = 0, quick: bool = False,
         Shorter Sustains.
     models : ModelBundle, optional
         The shipped models by default.
+    config : TwinConfig, optional
+        The twin (default: our gripper).
 
     Returns
     -------
     MultimodeResult
     """
     bundle = models if models is not None else load_default_models()
-    return MultimodeResult(seed, quick, _pinch_runs(seed, bundle, quick),
-                           _can_runs(seed, bundle, quick), _adhesive_runs(seed, bundle, quick))
+    return MultimodeResult(seed, quick, _pinch_runs(seed, bundle, quick, config),
+                           _can_runs(seed, bundle, quick, config),
+                           _adhesive_runs(seed, bundle, quick, config))
 
 
-def pinch_1kg_task(seed: int = 0) -> TaskResult:
+def pinch_1kg_task(seed: int = 0, config: TwinConfig | None = None) -> TaskResult:
     """The stiff mode lifts the 1 kg weight by pinch; the compliant mode cannot."""
-    runs = _pinch_runs(seed, load_default_models(), quick=False)
+    runs = _pinch_runs(seed, load_default_models(), quick=False, config=config)
     return pinch_result(seed, runs["stiff"], runs["compliant"])
 
 
-def can_task(seed: int = 0) -> TaskResult:
+def can_task(seed: int = 0, config: TwinConfig | None = None) -> TaskResult:
     """The compliant mode holds the empty can intact; the same closure when stiff crushes it."""
-    runs = _can_runs(seed, load_default_models(), quick=False)
+    runs = _can_runs(seed, load_default_models(), quick=False, config=config)
     return can_result(seed, runs["stiff"], runs["compliant"])
 
 
-def adhesive_task(seed: int = 0) -> TaskResult:
+def adhesive_task(seed: int = 0, config: TwinConfig | None = None) -> TaskResult:
     """The adhesive mode holds the flat box; force closure alone (stiff mode) drops it."""
-    runs = _adhesive_runs(seed, load_default_models(), quick=False)
+    runs = _adhesive_runs(seed, load_default_models(), quick=False, config=config)
     return adhesive_result(seed, runs["adhesive"], runs["stiff"])

@@ -31,6 +31,7 @@ from relaxgrip.experiments.profiles import (
 )
 from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
+from relaxgrip.twin import TwinConfig
 
 __all__ = ["SCENARIOS", "Scenario", "ScenarioComparison", "check_scenarios",
            "compare_scenarios", "scenario_hold", "scenario_holds"]
@@ -137,13 +138,14 @@ def check_scenarios(names: Sequence[str]) -> list[str]:
 
 def scenario_hold(estimator: str, name: str, seed: int = 0,
                   duration_s: float = PAPER_DURATION_S, models: ModelBundle | None = None,
-                  observer: ObserverModel | None = None) -> HoldResult:
+                  observer: ObserverModel | None = None,
+                  config: TwinConfig | None = None) -> HoldResult:
     """One estimator's closed-loop hold through a scenario (its target and temperature before
-    it acts)."""
+    it acts), on the twin ``config`` (our gripper by default)."""
     scenario = SCENARIOS[check_scenarios([name])[0]]
     p = scenario.profiles(duration_s)
     return run_hold(estimator, target_n=scenario.target_n, duration_s=duration_s,
-                    temp_c=scenario.temp_c, seed=seed, models=models,
+                    temp_c=scenario.temp_c, seed=seed, models=models, config=config,
                     observer=observer, temp_profile=p["temp_profile"],
                     target_profile=p["target_profile"], disturbance=p["disturbance"])
 
@@ -188,26 +190,29 @@ class ScenarioComparison:
 Run = tuple[str, str, int]
 
 
-def _one(args: tuple[Run, float, ModelBundle | None, ObserverModel | None]) -> HoldResult:
-    (estimator, name, seed), duration_s, models, observer = args
-    return scenario_hold(estimator, name, seed, duration_s, models, observer)
+def _one(args: tuple[Run, float, ModelBundle | None, ObserverModel | None, TwinConfig | None]
+         ) -> HoldResult:
+    (estimator, name, seed), duration_s, models, observer, config = args
+    return scenario_hold(estimator, name, seed, duration_s, models, observer, config)
 
 
 def scenario_holds(runs: Sequence[Run], duration_s: float = PAPER_DURATION_S,
                    models: ModelBundle | None = None, observer: ObserverModel | None = None,
-                   n_jobs: int = 1) -> list[HoldResult]:
+                   n_jobs: int = 1, config: TwinConfig | None = None) -> list[HoldResult]:
     """Each run's :func:`scenario_hold`, in order, ``n_jobs`` at once."""
-    return map_holds(_one, [(run, duration_s, models, observer) for run in runs], n_jobs)
+    return map_holds(_one, [(run, duration_s, models, observer, config) for run in runs],
+                     n_jobs)
 
 
 def compare_scenarios(names: Sequence[str] = ("ramp", "step", "push"), seed: int = 0,
                       duration_s: float = PAPER_DURATION_S,
                       estimators: Sequence[str] = ("relax", "observer"),
                       models: ModelBundle | None = None, observer: ObserverModel | None = None,
-                      n_jobs: int = 1) -> ScenarioComparison:
-    """Run every estimator through every scenario on ``seed`` (``n_jobs`` holds at once)."""
+                      n_jobs: int = 1, config: TwinConfig | None = None) -> ScenarioComparison:
+    """Run every estimator through every scenario on ``seed`` (``n_jobs`` holds at once), on
+    the twin ``config`` (our gripper by default)."""
     runs = [(est, name, seed) for name in check_scenarios(names) for est in estimators]
-    holds = scenario_holds(runs, duration_s, models, observer, n_jobs)
+    holds = scenario_holds(runs, duration_s, models, observer, n_jobs, config)
     out: dict[str, dict[str, HoldResult]] = {}
     for (est, name, _), hold in zip(runs, holds, strict=True):
         out.setdefault(name, {})[est] = hold

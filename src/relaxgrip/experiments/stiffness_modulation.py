@@ -341,6 +341,7 @@ def run_contact(
     seed: int = 0,
     models: ModelBundle | None = None,
     stroke: ContactStroke | None = None,
+    config: TwinConfig | None = None,
 ) -> ContactRun:
     """Press ``object_name`` against the marker finger once at a stiffness state.
 
@@ -356,6 +357,8 @@ def run_contact(
         The ICFN (default: the shipped models).
     stroke : ContactStroke, optional
         The indentation (default: the object's entry of :data:`STROKES`, else 5 mm).
+    config : TwinConfig, optional
+        The twin (default: our gripper); its object, ambient and temperature are set here.
 
     Returns
     -------
@@ -364,11 +367,12 @@ def run_contact(
     kind = StiffnessMode(mode)
     if kind is StiffnessMode.ADHESIVE:
         raise InputError("the single-finger contacts use the stiff, medium and compliant states")
-    obj = get_object(object_name)
     stroke = stroke if stroke is not None else STROKES.get(object_name, ContactStroke(5.0))
     bundle = models if models is not None else load_default_models()
     setpoint = _mode_setpoint_c(kind)
-    base = TwinConfig(object_name=object_name, ambient_c=ROOM_C, initial_temp_c=setpoint)
+    base = replace(config if config is not None else TwinConfig(), object_name=object_name,
+                   ambient_c=ROOM_C, initial_temp_c=setpoint)
+    obj = base.object_spec(object_name)
     cfg = replace(base, rigid_finger=1 - base.rig.marker_finger)
     clock = VirtualClock()
     twin = GripperTwin(cfg, seed=seed, clock=clock)
@@ -492,10 +496,12 @@ def contact_task_result(name: str, seed: int, runs: Sequence[ContactRun]) -> Tas
 
 
 def run_contacts(object_name: str, seed: int = 0, models: ModelBundle | None = None,
-                 stroke: ContactStroke | None = None) -> tuple[ContactRun, ...]:
+                 stroke: ContactStroke | None = None, config: TwinConfig | None = None,
+                 ) -> tuple[ContactRun, ...]:
     """One contact stroke of ``object_name`` at every state of :data:`CONTACT_MODES`."""
     bundle = models if models is not None else load_default_models()
-    return tuple(run_contact(object_name, mode, seed, bundle, stroke) for mode in CONTACT_MODES)
+    return tuple(run_contact(object_name, mode, seed, bundle, stroke, config)
+                 for mode in CONTACT_MODES)
 
 
 # -- (b) closed-loop grasps ---------------------------------------------------------------
@@ -720,12 +726,13 @@ def run_grasp(
     seed: int = 0,
     models: ModelBundle | None = None,
     estimator: EstimatorKind | str = GRASP_ESTIMATOR,
-    contact_position_m: float = 0.080,
+    contact_position_m: float | None = None,
     hold_s: float = 3.0,
     lift_mm: float = 30.0,
     sustain_s: float = 8.0,
     band_n: float | None = None,
     ambient_c: float = ROOM_C,
+    config: TwinConfig | None = None,
 ) -> GraspRun:
     """Grasp ``object_name`` at ``target_n`` in ``mode``: Open, Close, Hold, Lift, Sustain.
 
@@ -744,14 +751,18 @@ def run_grasp(
         ICFN and RCFN (default: the shipped models).
     estimator : {"icfn", "relax", "fixed"}
         The controller's force estimator.
-    contact_position_m : float
-        Nominal contact position along the fingers (m).
+    contact_position_m : float, optional
+        Nominal contact position along the fingers (m; default: the twin's usual
+        contact, 80 mm on our gripper).
     hold_s, lift_mm, sustain_s : float
         Time in Hold (s), arm lift (mm), time in Sustain (s).
     band_n : float, optional
         Half-width of the force band (N); default :func:`force_band_n`.
     ambient_c : float
         Room temperature (°C).
+    config : TwinConfig, optional
+        The twin (default: our gripper); its object, contact, ambient and
+        temperature are set here.
 
     Returns
     -------
@@ -761,16 +772,19 @@ def run_grasp(
     est_kind = EstimatorKind(estimator)
     check_target_n(target_n)
     bundle = models if models is not None else load_default_models()
-    cfg = TwinConfig(object_name=object_name, contact_position_m=contact_position_m,
-                     ambient_c=ambient_c, initial_temp_c=_mode_setpoint_c(kind))
+    base = config if config is not None else TwinConfig()
+    cfg = replace(base, object_name=object_name,
+                  contact_position_m=(base.contact_position_m if contact_position_m is None
+                                      else contact_position_m),
+                  ambient_c=ambient_c, initial_temp_c=_mode_setpoint_c(kind))
     clock = VirtualClock()
     twin = GripperTwin(cfg, seed=seed, clock=clock)
     recorder = _TruthRecorder(twin)
-    controller = GraspController(cfg.rig, bundle_estimator(est_kind, bundle),
+    cc = ForceControlConfig(stroke_mm=cfg.motor.stroke_mm)
+    controller = GraspController(cfg.rig, bundle_estimator(est_kind, bundle), cc,
                                  heat=cfg.heat)
     plan = GraspPlan(target_n=target_n, mode=kind, hold_s=hold_s, lift_mm=lift_mm,
                      sustain_s=sustain_s, release=False)
-    cc = ForceControlConfig()
     # Settling and re-zeroing, the full closing stroke at the approach speed, the
     # climb to the target, the lift: all bounded, with a margin for the force loop.
     budget = (cc.temp_settle_s + 5.0 + cc.stroke_mm / cc.approach_mm_s + 15.0 + hold_s
@@ -783,18 +797,20 @@ def run_grasp(
     return GraspRun(
         object_name, kind.value, target_n,
         band_n if band_n is not None else force_band_n(target_n), est_kind.value, seed,
-        contact_position_m, lift_mm, sustain_s, loop,
+        cfg.contact_position_m, lift_mm, sustain_s, loop,
         np.array(recorder.slipping[:n], dtype=bool), np.array(recorder.crushed[:n], dtype=bool),
         np.array(recorder.plastic_m[:n], dtype=np.float64))
 
 
 def run_grasp_task(task: GraspTask, seed: int = 0, models: ModelBundle | None = None,
-                   quick: bool = False) -> GraspRun:
-    """Run one of :data:`GRASP_TASKS` (``quick``: shorter Hold and Sustain)."""
+                   quick: bool = False, config: TwinConfig | None = None) -> GraspRun:
+    """Run one of :data:`GRASP_TASKS` (``quick``: shorter Hold and Sustain) on the twin
+    ``config`` (our gripper by default), where the paper held it on its finger."""
     hold_s, sustain_s = (2.0, 4.0) if quick else (3.0, 8.0)
+    base = config if config is not None else TwinConfig()
     return run_grasp(task.object_name, task.target_n, task.mode, seed, models,
-                     contact_position_m=task.contact_position_m, hold_s=hold_s,
-                     sustain_s=sustain_s)
+                     contact_position_m=base.paper_position_m(task.contact_position_m),
+                     hold_s=hold_s, sustain_s=sustain_s, config=base)
 
 
 def grasp_task_result(name: str, run: GraspRun) -> TaskResult:
@@ -863,7 +879,8 @@ class StiffnessModulationResult:
 
 
 def run_stiffness_modulation(seed: int = 0, quick: bool = False,
-                             models: ModelBundle | None = None) -> StiffnessModulationResult:
+                             models: ModelBundle | None = None,
+                             config: TwinConfig | None = None) -> StiffnessModulationResult:
     """Run the whole of Fig. "grasp": nine contact strokes and three grasps.
 
     Parameters
@@ -874,14 +891,17 @@ def run_stiffness_modulation(seed: int = 0, quick: bool = False,
         Shorter Hold and Sustain in the grasps (the contacts are short anyway).
     models : ModelBundle, optional
         ICFN and RCFN (default: the shipped models).
+    config : TwinConfig, optional
+        The twin (default: our gripper).
 
     Returns
     -------
     StiffnessModulationResult
     """
     bundle = models if models is not None else load_default_models()
-    contacts = tuple(r for obj in CONTACT_OBJECTS for r in run_contacts(obj, seed, bundle))
-    grasps = {name: run_grasp_task(task, seed, bundle, quick)
+    contacts = tuple(r for obj in CONTACT_OBJECTS
+                     for r in run_contacts(obj, seed, bundle, config=config))
+    grasps = {name: run_grasp_task(task, seed, bundle, quick, config)
               for name, task in GRASP_TASKS.items()}
     return StiffnessModulationResult(seed, quick, contacts, grasps)
 
@@ -889,39 +909,39 @@ def run_stiffness_modulation(seed: int = 0, quick: bool = False,
 # -- tasks ------------------------------------------------------------------------------------
 
 
-def _grasp_task(name: str, seed: int) -> TaskResult:
-    return grasp_task_result(name, run_grasp_task(GRASP_TASKS[name], seed))
+def _grasp_task(name: str, seed: int, config: TwinConfig | None) -> TaskResult:
+    return grasp_task_result(name, run_grasp_task(GRASP_TASKS[name], seed, config=config))
 
 
-def _contact_task(name: str, seed: int) -> TaskResult:
-    return contact_task_result(name, seed, run_contacts(name, seed))
+def _contact_task(name: str, seed: int, config: TwinConfig | None) -> TaskResult:
+    return contact_task_result(name, seed, run_contacts(name, seed, config=config))
 
 
-def hammer_task(seed: int = 0) -> TaskResult:
+def hammer_task(seed: int = 0, config: TwinConfig | None = None) -> TaskResult:
     """Grasp the hammer at 5 N in the stiff mode, lift it and sustain (Fig. "grasp" d)."""
-    return _grasp_task("hammer", seed)
+    return _grasp_task("hammer", seed, config)
 
 
-def orange_task(seed: int = 0) -> TaskResult:
+def orange_task(seed: int = 0, config: TwinConfig | None = None) -> TaskResult:
     """Grasp the orange at 6 N in the medium mode, lift it and sustain (Fig. "grasp" e)."""
-    return _grasp_task("orange", seed)
+    return _grasp_task("orange", seed, config)
 
 
-def balloon_task(seed: int = 0) -> TaskResult:
+def balloon_task(seed: int = 0, config: TwinConfig | None = None) -> TaskResult:
     """Grasp the balloon at 0.3 N in the compliant mode, lift it and sustain (Fig. "grasp" f)."""
-    return _grasp_task("balloon", seed)
+    return _grasp_task("balloon", seed, config)
 
 
-def feather_task(seed: int = 0) -> TaskResult:
+def feather_task(seed: int = 0, config: TwinConfig | None = None) -> TaskResult:
     """Touch the finger with a feather at the three stiffness states (Fig. "grasp" a)."""
-    return _contact_task("feather", seed)
+    return _contact_task("feather", seed, config)
 
 
-def brush_task(seed: int = 0) -> TaskResult:
+def brush_task(seed: int = 0, config: TwinConfig | None = None) -> TaskResult:
     """Touch the finger with a brush at the three stiffness states (Fig. "grasp" b)."""
-    return _contact_task("brush", seed)
+    return _contact_task("brush", seed, config)
 
 
-def wrench_task(seed: int = 0) -> TaskResult:
+def wrench_task(seed: int = 0, config: TwinConfig | None = None) -> TaskResult:
     """Press a wrench against the finger at the three stiffness states (Fig. "grasp" c)."""
-    return _contact_task("wrench", seed)
+    return _contact_task("wrench", seed, config)

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from relaxgrip.errors import InputError
+from relaxgrip.twin import TwinConfig
 
 __all__ = ["TASKS", "TaskResult", "finite_figures", "run_task", "task_names"]
 
@@ -70,7 +71,8 @@ def finite_figures(figures: Mapping[str, float]) -> dict[str, float]:
     return {k: float(v) for k, v in figures.items() if math.isfinite(v)}
 
 
-#: Task name -> (module, function); the function takes ``seed`` and returns a TaskResult.
+#: Task name -> (module, function); the function takes ``seed`` and ``config`` (the twin,
+#: our gripper by default) and returns a TaskResult.
 TASKS: dict[str, tuple[str, str]] = {
     "hammer": ("relaxgrip.experiments.stiffness_modulation", "hammer_task"),
     "orange": ("relaxgrip.experiments.stiffness_modulation", "orange_task"),
@@ -106,6 +108,6 @@ def task_function(name: str) -> Callable[..., TaskResult]:
     return fn
 
 
-def run_task(name: str, seed: int = 0) -> TaskResult:
-    """Run task ``name`` on the twin with ``seed``."""
-    return task_function(name)(seed=seed)
+def run_task(name: str, seed: int = 0, config: TwinConfig | None = None) -> TaskResult:
+    """Run task ``name`` with ``seed`` on the twin ``config`` (our gripper by default)."""
+    return task_function(name)(seed=seed, config=config)

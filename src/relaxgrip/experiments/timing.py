@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import cv2
@@ -70,14 +70,17 @@ class GraspFrames:
     rest2cam: FloatArray
 
 
-def render_grasp(n_frames: int = 600, seed: int = 0) -> GraspFrames:
-    """Render a grasp of the force ball: open for 1 s, close, squeeze, hold from 9 s, heaters on."""
-    cfg = TwinConfig(initial_temp_c=35.0, ir=None)
+def render_grasp(n_frames: int = 600, seed: int = 0,
+                 config: TwinConfig | None = None) -> GraspFrames:
+    """Render a grasp of the force ball: open for 1 s, close, squeeze, hold from 9 s, heaters on
+    (on the twin ``config``, our gripper by default)."""
+    cfg = replace(config if config is not None else TwinConfig(), initial_temp_c=35.0, ir=None)
     clock = VirtualClock()
     twin = GripperTwin(cfg, seed=seed, clock=clock)
     rig = cfg.rig
     ir_renderer = IrRenderer(rig, IrSensorConfig(), seed)
     nodes_m = node_positions_m(cfg.heat)
+    radius_m = 0.5 * cfg.force_ball.width_m
     j = rig.marker_finger
     rgb, ir, motor, poses = [], [], [], []
     for k in range(n_frames):
@@ -92,7 +95,7 @@ def render_grasp(n_frames: int = 600, seed: int = 0) -> GraspFrames:
         rgb.append(obs.rgb)
         motor.append(obs.motor_position_mm)
         poses.append(rig.marker2cam(truth.marker_deflection_m[j], truth.marker_slope_rad[j]))
-        ball = IrObject((truth.contact_position_m, 0.0, 0.0), 0.03, 25.0, 0.95)
+        ball = IrObject((truth.contact_position_m, 0.0, 0.0), radius_m, 25.0, 0.95)
         image = ir_renderer.render(k, np.asarray(truth.finger_temps_c), nodes_m,
                                    truth.aperture_m, [ball], twin.material.ambient_c)
         ir.append(Frame(obs.t_s, k, image))
@@ -146,7 +149,8 @@ def _timed(fn: Callable[[int], Any], indices: range | list[int]) -> tuple[list[f
     return times, out
 
 
-def run_timing(seed: int = 0, quick: bool = False) -> TimingResult:
+def run_timing(seed: int = 0, quick: bool = False,
+               config: TwinConfig | None = None) -> TimingResult:
     """Measure every stage on a rendered grasp with the shipped models.
 
     Parameters
@@ -155,6 +159,8 @@ def run_timing(seed: int = 0, quick: bool = False) -> TimingResult:
         Twin seed of the rendered grasp.
     quick : bool
         One pass over 450 frames instead of three over 600.
+    config : TwinConfig, optional
+        The twin (default: our gripper).
     """
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import (
@@ -173,8 +179,9 @@ def run_timing(seed: int = 0, quick: bool = False) -> TimingResult:
     from relaxgrip.perception.thermal import ThermalPerception
 
     n_frames, passes = (450, 1) if quick else (600, 3)
-    grasp = render_grasp(n_frames, seed)
-    rig = TwinConfig().rig
+    cfg = config if config is not None else TwinConfig()
+    grasp = render_grasp(n_frames, seed, cfg)
+    rig = cfg.rig
     models = load_default_models()
     previous_threads = cv2.getNumThreads()
     cv2.setNumThreads(1)

@@ -28,7 +28,7 @@ import stat
 import threading
 import tty
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -50,7 +50,7 @@ from relaxgrip.hardware.hx711 import Hx711Config, Hx711Model
 from relaxgrip.hardware.protocol.client import McuClient
 from relaxgrip.hardware.protocol.mcu import AppliedOutputs, McuConfig, McuCore, McuEndpoint
 from relaxgrip.hardware.protocol.transport import FdTransport, SerialTransport
-from relaxgrip.hardware.rig_file import LimitsSpec, RigFile
+from relaxgrip.hardware.rig_file import LimitsSpec
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
 from relaxgrip.twin.objects import get_object
 
@@ -68,7 +68,6 @@ __all__ = [
     "load_cell_model",
     "open_emulated_gripper",
     "ready_emulated_gripper",
-    "twin_config_for_rig",
 ]
 
 #: Messages that may wait for a slow wall-clock host (a third of a second of RGB
@@ -633,19 +632,6 @@ def _answers(path: Path) -> bool:
                 " ".join(parts[7:]) in (target, str(path)):
             return True
     return False
-
-
-def twin_config_for_rig(rig: RigFile, base: TwinConfig | None = None) -> TwinConfig:
-    """The twin an emulator runs for a rig file: its geometry and motor speed limit.
-
-    Raises
-    ------
-    InputError
-        If the rig's finger does not match the twin's beam model (length).
-    """
-    cfg = base if base is not None else TwinConfig()
-    motor = replace(cfg.motor, max_velocity_mm_s=rig.limits.max_motor_speed_mm_s)
-    return replace(cfg, rig=rig.geometry, motor=motor)
 
 
 def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,

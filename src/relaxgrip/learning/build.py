@@ -14,6 +14,7 @@ import os
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +22,7 @@ import pandas as pd
 
 from relaxgrip import __version__
 from relaxgrip.errors import InputError
+from relaxgrip.fileio import json_digest
 from relaxgrip.learning.datasets import (
     REPEAT_TEMPS_C,
     REPEATS_PER_GROUP,
@@ -38,10 +40,11 @@ from relaxgrip.learning.datastore import (
     write_dataset,
 )
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
+from relaxgrip.serialize import json_safe
 from relaxgrip.twin import TWIN_VERSION, TwinConfig
 from relaxgrip.validate import check_jobs
 
-__all__ = ["BACKENDS", "build_dataset", "check_backend", "parallel_backend"]
+__all__ = ["BACKENDS", "build_dataset", "check_backend", "gripper_record", "parallel_backend"]
 
 BACKENDS: tuple[str, ...] = ("loky", "dask", "ray")
 
@@ -125,17 +128,16 @@ def parallel_backend(name: str, jobs: int) -> Iterator[int]:
         return
 
 
-def _run(unit: Any) -> UnitResult:
+def _run(unit: Any, config: TwinConfig) -> UnitResult:
     """One unit in a worker: OpenCV on one thread (the parallelism is across units)."""
     import cv2
 
     cv2.setNumThreads(1)
-    return run_unit(unit)
+    return run_unit(unit, config)
 
 
-def _noise_levels() -> dict[str, Any]:
-    """The imperfections a default twin has, as the manifest records them."""
-    cfg = TwinConfig()
+def _noise_levels(cfg: TwinConfig) -> dict[str, Any]:
+    """The imperfections the twin has, as the manifest records them."""
     assert cfg.rgb is not None
     assert cfg.ir is not None
     assert cfg.force_sensor is not None
@@ -163,6 +165,18 @@ def _noise_levels() -> dict[str, Any]:
     }
 
 
+def gripper_record(cfg: TwinConfig) -> dict[str, Any]:
+    """Which gripper a dataset was recorded on: a digest of everything the rig file sets
+    (every field of the twin but the experiment's object and scene), and a few of them."""
+    parts = ("finger", "heat", "relax", "motor", "rig", "force_sensor", "force_ball")
+    gripper: dict[str, Any] = {name: None if getattr(cfg, name) is None
+                               else asdict(getattr(cfg, name)) for name in parts}
+    gripper["contact_position_m"] = cfg.contact_position_m
+    return {"digest": json_digest(json_safe(gripper)),
+            "finger_length_m": cfg.finger.length_m,
+            "marker": {"dictionary": cfg.rig.marker.dictionary, "id": cfg.rig.marker.marker_id}}
+
+
 def _table(parts: list[dict[str, list[Any]]], order: list[str]) -> pd.DataFrame:
     frames = [pd.DataFrame(p) for p in parts if any(len(v) for v in p.values())]
     if not frames:
@@ -177,6 +191,7 @@ def build_dataset(
     jobs: int = 1,
     backend: str = "loky",
     progress: ProgressFn | None = None,
+    config: TwinConfig | None = None,
 ) -> dict[str, Any]:
     """Generate a dataset into ``out_dir`` and return its manifest.
 
@@ -192,19 +207,24 @@ def build_dataset(
         joblib backend.
     progress : callable, optional
         Called as ``progress(done, total)`` after every unit.
+    config : TwinConfig, optional
+        The twin the data is recorded on (default: our gripper; a rig's from
+        :func:`relaxgrip.hardware.rig_twin.twin_config_for_rig`); the manifest
+        records its gripper (``gripper``).
     """
     from joblib import Parallel, delayed
 
     check_jobs(jobs)
     check_backend(backend)
     check_dataset_out(out_dir)  # before minutes of building, not after
-    units = list(iter_units(spec))
+    cfg = config if config is not None else TwinConfig()
+    units = list(iter_units(spec, cfg))
     start = time.perf_counter()
     results: list[UnitResult] = []
     # No more workers than units: each is a process that imports the package.
     with parallel_backend(backend, max(1, min(jobs, len(units)))) as n_jobs:
         parallel = Parallel(n_jobs=n_jobs, return_as="generator_unordered")
-        for result in parallel(delayed(_run)(unit) for unit in units):
+        for result in parallel(delayed(_run)(unit, cfg) for unit in units):
             results.append(result)
             if progress is not None:
                 progress(len(results), len(units))
@@ -240,7 +260,8 @@ def build_dataset(
             "splits": counts,
         },
         "warnings": warnings,
-        "noise": _noise_levels(),
+        "noise": _noise_levels(cfg),
+        "gripper": gripper_record(cfg),
         "build": {"backend": backend, "jobs": jobs, "seconds": time.perf_counter() - start},
     }
     write_dataset(out_dir, tables, manifest)

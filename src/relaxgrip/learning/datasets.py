@@ -52,9 +52,10 @@ from relaxgrip.perception.features import (
 from relaxgrip.perception.pipeline import Percept, Perception
 from relaxgrip.physics.fitting import fit_reduced
 from relaxgrip.physics.thermal import duty_for_mean_temp
-from relaxgrip.twin import GripperTwin, TwinConfig, get_object
+from relaxgrip.twin import GripperTwin, TwinConfig
 
 __all__ = [
+    "ICFN_CONTACT_RANGE_M",
     "ICFN_MAX_FORCE_N",
     "ICFN_OBJECTS",
     "ICFN_SAMPLES",
@@ -81,7 +82,10 @@ ICFN_OBJECTS: tuple[tuple[str, float], ...] = (
 )
 #: Objects of the RCFN conditions.
 RCFN_OBJECTS: tuple[str, ...] = ("force_ball", "orange", "hammer")
+#: Contact locations of the RCFN conditions on the paper's finger (m; on another rig's, at
+#: the same share of its length: ``TwinConfig.paper_position_m``), and of the ICFN episodes.
 RCFN_LOCATIONS_M: tuple[float, ...] = (0.050, 0.065, 0.080, 0.095)
+ICFN_CONTACT_RANGE_M = (0.045, 0.100)
 RCFN_TEMPS_C: tuple[float, ...] = (25.0, 30.0, 35.0, 40.0, 45.0, 50.0, 55.0, 60.0)
 RCFN_FORCES_N: tuple[float, ...] = (2.0, 3.5, 5.0, 6.5, 8.0)
 #: The paper's ICFN dataset size (samples up to 8 N).
@@ -268,8 +272,11 @@ def _ranks(n: int, rng: np.random.Generator) -> list[int]:
     return ranks.tolist()
 
 
-def plan_icfn(spec: DatasetSpec) -> list[IcfnEpisode]:
-    """The ICFN episodes of a dataset (deterministic in ``spec.seed``)."""
+def plan_icfn(spec: DatasetSpec, config: TwinConfig | None = None) -> list[IcfnEpisode]:
+    """The ICFN episodes of a dataset (deterministic in ``spec.seed``) on the twin ``config``
+    (our gripper by default): its force ball, contacts along its finger."""
+    cfg = config if config is not None else TwinConfig()
+    near, far = (cfg.paper_position_m(x) for x in ICFN_CONTACT_RANGE_M)
     rng = np.random.default_rng([spec.seed, 101])
     full, rest = divmod(spec.icfn_samples, spec.samples_per_episode)
     sizes = [spec.samples_per_episode] * full
@@ -284,14 +291,14 @@ def plan_icfn(spec: DatasetSpec) -> list[IcfnEpisode]:
     episodes = []
     for i, n in enumerate(sizes):
         name = names[int(rng.choice(len(names), p=shares / shares.sum()))]
-        obj = get_object(name)
+        obj = cfg.object_spec(name)
         ceiling = min(ICFN_MAX_FORCE_N, 0.85 * obj.yield_force_n)
         episodes.append(IcfnEpisode(
             index=i,
             seed=int(rng.integers(2**31)),
             object_name=name,
             temp_c=float(rng.uniform(25.0, 60.0)),
-            contact_m=float(rng.uniform(0.045, 0.100)),
+            contact_m=float(rng.uniform(near, far)),
             speed_mm_s=float(np.exp(rng.uniform(math.log(0.5), math.log(4.0)))),
             max_force_n=float(rng.uniform(min(2.0, ceiling), ceiling)),
             n_samples=n,
@@ -324,14 +331,18 @@ def _with_mode_changes(episodes: list[IcfnEpisode],
     return out
 
 
-def plan_rcfn(spec: DatasetSpec) -> list[RcfnSequence]:
-    """The RCFN sequences of a dataset: repeatability groups first, then the grid."""
+def plan_rcfn(spec: DatasetSpec, config: TwinConfig | None = None) -> list[RcfnSequence]:
+    """The RCFN sequences of a dataset: repeatability groups first, then the grid (contacts
+    along the finger of the twin ``config``, our gripper by default)."""
+    cfg = config if config is not None else TwinConfig()
+    locations = tuple(cfg.paper_position_m(x) for x in RCFN_LOCATIONS_M)
+    repeat_m = cfg.paper_position_m(REPEAT_CONTACT_M)
     rng = np.random.default_rng([spec.seed, 202])
     grid = [
         (obj, temp, loc, force)
         for obj in RCFN_OBJECTS for temp in RCFN_TEMPS_C
-        for loc in RCFN_LOCATIONS_M for force in RCFN_FORCES_N
-        if not (obj == "force_ball" and loc == REPEAT_CONTACT_M and force == REPEAT_FORCE_N
+        for loc in locations for force in RCFN_FORCES_N
+        if not (obj == "force_ball" and loc == repeat_m and force == REPEAT_FORCE_N
                 and temp in REPEAT_TEMPS_C)
     ]
     order = rng.permutation(len(grid))
@@ -352,7 +363,7 @@ def plan_rcfn(spec: DatasetSpec) -> list[RcfnSequence]:
 
     for k in range(n_repeat):
         group = k % len(REPEAT_TEMPS_C)
-        add(len(grid) + group, "force_ball", REPEAT_TEMPS_C[group], REPEAT_CONTACT_M,
+        add(len(grid) + group, "force_ball", REPEAT_TEMPS_C[group], repeat_m,
             REPEAT_FORCE_N, k // len(REPEAT_TEMPS_C), "test")
     for k in range(n_grid):
         c = k % len(grid)
@@ -367,9 +378,10 @@ class _Harness:
     The rig reads truth (it is an experiment); perception never does.
     """
 
-    def __init__(self, object_name: str, contact_m: float, temp_c: float, seed: int) -> None:
-        cfg = TwinConfig(object_name=object_name, contact_position_m=contact_m,
-                         initial_temp_c=temp_c)
+    def __init__(self, object_name: str, contact_m: float, temp_c: float, seed: int,
+                 config: TwinConfig | None = None) -> None:
+        cfg = replace(config if config is not None else TwinConfig(), object_name=object_name,
+                      contact_position_m=contact_m, initial_temp_c=temp_c)
         self.clock = VirtualClock()
         self.twin = GripperTwin(cfg, seed=seed, clock=self.clock)
         self.duty = duty_for_mean_temp(temp_c, cfg.heat, cfg.ambient_c)
@@ -440,10 +452,11 @@ class _Harness:
         return truth
 
 
-def run_icfn_episode(ep: IcfnEpisode) -> UnitResult:
-    """Close through ``n_samples`` force levels and sample features at each."""
+def run_icfn_episode(ep: IcfnEpisode, config: TwinConfig | None = None) -> UnitResult:
+    """Close through ``n_samples`` force levels and sample features at each (on the twin
+    ``config``, our gripper by default)."""
     start_c = ep.temp_c if ep.start_temp_c is None else ep.start_temp_c
-    h = _Harness(ep.object_name, ep.contact_m, start_c, ep.seed)
+    h = _Harness(ep.object_name, ep.contact_m, start_c, ep.seed, config)
     h.zero()
     if ep.start_temp_c is not None:
         h.change_mode(ep.temp_c)
@@ -506,9 +519,10 @@ def run_icfn_episode(ep: IcfnEpisode) -> UnitResult:
     return out
 
 
-def run_rcfn_sequence(seq: RcfnSequence) -> UnitResult:
-    """Close to the start force, hold the aperture, keep curve, features and labels."""
-    h = _Harness(seq.object_name, seq.contact_m, seq.temp_c, seq.seed)
+def run_rcfn_sequence(seq: RcfnSequence, config: TwinConfig | None = None) -> UnitResult:
+    """Close to the start force, hold the aperture, keep curve, features and labels (on the
+    twin ``config``, our gripper by default)."""
+    h = _Harness(seq.object_name, seq.contact_m, seq.temp_c, seq.seed, config)
     h.zero()
     h.approach()
     builder = RcfnFeatures()
@@ -598,11 +612,11 @@ def run_rcfn_sequence(seq: RcfnSequence) -> UnitResult:
     return out
 
 
-def run_unit(unit: IcfnEpisode | RcfnSequence) -> UnitResult:
-    """Run one episode or sequence (the unit of parallel work)."""
+def run_unit(unit: IcfnEpisode | RcfnSequence, config: TwinConfig | None = None) -> UnitResult:
+    """Run one episode or sequence (the unit of parallel work) on the twin ``config``."""
     if isinstance(unit, IcfnEpisode):
-        return run_icfn_episode(unit)
-    return run_rcfn_sequence(unit)
+        return run_icfn_episode(unit, config)
+    return run_rcfn_sequence(unit, config)
 
 
 _ICFN_COLUMNS: tuple[str, ...] = (
@@ -611,8 +625,9 @@ _ICFN_COLUMNS: tuple[str, ...] = (
 )
 
 
-def iter_units(spec: DatasetSpec) -> Iterator[IcfnEpisode | RcfnSequence]:
+def iter_units(spec: DatasetSpec, config: TwinConfig | None = None
+               ) -> Iterator[IcfnEpisode | RcfnSequence]:
     """Every unit of work of a dataset, RCFN sequences first (they take longest)."""
-    yield from plan_rcfn(spec)
-    yield from plan_icfn(spec)
+    yield from plan_rcfn(spec, config)
+    yield from plan_icfn(spec, config)
 

@@ -21,7 +21,7 @@ field along the finger).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import numpy as np
@@ -40,6 +40,7 @@ __all__ = [
     "deflection_area_m2",
     "deflection_profile_m",
     "deflection_share",
+    "finger_from_k80",
     "local_stiffness_n_per_m",
     "stiffening_factor",
     "unit_profile_m_per_n",
@@ -291,3 +292,77 @@ def deflection_area_m2(
     """Global deformation ``A_z = int_0^L z(x) dx`` (m^2)."""
     z = deflection_profile_m(force_n, contact_m, temp_c, finger)
     return float(_cumtrapz(z, beam_grid(finger))[-1])
+
+
+def finger_from_k80(finger: FingerParams, k80_n_per_m: tuple[float, float],
+                    temps_c: tuple[float, float], force_n: float,
+                    contact_m: float = 0.080) -> FingerParams:
+    """The finger whose ``k80`` at two temperatures is the measured one.
+
+    ``k80 = F / z(a)`` with the load ``F`` at ``a`` (the paper's 80 mm) is
+    what a lab measures with a force gauge and a ruler.  Two temperatures
+    fix the two parts of :func:`bending_stiffness_n_m2`: the ratio
+    ``k80(T_hot) / k80(T_cold)`` depends only on the SMP share at the base
+    (``smp_ratio_base``; the rest of ``finger`` keeps its shape), and the
+    cold ``k80`` then scales the skeleton (``ei_skeleton_base_n_m2``).  The
+    geometric stiffening is taken out of each measurement first.
+
+    Parameters
+    ----------
+    finger : FingerParams
+        The finger's length, taper, temperature coefficient, tip ratio,
+        stiffening and SMP; its ``ei_skeleton_base_n_m2`` and
+        ``smp_ratio_base`` are replaced.
+    k80_n_per_m : tuple of float
+        Measured ``F / z(a)`` at ``temps_c`` (N/m), > 0.
+    temps_c : tuple of float
+        The two uniform finger temperatures (°C), colder first.
+    force_n : float
+        The load of the measurement (N), > 0.
+    contact_m : float
+        Where the load acted and the deflection was read (m from the root).
+
+    Returns
+    -------
+    FingerParams
+
+    Raises
+    ------
+    ValueError
+        Temperatures not rising, a stiffness that does not fall with them, or a
+        fall this SMP cannot give at any share.
+    """
+    from scipy.optimize import brentq
+
+    (k_cold, k_hot), (t_cold, t_hot) = k80_n_per_m, temps_c
+    if not (min(k_cold, k_hot, force_n) > 0 and math.isfinite(k_cold + k_hot + force_n)):
+        raise ValueError("k80 and the load must be finite and > 0")
+    if not t_cold < t_hot:
+        raise ValueError(f"the temperatures must rise, got {t_cold:g} and {t_hot:g} °C")
+
+    def compliance(k_n_per_m: float) -> float:
+        # F = z / c_a (1 + gamma (z / L)^2), from the measured z = F / k
+        z = force_n / k_n_per_m
+        return z * (1.0 + finger.stiffening * (z / finger.length_m) ** 2) / force_n
+
+    c_cold, c_hot = compliance(k_cold), compliance(k_hot)
+
+    def ratio(smp_ratio_base: float) -> float:
+        trial = replace(finger, ei_skeleton_base_n_m2=1.0, smp_ratio_base=smp_ratio_base)
+        return (contact_compliance_m_per_n(contact_m, t_hot, trial)
+                / contact_compliance_m_per_n(contact_m, t_cold, trial))
+
+    wanted, lo, hi = c_hot / c_cold, ratio(0.0), ratio(_MAX_SMP_RATIO)
+    if not lo <= wanted <= hi:
+        raise ValueError(
+            f"k80 falls {100 * (1 - k_hot / k_cold):.1f} % from {t_cold:g} to {t_hot:g} °C; "
+            f"this finger's SMP gives {100 * (1 - 1 / lo):.1f} to {100 * (1 - 1 / hi):.1f} %")
+    share = float(brentq(lambda r: ratio(r) - wanted, 0.0, _MAX_SMP_RATIO, xtol=1e-12))
+    unit = replace(finger, ei_skeleton_base_n_m2=1.0, smp_ratio_base=share)
+    ei = contact_compliance_m_per_n(contact_m, t_cold, unit) / c_cold
+    return replace(finger, ei_skeleton_base_n_m2=ei, smp_ratio_base=share)
+
+
+#: Largest SMP-to-skeleton ratio :func:`finger_from_k80` considers: beyond it, the skeleton
+#: carries under 0.1 % of the finger, and k80's fall is the SMP's alone.
+_MAX_SMP_RATIO = 1000.0

@@ -10,12 +10,12 @@ from relaxgrip.physics.contact import AdhesionParams
 from relaxgrip.physics.thermal import HeatParams
 from relaxgrip.physics.viscoelastic import RelaxationParams
 from relaxgrip.rig import RigGeometry
-from relaxgrip.twin.objects import ObjectSpec, get_object
+from relaxgrip.twin.objects import CATALOGUE, ObjectSpec, get_object
 from relaxgrip.twin.sensors import ForceSensorConfig, IrSensorConfig, RgbSensorConfig, SceneObject
 from relaxgrip.validate import check_positive, check_temp_c
 
-__all__ = ["MODELS_FROM", "SAME_RUNS_AS", "TWIN_VERSION", "MotorParams", "ScatterParams",
-           "TwinConfig"]
+__all__ = ["MODELS_FROM", "PAPER_FINGER_LENGTH_M", "SAME_RUNS_AS", "TWIN_VERSION",
+           "MotorParams", "ScatterParams", "TwinConfig"]
 
 #: Bumped whenever the twin's behaviour changes; every result records it.
 TWIN_VERSION = "relaxgrip-twin-v7"
@@ -30,6 +30,9 @@ SAME_RUNS_AS: tuple[str, ...] = ()
 #: shipped ICFN's force by +0.003 ± 0.030 N, its MAE 0.133 -> 0.136 N.  Retraining on
 #: this twin takes that back (docs/hold-experiments.md, session 57).
 MODELS_FROM: tuple[str, ...] = ("relaxgrip-twin-v6",)
+#: The paper's finger (m): experiments place their contacts where the paper did on it, at
+#: the same share of another rig's finger (:meth:`TwinConfig.paper_position_m`).
+PAPER_FINGER_LENGTH_M = 0.110
 
 
 @dataclass(frozen=True)
@@ -139,6 +142,9 @@ class TwinConfig:
     force_sensor : ForceSensorConfig or None
         The force ball's sensor (only objects with ``force_sensor`` carry one);
         ``None``: no reference force readings.
+    force_ball : ObjectSpec
+        The calibration object the name ``"force_ball"`` stands for (a rig's
+        own, ``[force_ball]`` of its rig file; default: the catalogue's).
     scene : tuple of SceneObject
         Further objects standing in view (seen by the cameras, never touched).
     ambient_c : float
@@ -172,6 +178,7 @@ class TwinConfig:
     rgb: RgbSensorConfig | None = field(default_factory=RgbSensorConfig)
     ir: IrSensorConfig | None = field(default_factory=IrSensorConfig)
     force_sensor: ForceSensorConfig | None = field(default_factory=ForceSensorConfig)
+    force_ball: ObjectSpec = field(default_factory=lambda: CATALOGUE["force_ball"])
     scene: tuple[SceneObject, ...] = ()
     ambient_c: float = 25.0
     initial_temp_c: float | None = None
@@ -184,6 +191,9 @@ class TwinConfig:
             raise InputError(f"unit must be a non-negative integer, got {self.unit!r}")
         if self.object_name is not None:
             get_object(self.object_name)
+        if self.force_ball.name != "force_ball" or not self.force_ball.force_sensor:
+            raise InputError("force_ball must be named 'force_ball' and carry a force sensor, "
+                             f"got {self.force_ball.name!r}")
         check_temp_c(self.ambient_c, "ambient temperature")
         if self.initial_temp_c is not None:
             check_temp_c(self.initial_temp_c, "initial finger temperature")
@@ -216,5 +226,23 @@ class TwinConfig:
 
     @property
     def object(self) -> ObjectSpec | None:
-        """The object's catalogue entry, if any."""
-        return None if self.object_name is None else get_object(self.object_name)
+        """The object's catalogue entry (this twin's force ball for ``"force_ball"``), if any."""
+        return None if self.object_name is None else self.object_spec(self.object_name)
+
+    def paper_position_m(self, position_m: float) -> float:
+        """Where ``position_m`` along the paper's finger falls on this twin's finger (m).
+
+        At the same share of the finger's length: the paper's contacts at 50-95 mm of
+        its 110 mm finger are at 57-108 mm of a 125 mm one, and where they are on ours.
+        """
+        return position_m * (self.finger.length_m / PAPER_FINGER_LENGTH_M)
+
+    def object_spec(self, name: str) -> ObjectSpec:
+        """A catalogue object by name; ``"force_ball"`` is this twin's :attr:`force_ball`.
+
+        Raises
+        ------
+        InputError
+            If ``name`` is not in the catalogue.
+        """
+        return self.force_ball if name == "force_ball" else get_object(name)

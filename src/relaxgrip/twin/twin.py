@@ -37,7 +37,7 @@ from relaxgrip.physics.thermal import (
 )
 from relaxgrip.physics.viscoelastic import phi1
 from relaxgrip.twin.config import TWIN_VERSION, TwinConfig
-from relaxgrip.twin.objects import ObjectSpec, get_object
+from relaxgrip.twin.objects import ObjectSpec
 from relaxgrip.twin.sensor_suite import SceneState, SensorSuite
 from relaxgrip.twin.sensors import SceneObject
 
@@ -313,7 +313,7 @@ class GripperTwin:
         """
         if not (math.isfinite(ahead_m) and ahead_m >= 0.0):
             raise InputError(f"object distance must be >= 0 m, got {ahead_m}")
-        obj = None if name is None else get_object(name)
+        obj = None if name is None else self.config.object_spec(name)
         if obj is not None and ahead_m == 0.0 and self.aperture_m < obj.width_m:
             raise InputError(f"{name} is {obj.width_m * 1e3:g} mm wide and the fingers "
                              f"{self.aperture_m * 1e3:.1f} mm apart: open them first")
@@ -428,8 +428,8 @@ class GripperTwin:
         stiff = self._stiff[j]
         fwd_m, arm_m = self._forward_mm * 1e-3, self._arm_mm * 1e-3
         objects = [
-            (get_object(o.name), (o.position_m[0] - fwd_m, o.position_m[1],
-                                  o.position_m[2] - arm_m))
+            (cfg.object_spec(o.name), (o.position_m[0] - fwd_m, o.position_m[1],
+                                       o.position_m[2] - arm_m))
             for o in self._scene_objects
         ]
         if self._object is not None:
