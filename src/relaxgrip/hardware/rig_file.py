@@ -123,7 +123,8 @@ _KINDS: dict[str, str] = {
     "schema": "an integer, 2", "name": "text", "marker_finger": "0 or 1", "port": "a path",
     "baud": "bit/s", "source": "text", "device": "an index or a path", "dist": "OpenCV "
     "coefficients, [] for none", "scale": "°C per count", "dictionary": "e.g. 4X4_50",
-    "id": "an integer", "frames": "a count", "skeleton_taper": "a share, 0..1", "smp_ratio_base": "a ratio",
+    "id": "an integer", "frames": "a count", "skeleton_taper": "a share, 0..1",
+    "smp_ratio_base": "a ratio",
     "smp_ratio_tip": "a ratio", "stiffening": "no unit", "heater_share": "shares, one a node",
     "friction": "no unit", "wlf_c1": "no unit", "relax_fraction_glassy": "a share, 0..1",
     "relax_fraction_rubbery": "a share, 0..1", "branch_weights": "shares",
