@@ -12,7 +12,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "src" / "relaxgrip"
 #: Each top-level module or subpackage of relaxgrip and its layer, lowest first.
 LAYERS: dict[str, int] = {
     **dict.fromkeys(("__init__", "errors", "validate", "rig", "board", "clock", "backend",
-                     "serialize", "fileio", "metrics", "interrupts"), 0),
+                     "serialize", "fileio", "metrics", "interrupts", "limits"), 0),
     "physics": 1,
     "twin": 2,
     "hardware": 3,

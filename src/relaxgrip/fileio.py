@@ -341,6 +341,44 @@ def check_writable(path: Path, error: type[Exception]) -> None:
         raise error(f"{path}: cannot write in {folder} ({exc.strerror or exc})") from None
 
 
+def check_new_file(path: Path, flag: str, overwrite: bool, error: type[Exception]) -> Path:
+    """Check that ``path`` (given with ``flag``) may be written: new, or ``overwrite`` given.
+
+    A run that records for minutes must not silently replace the recording
+    of an earlier one.
+
+    Raises
+    ------
+    error
+        ``path`` exists and ``overwrite`` is false, is a directory or a
+        special file, or cannot be written where it is to go.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise error(f"{flag} {path} is a directory: give a file name")
+    if (path.exists() or path.is_symlink()) and not overwrite:
+        raise error(f"{flag} {path} exists: add --overwrite to replace it")
+    check_writable(path, error)
+    return path
+
+
+def check_input_dir(path: Path, what: str, error: type[Exception]) -> Path:
+    """Check that ``path`` is a directory (``what``: "dataset directory"), before reading it.
+
+    Raises
+    ------
+    error
+        ``path`` is missing ("no such <what>") or is a file, not a directory
+        (named as such: a file given where a directory is expected).
+    """
+    path = Path(path)
+    if path.is_dir():
+        return path
+    if path.exists():
+        raise error(f"{path}: a file, not a directory ({_indefinite(what)} is expected)")
+    raise error(f"{path}: no such {what}")
+
+
 def entries(directory: Path) -> set[str]:
     """The names in ``directory``, but for the temporaries an interrupted write left there.
 
@@ -415,6 +453,9 @@ def read_manifest(path: Path, format_name: str, format_version: int,
     what : str
         What the directory should be, for the messages ("a relaxgrip model directory").
     """
+    parent = path.parent
+    if parent.exists() and not parent.is_dir():
+        raise error(f"{parent}: a file, not a directory ({what} is expected)")
     if not path.is_file():
         raise error(f"{path}: missing (not {what}?)")
     try:

@@ -283,3 +283,51 @@ def test_a_push_off_the_twin_is_refused_before_the_recording_opens(monkeypatch, 
     assert err.count("\n") == 1
     assert out == ""
     assert record.read_text() == "an earlier recording"
+
+
+def test_record_refuses_an_existing_file_without_overwrite(monkeypatch, capsys, tmp_path: Path):
+    """An earlier run's recording is not replaced by a typo: nothing runs, the file is kept."""
+    old = tmp_path / "yesterday.mcap"
+    old.write_bytes(b"a recording of yesterday's hold")
+    code, _, err = run_main(["hold", "--duration-s", "1", "--record", old], monkeypatch,
+                            capsys)
+    assert code == 2
+    assert err == f"error: --record {old} exists: add --overwrite to replace it\n"
+    assert old.read_bytes() == b"a recording of yesterday's hold"
+    code, _, err = run_main(["hold", "--record", tmp_path, "--overwrite"], monkeypatch, capsys)
+    assert code == 2
+    assert f"--record {tmp_path} is a directory" in err
+    code, _, err = run_main(["hold", "--overwrite"], monkeypatch, capsys)
+    assert code == 2
+    assert "--overwrite lets --record replace a file" in err
+
+
+def test_a_stopped_hold_prints_what_it_held_and_exits_130(monkeypatch, capsys, tmp_path: Path):
+    """A stop signal mid-hold (here: raised by the recorder, as the handler would) prints the
+    partial result, ``"interrupted": true``, closes the recording complete and exits 130."""
+    from relaxgrip.recording import McapRecorder, read_session
+
+    step = McapRecorder.step
+
+    def stopping(self, obs, controller, command):
+        step(self, obs, controller, command)
+        if controller.estimate.hold_s >= 2.0:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(McapRecorder, "step", stopping)
+    path = tmp_path / "stopped.mcap"
+    code, out, err = run_main(["hold", "--duration-s", "4", "--json", "--record", path],
+                              monkeypatch, capsys)
+    assert code == 130, err
+    partial = json.loads(out)
+    assert partial["interrupted"] is True
+    assert 2.0 <= partial["held_s"] < 2.1
+    assert partial["window_s"][0] < 2.0  # the figures of the steady state's first part
+    assert partial["mae_n"] < 0.2
+    assert read_session(path)["backend"]["name"] == "twin"  # complete: read strictly
+    code, out, err = run_main(["hold", "--duration-s", "4", "--record", path, "--overwrite"],
+                              monkeypatch, capsys)
+    assert code == 130
+    assert "MAE (N)" in out
+    assert "interrupted after 2.0 s of the 4 s hold: motor stopped, heaters off; recording" \
+        in err

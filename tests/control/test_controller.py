@@ -423,29 +423,41 @@ def test_a_second_start_during_a_grasp_is_refused_and_changes_nothing(models):
     assert ctl.phase.value == "open"
 
 
-def test_the_per_frame_icfn_is_a_second_force_limit(models):
-    """Eq. 10 can read far under the truth when the temperature changes; the per-frame
-    ICFN, over the limit by more than its margin, backs the motor off as well."""
+@pytest.mark.parametrize(("estimate_n", "icfn_n", "stops", "said"), [
+    (5.0, 13.1 - 0.2, False, ""),
+    (5.0, 13.1, True, "per-frame ICFN 13.1 N"),  # Eq. 10 reading far under a temperature change
+    (12.2, 5.0, True, "estimate 12.2 N"),
+    (-12.2, 5.0, True, "estimate -12.2 N"),  # a model's absurd output, either way
+    (1e6, 1e6, True, "estimate 1e+06 N; per-frame ICFN 1e+06 N"),
+])
+def test_an_estimate_beyond_the_force_limit_stops_the_grasp(models, estimate_n, icfn_n, stops,
+                                                            said):
+    """The rig's force limit, on the estimate and (with a margin) on the per-frame ICFN: the
+    grasp stops, motor stopped and heaters off, with one event and one reason."""
     from relaxgrip.control.estimators import ForceEstimate
+    from relaxgrip.perception.marker import MarkerState, TrackStatus
 
     ctl = GraspController(TwinConfig().rig, make_estimator("relax", models.icfn, models.rcfn))
     ctl.phase = GraspPhase.HOLD
-    cfg = ctl.config
     percept = type("P", (), {})()  # only what _motor reads before the limit
-    from relaxgrip.perception.marker import MarkerState, TrackStatus
-
     percept.t_s = 10.0
     percept.marker = MarkerState(10.0, TrackStatus.TRACKING)
     percept.thermal = type("T", (), {"t_s": 9.5})()
-    for icfn_n, backs in ((cfg.max_force_n + cfg.icfn_margin_n - 0.1, False),
-                          (cfg.max_force_n + cfg.icfn_margin_n + 0.1, True)):
-        ctl.estimate = ForceEstimate(5.0, icfn_n)
-        ctl._hold_started = True
-        velocity, _ = ctl._motor(10.0, 1 / 30, 100.0, 0.0, percept)
-        assert (velocity == -cfg.approach_mm_s) is backs
+    ctl.estimate = ForceEstimate(estimate_n, icfn_n)
+    ctl._hold_started = True
+    velocity, _ = ctl._motor(10.0, 1 / 30, 100.0, 0.0, percept)
+    assert velocity == 0.0
+    assert (ctl.phase is GraspPhase.STOPPED) is stops
     event = ctl.log.first(EventKind.FORCE_LIMIT)
+    if not stops:
+        assert event is None
+        return
     assert event is not None
-    assert event.detail.startswith("per-frame ICFN 13.1")
+    assert event.detail == f"{said} beyond the ±12 N force limit"
+    stop = ctl.log.first(EventKind.STOP)
+    assert stop is not None
+    assert stop.detail == f"force limit: {event.detail}"
+    assert ctl.command == Command()
 
 
 def test_a_heater_fault_stops_the_grasp_with_the_heaters_off(models):
@@ -481,3 +493,44 @@ def test_a_stop_is_the_last_command_at_once(models):
     assert ctl.command == Command()
     assert ctl.command.heater_duty == (0.0, 0.0)
     assert ctl.phase is GraspPhase.STOPPED
+
+
+def test_blind_to_the_force_the_heaters_are_held_off_and_come_back_with_the_marker(models):
+    """A lost marker: motor held and heaters off from that period on, the temperature loop
+    shown held off; with the marker back, both resume (no heater fault from the pause)."""
+    from relaxgrip.control import PHASES
+
+    res, _ = grasp(models, "icfn", change=blinded(25.0, 27.0), seed=5,
+                   plan=GraspPlan(target_n=3.0, temp_c=40.0, hold_s=20.0))
+    lost, back, _ = held_while_lost(res, EventKind.MARKER_LOST, EventKind.MARKER_BACK)
+    blind = (res["t_s"] >= lost.t_s) & (res["t_s"] < back.t_s)
+    assert np.all(res["duty_0"][blind] == 0.0)
+    assert np.all(res["duty_1"][blind] == 0.0)
+    before = (res["t_s"] > 20.0) & (res["t_s"] < lost.t_s)
+    after = (res["t_s"] > back.t_s + 1.5) & (res["phase"] == PHASES.index(GraspPhase.HOLD))
+    assert np.all(res["duty_0"][before] > 0.0)
+    assert np.all(res["duty_0"][after] > 0.0)  # heating again, on the next infrared frame
+    assert res.log.first(EventKind.HEATER_FAULT) is None
+
+
+def test_over_temperature_stops_the_grasp_at_once(models):
+    """A finger read above the rig's 70 °C cut-off: stopped in that period, one reason."""
+    def hot(obs: Observation) -> Observation:
+        if obs.ir is not None and obs.t_s >= 25.0:
+            image = np.asarray(obs.ir.image, dtype=np.float32) + np.float32(40.0)
+            return replace(obs, ir=Frame(obs.ir.t_s, obs.ir.seq, image))
+        return obs
+
+    res, _ = grasp(models, "icfn", change=hot, seed=5,
+                         plan=GraspPlan(target_n=3.0, temp_c=40.0, hold_s=20.0))
+    over = res.log.first(EventKind.OVER_TEMPERATURE)
+    stop = res.log.first(EventKind.STOP)
+    assert over is not None
+    assert stop is not None
+    assert stop.t_s == over.t_s
+    assert stop.detail.startswith("over-temperature: a finger read ")
+    assert stop.detail.endswith("°C, above the 70 °C cut-off")
+    assert res.log.transitions[-1][1] is GraspPhase.STOPPED
+    from_stop = res["t_s"] >= stop.t_s
+    assert np.all(res["duty_0"][from_stop] == 0.0)
+    assert np.all(res["velocity_cmd_mm_s"][from_stop] == 0.0)

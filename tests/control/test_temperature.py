@@ -266,7 +266,7 @@ def test_an_infrared_frame_stamped_never_or_in_the_future_counts_as_none(stamp):
 
 def test_a_mode_outside_the_lab_s_setpoint_range_is_refused():
     loop = TemperatureLoop(HEAT, ThermalLimits(max_setpoint_c=50.0, max_temp_c=55.0))
-    with pytest.raises(InputError, match="outside the safe range 20-50"):
+    with pytest.raises(InputError, match="outside the safe range 28-50"):
         loop.set_mode(StiffnessMode.COMPLIANT)
     assert loop.setpoint_c is None
     loop.set_mode(StiffnessMode.MEDIUM)

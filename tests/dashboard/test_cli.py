@@ -20,30 +20,18 @@ from relaxgrip.cli import app
 from relaxgrip.cli.dashboard import check_host, is_loopback
 from relaxgrip.dashboard import require_web_stack
 from relaxgrip.errors import InputError
+from tests.dashboard.conftest import TOKEN, dashboard_process, free_port
 
 
 def _free_port() -> int:
-    """A loopback port no one listens on now."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port: int = probe.getsockname()[1]
-    return port
+    return free_port()
 
 
 @contextlib.contextmanager
 def _dashboard(record_dir: Path) -> Iterator[tuple[subprocess.Popen[str], int]]:
-    """``relaxgrip dashboard`` started on a free loopback port, and that port; killed on the
-    way out if it is still running."""
-    port = _free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "relaxgrip", "dashboard", "--port", str(port),
-                             "--record-dir", str(record_dir)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        yield proc, port
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(10)
+    """``relaxgrip dashboard`` serving on a free loopback port, and that port."""
+    with dashboard_process(record_dir, stdout=subprocess.PIPE) as served:
+        yield served
 
 
 def _viewer(proc: subprocess.Popen[str], port: int) -> Any:
@@ -52,7 +40,8 @@ def _viewer(proc: subprocess.Popen[str], port: int) -> Any:
     deadline = time.monotonic() + 60.0
     while True:
         try:
-            return sync_client.connect(f"ws://127.0.0.1:{port}/ws", max_size=None)
+            return sync_client.connect(f"ws://127.0.0.1:{port}/ws?token={TOKEN}",
+                                       max_size=None)
         except OSError:
             assert time.monotonic() < deadline
             assert proc.poll() is None
@@ -190,7 +179,8 @@ def test_invalid_utf8_from_a_client_is_one_line_and_the_others_are_served(tmp_pa
               socket.create_connection(("127.0.0.1", port), timeout=10) as raw):
             stream = raw.makefile("rb")
             key = base64.b64encode(b"sixteen byte key").decode()
-            raw.sendall(f"GET /ws HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+            raw.sendall(f"GET /ws?token={TOKEN} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n"
+                        "Upgrade: websocket\r\n"
                         f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
                         "Sec-WebSocket-Version: 13\r\n\r\n".encode())
             assert stream.readline().startswith(b"HTTP/1.1 101")
@@ -200,7 +190,7 @@ def test_invalid_utf8_from_a_client_is_one_line_and_the_others_are_served(tmp_pa
             close = next(data for opcode, data in _server_frames(stream) if opcode == 0x8)
             assert int.from_bytes(close[:2], "big") == 1007
             assert _reply(ws, {"id": 1, **target}) == {"type": "reply", "id": 1, "ok": True,
-                                                        "error": None}
+                                                        "error": None, "applied": 1}
             with _viewer(proc, port) as again:  # the server runs on
                 assert _reply(again, {"id": 2, **target})["ok"]
         proc.send_signal(signal.SIGINT)
@@ -242,8 +232,95 @@ def test_the_session_runs_the_twin_of_the_rig_given(make_session) -> None:
         assert session.backend.config.finger == lab.finger
         assert session.controller.rig == lab.rig
         assert session.controller.temperature.heat == lab.heat
-        assert session.controller.config.stroke_mm == lab.motor.stroke_mm
+        assert session.controller.limits.stroke_mm == lab.motor.stroke_mm
     finally:
         session.close()
     with pytest.raises(InputError, match="--rig chooses the twin's gripper; a serial backend"):
         open_session("serial:rig.toml", clock=WallClock(), config=lab)
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--host", "0.0.0.0", "--allow-remote"], "with --allow-remote needs TLS: give --certfile "
+                                              "and --keyfile, or --insecure-remote"),
+    (["--insecure-remote"], "--insecure-remote is for --allow-remote"),
+    (["--certfile", "cert.pem"], "TLS needs both --certfile and --keyfile"),
+    (["--token", "short"], "--token must be 8-256 characters of letters, digits and ._~- "
+                           "(got 5 characters, too short)"),
+    (["--token", "has spaces in it"], "--token must be 8-256 characters"),
+])
+def test_remote_access_needs_tls_and_a_token_is_checked(args: list[str], message: str) -> None:
+    result = CliRunner().invoke(app, ["dashboard", "--port", str(free_port()), *args])
+    assert isinstance(result.exception, InputError), result.output
+    assert message in str(result.exception)
+    assert "has spaces in it" not in str(result.exception)  # a token is not repeated
+
+
+def _self_signed(tmp_path: Path) -> tuple[Path, Path]:
+    cert, key = tmp_path / "cert.pem", tmp_path / "key.pem"
+    try:
+        subprocess.run(["openssl", "req", "-x509", "-newkey", "ec", "-pkeyopt",
+                        "ec_paramgen_curve:prime256v1", "-nodes", "-days", "1", "-subj",
+                        "/CN=localhost", "-keyout", str(key), "-out", str(cert)],
+                       check=True, capture_output=True, timeout=60)
+    except (OSError, subprocess.CalledProcessError) as exc:
+        pytest.skip(f"no openssl to make a test certificate: {exc}")
+    return cert, key
+
+
+def test_a_certificate_that_does_not_load_is_named(tmp_path: Path) -> None:
+    cert, key = _self_signed(tmp_path)
+    junk = tmp_path / "junk.pem"
+    junk.write_text("not a certificate\n")
+    for c, k, expected in ((junk, key, "do not load as a TLS certificate and its key"),
+                           (cert, junk, "do not load as a TLS certificate and its key"),
+                           (tmp_path / "none.pem", key, "no such --certfile file")):
+        result = CliRunner().invoke(app, ["dashboard", "--port", str(free_port()),
+                                          "--certfile", str(c), "--keyfile", str(k)])
+        assert isinstance(result.exception, InputError), result.output
+        assert expected in str(result.exception)
+
+
+def test_the_dashboard_serves_https_and_wss_with_a_certificate(tmp_path: Path) -> None:
+    """TLS on loopback (tests bind no other address); the printed URL is https, with the
+    token; without the token the page is refused."""
+    import ssl
+    import urllib.error
+    import urllib.request
+
+    cert, key = _self_signed(tmp_path)
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "relaxgrip", "dashboard", "--port", str(port),
+                             "--record-dir", str(tmp_path), "--certfile", str(cert),
+                             "--keyfile", str(key)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    context = ssl.create_default_context(cafile=str(cert))
+    context.check_hostname = False
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()  # printed before the server starts
+        assert line.startswith(f"dashboard (twin) on https://127.0.0.1:{port}/?token=")
+        url = line.split(" on ", 1)[1].strip()
+        token = url.split("token=", 1)[1]
+        assert len(token) >= 40  # a new random token: 32 bytes
+        deadline = time.monotonic() + 120
+        while True:
+            try:
+                with urllib.request.urlopen(url, context=context, timeout=2) as r:
+                    assert r.status == 200
+                    break
+            except urllib.error.HTTPError:
+                raise
+            except OSError:
+                assert proc.poll() is None, proc.communicate()[1]
+                assert time.monotonic() < deadline
+                time.sleep(0.2)
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(f"https://127.0.0.1:{port}/", context=context, timeout=5)
+        assert refused.value.code == 403
+        sync_client = pytest.importorskip("websockets.sync.client")
+        with sync_client.connect(f"wss://127.0.0.1:{port}/ws?token={token}", ssl=context,
+                                 max_size=None) as ws:
+            assert json.loads(ws.recv(timeout=10))["type"] == "state"
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=60)

@@ -36,3 +36,18 @@ def test_new_viewer_gets_the_latest_message_at_once() -> None:
         return await asyncio.wait_for(hub.subscribe().get(), 1.0)
 
     assert asyncio.run(scenario()) == "new"
+
+
+def test_the_latest_message_is_forgotten_as_the_last_viewer_leaves() -> None:
+    """Nobody watching, nothing is published: the next viewer must not see a stale state."""
+    hub = Hub()
+    box = hub.subscribe()
+    hub.publish("while watched")
+    other = hub.subscribe()
+    assert hub.latest == "while watched"
+    hub.unsubscribe(box)
+    assert hub.latest == "while watched"  # one viewer still there
+    hub.unsubscribe(other)
+    gone: object = hub.latest
+    assert gone is None
+    assert hub.subscribe()._queue.empty()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import json
 import threading
 import time
 from typing import Any
@@ -20,6 +21,29 @@ from relaxgrip.backend import Command
 from relaxgrip.clock import WallClock
 from relaxgrip.dashboard.app import TOKEN_HEADER, create_app
 from relaxgrip.dashboard.session import LiveSession
+
+TOKEN = "test-token-0123"
+#: Where the test server says it is: a loopback address (the Host check refuses others).
+BASE = "http://127.0.0.1:8000"
+
+
+class Client(TestClient):
+    """Starlette's test client, its WebSockets addressed to :data:`BASE` as its requests are
+    (Starlette's own say ``Host: testserver``)."""
+
+    def websocket_connect(self, url: str, subprotocols: Any = None, **kwargs: Any) -> Any:
+        headers = {k.lower(): v for k, v in (kwargs.get("headers") or {}).items()}
+        headers.setdefault("host", BASE.removeprefix("http://"))
+        for name, value in self.headers.items():
+            headers.setdefault(name.lower(), value)
+        kwargs["headers"] = headers
+        return super().websocket_connect(url, subprotocols, **kwargs)
+
+
+def serve(session: LiveSession, **kwargs: Any) -> Client:
+    """A test client of the dashboard around ``session``, its requests carrying the token."""
+    return Client(create_app(session, token=TOKEN, **kwargs), base_url=BASE,
+                  headers={TOKEN_HEADER: TOKEN})
 
 
 class Spy:
@@ -62,6 +86,12 @@ def _state(ws: Any, pred: Any = lambda s: True, max_messages: int = 200) -> Any:
     raise AssertionError("no matching state message")
 
 
+def _after(ws: Any, reply: Any) -> Any:
+    """The first state message that shows the control ``reply`` answered (waits on state)."""
+    assert reply["ok"], reply
+    return _state(ws, lambda s: s["controls"] >= reply["applied"])
+
+
 def _control(ws: Any, op: str, value: Any = None, ident: int = 1) -> Any:
     ws.send_json({"id": ident, "op": op, "value": value})
     for _ in range(200):
@@ -81,7 +111,7 @@ def served(make_session):
     session = make_session()
     spy = Spy(session.backend)
     session.backend = spy
-    with TestClient(create_app(session)) as client:
+    with serve(session) as client:
         yield client, session, spy
     # lifespan shut down:
     assert not session.alive
@@ -131,7 +161,7 @@ def test_a_state_message_that_fails_is_logged_and_the_next_ones_go_out(
 
     monkeypatch.setattr(app_module._Frames, "message", flaky)
     session = make_session()
-    with TestClient(create_app(session)) as client, client.websocket_connect("/ws") as ws:
+    with serve(session) as client, client.websocket_connect("/ws") as ws:
         assert _state(ws, lambda s: True)["type"] == "state"
     failed = [r for r in caplog.records if "state message failed" in r.getMessage()]
     assert len(failed) == 1  # once per streak of failures, not per message
@@ -140,14 +170,15 @@ def test_a_state_message_that_fails_is_logged_and_the_next_ones_go_out(
 def test_controls_change_the_loop_and_bad_values_change_nothing(served) -> None:
     client, session, _ = served
     with client.websocket_connect("/ws") as ws:
-        assert _control(ws, "target", 3, 1)["ok"]
+        three = _control(ws, "target", 3, 1)
         bad = _control(ws, "target", 12.5, 2)
         assert not bad["ok"]
         assert bad["error"] == "target force 12.5 N is outside (0, 10] N"
+        assert "applied" not in bad
         assert not _control(ws, "target", "abc", 3)["ok"]
-        assert _state(ws)["target_n"] == 3.0
-        assert _control(ws, "mode", "medium", 4)["ok"]
-        s = _state(ws, lambda s: s["mode"] == "medium")
+        assert _after(ws, three)["target_n"] == 3.0
+        s = _after(ws, _control(ws, "mode", "medium", 4))
+        assert s["mode"] == "medium"
         assert s["setpoint_c"] == 40.0
         lava = _control(ws, "mode", "lava", 5)
         assert not lava["ok"]
@@ -156,16 +187,17 @@ def test_controls_change_the_loop_and_bad_values_change_nothing(served) -> None:
         assert not hot["ok"]
         assert "\n" not in hot["error"]
         assert _state(ws)["setpoint_c"] == 40.0
-        assert _control(ws, "temperature", 45, 7)["ok"]
-        assert _state(ws, lambda s: s["mode"] is None)["setpoint_c"] == 45.0
+        s = _after(ws, _control(ws, "temperature", 45, 7))
+        assert s["mode"] is None
+        assert s["setpoint_c"] == 45.0
         assert not _control(ws, "object", "anvil", 8)["ok"]
-        assert _control(ws, "object", "hammer", 9)["ok"]
-        assert _state(ws)["object"] == "hammer"
+        assert _after(ws, _control(ws, "object", "hammer", 9))["object"] == "hammer"
         assert "nothing to release" in _control(ws, "release", None, 10)["error"]
         assert "nothing to hold" in _control(ws, "hold", None, 11)["error"]
         assert "unknown control" in _control(ws, "explode", None, 12)["error"]
-        assert _control(ws, "close", None, 13)["ok"]
-        assert _state(ws, lambda s: s["phase"] in ("open", "close", "hold"))["target_n"] == 3.0
+        s = _after(ws, _control(ws, "close", None, 13))
+        assert s["phase"] in ("open", "close", "hold")
+        assert s["target_n"] == 3.0
         again = _control(ws, "close", None, 14)
         assert not again["ok"]
         assert "release first" in again["error"]
@@ -173,36 +205,107 @@ def test_controls_change_the_loop_and_bad_values_change_nothing(served) -> None:
         rec = _control(ws, "record", True, 16)
         assert rec["ok"]
         assert rec["path"].endswith(".mcap")
-        assert _state(ws, lambda s: s["recording"] is not None)["recording"] == rec["path"]
-        time.sleep(0.5)
+        assert _after(ws, rec)["recording"] == rec["path"]
+        periods = session.periods
+        _state(ws, lambda s: s["periods"] > periods + 10)  # a few periods recorded
         assert _control(ws, "record", False, 17)["ok"]
-        assert _control(ws, "stop", None, 18)["ok"]
-        s = _state(ws, lambda s: s["phase"] == "stopped")
+        s = _after(ws, _control(ws, "stop", None, 18))
+        assert s["phase"] == "stopped"
         assert s["recording"] is None
         assert s["duty"] == [0.0, 0.0]
+        assert s["temp_status"] == "off"  # the loop's, not the last one before the stop
     from relaxgrip.recording import read_session
 
     assert read_session(session.record_dir / rec["path"].split("/")[-1])["backend"]["name"] \
         == "twin"
 
 
-def test_token_is_required_when_set(make_session) -> None:
+def _refused_ws(client: Client, path: str, **headers: str) -> int:
+    """The close code of a WebSocket the server refuses before its handshake completes."""
+    with pytest.raises(WebSocketDisconnect) as info, \
+            client.websocket_connect(path, headers=headers) as ws:
+        ws.receive_json()
+    return int(info.value.code)
+
+
+def test_the_token_is_required_for_the_page_the_api_and_the_websocket(make_session) -> None:
+    """Without a valid token: 403 (HTTP), 1008 (WebSocket), and nothing changed."""
     session = make_session()
-    token = "s3cret-token"
-    with TestClient(create_app(session, token=token)) as client:
-        assert client.get("/").status_code == 403
-        assert client.get("/?token=wrong").status_code == 403
+    token = TOKEN
+    with Client(create_app(session, token=token), base_url=BASE) as client:
+        for bad in ("", "?token=wrong-token-0123", "?token="):
+            assert client.get(f"/{bad}").status_code == 403
+            assert client.get(f"/api/state{bad}").status_code == 403
+            assert _refused_ws(client, f"/ws{bad}") == 1008
+        wrong = {TOKEN_HEADER: "wrong-token-0123"}
+        assert client.get("/", headers=wrong).status_code == 403
+        assert client.get("/", headers={"Authorization": "token nope-nope-nope"}
+                          ).status_code == 403
+        control = json.dumps({"op": "target", "value": 2.5})
+        for headers in ({}, wrong, {"Authorization": "Bearer " + token}):
+            assert client.post("/api/control", content=control,
+                               headers=headers).status_code == 403
+        assert _refused_ws(client, "/ws", **wrong) == 1008
+        assert session.state()["target_n"] == 5.0  # nothing changed
+        # The token in the query, in the header, or as "Authorization: token ...":
         assert client.get(f"/?token={token}").status_code == 200
         assert client.get("/", headers={TOKEN_HEADER: token}).status_code == 200
-        with pytest.raises(WebSocketDisconnect), client.websocket_connect("/ws") as ws:
-            ws.receive_json()
-        with pytest.raises(WebSocketDisconnect), \
-                client.websocket_connect("/ws?token=nope") as ws:
-            ws.receive_json()
+        reply = client.post("/api/control", content=control,
+                            headers={"Authorization": f"token {token}"})
+        assert reply.status_code == 200, reply.text
+        assert reply.json()["ok"]
+        state = client.get(f"/api/state?token={token}").json()
+        assert state["target_n"] == 2.5
+        assert state["backend"] == "twin"
         with client.websocket_connect(f"/ws?token={token}") as ws:
             assert _state(ws)["backend"] == "twin"
         with client.websocket_connect("/ws", headers={TOKEN_HEADER: token}) as ws:
-            assert _state(ws)["backend"] == "twin"
+            assert _state(ws)["target_n"] == 2.5
+        # The static files hold no state: served without the token.
+        assert client.get("/static/dashboard.js").status_code == 200
+        refused = client.post("/api/control", content='{"op": "target", "value": 50}',
+                              headers={TOKEN_HEADER: token})
+        assert refused.status_code == 400
+        assert refused.json()["error"] == "target force 50.0 N is outside (0, 10] N"
+
+
+def test_other_hosts_and_other_origins_are_refused_even_with_the_token(make_session) -> None:
+    """DNS rebinding (a foreign Host) and a foreign page (its Origin) change nothing."""
+    session = make_session()
+    with serve(session) as client:
+        for host in ("evil.example", "127.0.0.1.evil.example", "localhost.evil.example"):
+            assert client.get("/", headers={"Host": host}).status_code == 403
+            assert client.get("/static/dashboard.js", headers={"Host": host}
+                              ).status_code == 403
+            assert _refused_ws(client, "/ws", Host=host) == 1008
+        for host in ("localhost:8000", "127.0.0.1", "[::1]:8000", "127.0.0.2:80"):
+            assert client.get("/", headers={"Host": host}).status_code == 200, host
+        control = json.dumps({"op": "temperature", "value": 60})
+        for origin in ("http://evil.example", "null", "http://127.0.0.1:9999",
+                       "https://127.0.0.1:8000.evil.example", "file://"):
+            assert _refused_ws(client, "/ws", Origin=origin) == 1008
+            assert client.post("/api/control", content=control,
+                               headers={"Origin": origin}).status_code == 403
+            assert client.get("/api/state", headers={"Origin": origin}).status_code == 403
+        assert session.state()["setpoint_c"] != 60.0
+        with client.websocket_connect("/ws", headers={"Origin": BASE}) as ws:
+            assert _control(ws, "temperature", 45)["ok"]  # the dashboard's own page
+    # Bound for remote access, any host name may be used (the token protects it).
+    with serve(make_session(), loopback_only=False) as client:
+        assert client.get("/", headers={"Host": "rig-1.lab:8000"}).status_code == 200
+        assert client.get("/", headers={"Host": "rig-1.lab:8000",
+                                        TOKEN_HEADER: "wrong-token-0123"}).status_code == 403
+        assert _refused_ws(client, "/ws", Host="rig-1.lab:8000",
+                           Origin="http://evil.example") == 1008
+
+
+def test_a_bad_token_is_refused_when_the_app_is_made(make_session) -> None:
+    from relaxgrip.errors import InputError
+
+    session = make_session()
+    for token in ("", "short", "has space in it", "x" * 300):
+        with pytest.raises(InputError, match="access token must be 8-256 characters"):
+            create_app(session, token=token)
 
 
 def test_four_viewers_each_get_at_least_10_updates_per_second(served) -> None:
@@ -249,7 +352,7 @@ def test_loop_death_stops_motor_and_heaters_and_shows_the_error(make_session) ->
     spy = Spy(session.backend, fail_after=20)
     session.backend = spy
     session.set_mode("compliant")  # heaters on while it runs
-    with TestClient(create_app(session)) as client, client.websocket_connect("/ws") as ws:
+    with serve(session) as client, client.websocket_connect("/ws") as ws:
         s = _state(ws, lambda s: s["error"] is not None)
         assert s["error"] == "control loop stopped: OSError: camera unplugged"
         assert not s["alive"]
@@ -263,7 +366,7 @@ def test_a_dead_loop_does_not_show_the_heaters_on(make_session) -> None:
     session = make_session()
     session.backend = Spy(session.backend, fail_after=20)
     session.set_mode("compliant")  # heating at full duty when the loop dies
-    with TestClient(create_app(session)) as client, client.websocket_connect("/ws") as ws:
+    with serve(session) as client, client.websocket_connect("/ws") as ws:
         s = _state(ws, lambda s: s["error"] is not None)
         assert s["duty"] == [0.0, 0.0]
         assert s["phase"] == "stopped"
@@ -427,3 +530,21 @@ def test_a_full_disk_stops_the_recording_not_the_loop(make_session, monkeypatch)
         assert session.state()["error"] is None
     finally:
         session.close()
+
+
+def test_a_new_viewer_gets_the_live_state_not_one_cached_when_the_last_left(served) -> None:
+    """The broadcast stops with nobody watching: the hub's last message went stale."""
+    client, session, _ = served
+    with client.websocket_connect("/ws") as ws:
+        first = _state(ws)
+    periods = session.periods
+    deadline = time.monotonic() + 30.0
+    while session.periods < periods + 45:  # the loop runs on, 1.5 s of it, unwatched
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    now_s = session.state()["t_s"]
+    assert now_s > first["t_s"] + 1.0
+    with client.websocket_connect("/ws") as ws:
+        again = ws.receive_json()  # the very first message
+    assert again["type"] == "state"
+    assert again["t_s"] >= now_s

@@ -280,3 +280,34 @@ def test_an_mcu_reboot_is_not_counted_as_lost_frames() -> None:
     rig.link.restore()
     rig.client.command(1.0, (0.0, 0.0))
     assert rig.client.stats.mcu_frames_lost == 1
+
+
+def test_replayed_mcu_frames_are_dropped_and_a_line_of_replays_is_a_fault() -> None:
+    """A frame whose sequence number repeats or goes back (a line replaying old frames) is
+    not taken: an old Status's encoder reading must not pass for the latest."""
+    rig = Rig()
+    rig.start()
+    sent: list[bytes] = []
+    write = rig.link.device.write
+
+    def recording(data: bytes) -> None:
+        sent.append(data)
+        write(data)
+
+    rig.link.device.write = recording  # type: ignore[method-assign]
+    rig.client.command(2.0, (0.1, 0.1))
+    old = sent[-1]  # the MCU's answer to that command
+    rig.clock.advance(0.033)
+    rig.client.command(3.0, (0.1, 0.1))
+    assert rig.client.last_status is not None
+    newest = rig.client.last_status
+    write(old)  # replayed, and again
+    write(old)
+    assert rig.client.poll() == []
+    assert rig.client.last_status == newest
+    assert rig.client.stats.stale_frames == 2
+    assert rig.client.stats.mcu_frames_lost == 0
+    # A line that only replays: no answer is taken, and the error says why.
+    rig.link.device.write = lambda data: write(old)  # type: ignore[method-assign]
+    with pytest.raises(LinkCorruptedError, match="repeated or old sequence number dropped"):
+        rig.client.request_status()

@@ -170,6 +170,13 @@ def test_emulator_makes_and_removes_its_default_folder(
     assert not folder.exists()
 
 
+def _dispositions(ignored: signal.Signals) -> None:
+    """The stop signals as a terminal sets them, ``ignored`` ignored: whatever this test run
+    was started with (``nohup`` hands SIGHUP ignored down, a shell's ``&`` SIGINT)."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_IGN if sig == ignored else signal.SIG_DFL)
+
+
 @contextlib.contextmanager
 def _emulator_process(tmp_path: Path, ignored: signal.Signals
                       ) -> Iterator[tuple[subprocess.Popen[str], Path, Path]]:
@@ -182,7 +189,7 @@ def _emulator_process(tmp_path: Path, ignored: signal.Signals
     proc = subprocess.Popen([sys.executable, "-m", "relaxgrip", "emulator", "--rig",
                              str(_emulator_rig(tmp_path, port, sock))],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(ignored, signal.SIG_IGN))
+                            preexec_fn=lambda: _dispositions(ignored))
     try:
         deadline = time.monotonic() + 60.0
         while not (sock.exists() and port.is_symlink()) and time.monotonic() < deadline:

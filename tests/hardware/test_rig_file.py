@@ -24,8 +24,9 @@ SETTINGS = {("rig", "name"), ("serial", "baud"), ("serial", "reply_timeout_ms"),
             ("serial", "boot_wait_ms"), ("rgb", "fps"), ("rgb", "exposure"),
             ("rgb", "stall_ms"), ("ir", "fps"), ("ir", "stall_ms"), ("ir", "follow_bend"),
             ("marker", "max_travel_mm"), ("finger", "contact_mm"),
-            ("limits", "max_motor_speed_mm_s"), ("limits", "heater_duty_limit"),
-            ("limits", "max_temp_c")}
+            *(("limits", key) for key in ("max_target_n", "max_force_n", "min_setpoint_c",
+                                          "max_setpoint_c", "max_temp_c", "heater_duty_limit",
+                                          "max_motor_speed_mm_s", "stroke_mm"))}
 
 
 def _load(path: Path) -> dict[str, Any]:

@@ -94,14 +94,30 @@ def test_truncated_frame(bench: Bench) -> None:
     bench.outputs_off_within_watchdog()
 
 
-def test_dropped_connection(bench: Bench) -> None:
+def test_a_cable_cut_with_the_mcu_powered_trips_its_watchdog(bench: Bench) -> None:
+    """The MCU runs on behind a cut cable: its watchdog, not a stopped emulator, switches the
+    last command (3 mm/s, duty 0.6) off, 200 ms after the last command it got."""
+    plant = bench.emu.plant
+    last_command_s = bench.clock.now() - DT  # the bench's last act, one period ago
     bench.emu.disconnect()
     message, delay_s = bench.fault_after()
     _one_line(message)
     assert "MCU link fault" in message
     assert "MCU watchdog stops the motor and heaters within 200 ms" in message
     assert delay_s <= 0.1 + 1e-9
-    bench.outputs_off_within_watchdog()
+    # The host gave up; the MCU has not: step its clock in 1 ms and let it poll each time.
+    t_end = last_command_s + 0.3
+    while bench.clock.now() < t_end:
+        bench.clock.advance(0.001)
+        assert plant.wait_applied(bench.clock.now()), "the emulated MCU stopped running"
+    assert bench.emu.error is None
+    assert bench.emu.endpoint.core.fault_flags & FaultFlag.WATCHDOG
+    off_s, off = plant.output_log[-1]
+    assert off.velocity_um_s == 0
+    assert off.heater_duty_permyriad == (0, 0)
+    before = [o for t, o in plant.output_log if t < off_s]
+    assert before[-1].velocity_um_s == 3000  # what it drove until the watchdog tripped
+    assert 0.2 - 1e-9 <= off_s - last_command_s <= 0.2 + 0.002 + 1e-9
 
 
 def test_stalled_camera(bench: Bench) -> None:
@@ -139,9 +155,10 @@ def test_mcu_fault_is_reported_and_host_limits_apply(bench: Bench) -> None:
     assert bench.emu.endpoint.core.outputs.velocity_um_s == 20_000  # clamped by the host
     bench.emu.endpoint.core.raise_fault(FaultFlag.MOTOR_DRIVER, bench.clock.now())
     bench.clock.advance(DT)
-    obs = bench.gripper.observe()
-    assert "MOTOR_DRIVER" in obs.faults
-    with pytest.raises(GripperFaultError, match="outputs stopped by fault MOTOR_DRIVER"):
+    with pytest.raises(GripperFaultError,
+                       match=r"the MCU stopped its outputs itself \(MOTOR_DRIVER\)"):
+        bench.gripper.observe()
+    with pytest.raises(GripperFaultError, match="stopped earlier"):
         bench.gripper.act(Command(motor_velocity_mm_s=1.0))
     assert fault_names(int(FaultFlag.RESET) | (1 << 9)) == {"RESET", "BIT9"}
 
@@ -245,3 +262,17 @@ def test_an_mcu_that_never_boots_is_named_after_the_wait() -> None:
     finally:
         gripper.close()
         emu.stop()
+
+
+def test_an_mcu_whose_velocity_limit_is_above_the_rig_s_is_never_enabled() -> None:
+    b = Bench(McuConfig(max_velocity_um_s=50_000))
+    try:
+        with pytest.raises(GripperFaultError) as info:
+            b.gripper.reset()
+        message = str(info.value)
+        _one_line(message)
+        assert ("the MCU's velocity limit 50 mm/s is above the rig's [limits] "
+                "max_motor_speed_mm_s 20 mm/s") in message
+        assert not b.emu.endpoint.core.enabled
+    finally:
+        b.close()

@@ -90,14 +90,22 @@ def test_sigkill_leaves_the_flushed_part_readable(tmp_path: Path) -> None:
 
 
 def _recording_hold(path: Path, ignore_hangup: bool = False) -> subprocess.Popen[bytes]:
-    """``relaxgrip hold --record path`` in a child, once its recording has grown past 1 MB."""
-    def ignoring() -> None:
-        signal.signal(signal.SIGHUP, signal.SIG_IGN)  # as nohup starts it
+    """``relaxgrip hold --json --record path`` in a child, once its recording has grown past
+    1 MB.
+
+    The child gets the stop signals a terminal gives (SIGHUP ignored with
+    ``ignore_hangup``, as ``nohup`` starts it), whatever this test run was
+    started with: under ``nohup`` it inherits SIGHUP ignored, from ``&`` SIGINT.
+    """
+    def dispositions() -> None:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_DFL)
+        signal.signal(signal.SIGHUP, signal.SIG_IGN if ignore_hangup else signal.SIG_DFL)
 
     child = subprocess.Popen(
-        [sys.executable, "-m", "relaxgrip", "hold", "--duration-s", "120", "--record", str(path)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-        preexec_fn=ignoring if ignore_hangup else None)
+        [sys.executable, "-m", "relaxgrip", "hold", "--duration-s", "120", "--json",
+         "--record", str(path)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=dispositions)
     deadline = time.monotonic() + 120.0
     while not (path.exists() and path.stat().st_size > 1_000_000):
         assert child.poll() is None, "the hold ended before it was signalled"
@@ -106,16 +114,26 @@ def _recording_hold(path: Path, ignore_hangup: bool = False) -> subprocess.Popen
     return child
 
 
-@pytest.mark.parametrize("stop", [signal.SIGTERM, signal.SIGHUP])
+@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP],
+                         ids=lambda s: s.name)
 def test_kill_and_a_closed_terminal_stop_a_hold_as_ctrl_c_does(tmp_path: Path,
                                                                 stop: signal.Signals) -> None:
-    """The command's clean-up runs: the recording is closed, complete, with its summary."""
+    """The command's clean-up runs: the recording is closed, complete, with its summary, and
+    the hold so far is printed (``"interrupted": true``)."""
+    import json
+
     path = tmp_path / "stopped.mcap"
     child = _recording_hold(path)
     child.send_signal(stop)
-    _, err = child.communicate(timeout=60)
+    out, err = child.communicate(timeout=60)
     assert child.returncode == 130, err  # as Ctrl-C: interrupted, no traceback
     assert b"Traceback" not in err
+    (line,) = out.decode().splitlines()  # one JSON object
+    partial = json.loads(line)
+    assert partial["interrupted"] is True
+    assert partial["duration_s"] == 120.0
+    assert 0.0 <= partial["held_s"] < 120.0  # stopped early in the grasp, as a rule
+    assert isinstance(partial["events"], list)
     with open(path, "rb") as f:
         summary = make_reader(f).get_summary()
     assert summary is not None

@@ -6,7 +6,6 @@ import contextlib
 import ipaddress
 import logging
 import re
-import secrets
 import signal
 import socket
 import threading
@@ -18,17 +17,10 @@ import typer
 
 from relaxgrip.cli._app import app, console, int_option
 from relaxgrip.cli._twin import RigOption, twin_config
+from relaxgrip.dashboard.access import is_loopback
 from relaxgrip.errors import InputError
 
-
-def is_loopback(host: str) -> bool:
-    """Whether ``host`` names the loopback interface only."""
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
+__all__ = ["check_host", "check_tls", "dashboard", "is_loopback"]
 
 
 #: A DNS label (RFC 1123): letters, digits and inner hyphens, at most 63 characters.
@@ -67,8 +59,21 @@ def dashboard(
     host: Annotated[str, typer.Option("--host", help="Address to bind.")] = "127.0.0.1",
     port: Annotated[int, int_option("--port", help="TCP port.")] = 8000,
     allow_remote: Annotated[bool, typer.Option(
-        "--allow-remote", help="Allow a non-loopback --host; the page then needs the printed "
-                               "access token.")] = False,
+        "--allow-remote", help="Allow a non-loopback --host; needs --certfile and --keyfile "
+                               "(TLS) or --insecure-remote.")] = False,
+    token: Annotated[str | None, typer.Option(
+        "--token", envvar="RELAXGRIP_TOKEN",
+        help="Access token the page, the API and the WebSocket need (8-256 letters, digits "
+             "and ._~-; default: a new random one on every start, printed in the URL).",
+        show_default=False)] = None,
+    certfile: Annotated[Path | None, typer.Option(
+        "--certfile", help="TLS certificate (PEM): serve https and wss.",
+        show_default=False)] = None,
+    keyfile: Annotated[Path | None, typer.Option(
+        "--keyfile", help="Private key of --certfile (PEM).", show_default=False)] = None,
+    insecure_remote: Annotated[bool, typer.Option(
+        "--insecure-remote", help="With --allow-remote, serve plain http: the token and "
+                                  "every control cross the network unencrypted.")] = False,
     estimator: Annotated[str, typer.Option(
         "--estimator", help="fixed, icfn, relax or observer (the default: it follows a "
                             "mode switch while holding, which relax's Eq. 10 does not).")
@@ -91,11 +96,22 @@ def dashboard(
     if not 0 < port < 65536:
         raise InputError(f"--port must be 1-65535, got {port}")
     check_host(host)
+    from relaxgrip.dashboard.access import check_token, new_token
+
+    access_token = new_token() if token is None else check_token(token)
     address = _resolve(host, port)  # a name that does not resolve: said before --allow-remote
     remote = not is_loopback(host)
     if remote and not allow_remote:
-        raise InputError(f"--host {host} is reachable from other machines: "
-                         "add --allow-remote (an access token is then required)")
+        raise InputError(f"--host {host} is reachable from other machines: add --allow-remote "
+                         "(with --certfile/--keyfile for TLS, or --insecure-remote)")
+    if insecure_remote and not allow_remote:
+        raise InputError("--insecure-remote is for --allow-remote: a loopback dashboard "
+                         "needs no permission to serve plain http")
+    tls = check_tls(certfile, keyfile)
+    if remote and tls is None and not insecure_remote:
+        raise InputError(f"--host {host} with --allow-remote needs TLS: give --certfile and "
+                         "--keyfile, or --insecure-remote to send the token and the controls "
+                         "unencrypted")
     import uvicorn
 
     from relaxgrip.clock import WallClock
@@ -111,24 +127,58 @@ def dashboard(
     except BaseException:
         listener.close()
         raise
-    token = secrets.token_urlsafe(24) if remote else None
-    application = create_app(session, token=token)
+    application = create_app(session, token=access_token, loopback_only=not remote)
     shown = f"[{host}]" if ":" in host else host
-    url = f"http://{shown}:{port}/" + (f"?token={token}" if token else "")
-    console.print(f"dashboard on {url} ({session.backend.info.name}); Ctrl-C stops it "
-                  "(motor stopped, heaters off)", markup=False, highlight=False, soft_wrap=True)
-    if token:
-        console.print(f"access token: {token}", markup=False, highlight=False)
+    url = f"{'https' if tls else 'http'}://{shown}:{port}/?token={access_token}"
+    console.print(f"dashboard ({session.backend.info.name}) on {url}", markup=False,
+                  highlight=False, soft_wrap=True)
+    console.print("open that URL (it holds the access token); Ctrl-C stops the dashboard "
+                  "(motor stopped, heaters off)", markup=False, highlight=False)
     server_log = logging.getLogger("uvicorn.error")
     invalid_text = _InvalidTextFilter()
     try:
-        server = _hangup_server(uvicorn.Config(application, log_level="warning"))
+        # No proxy headers: a loopback client's X-Forwarded-* would be believed otherwise.
+        server_config = uvicorn.Config(application, log_level="warning", proxy_headers=False,
+                                ssl_certfile=None if tls is None else str(tls[0]),
+                                ssl_keyfile=None if tls is None else str(tls[1]))
+        server = _hangup_server(server_config)
         server_log.addFilter(invalid_text)  # after the Config, which sets up uvicorn's logging
         server.run(sockets=[listener])
     finally:
         server_log.removeFilter(invalid_text)
         session.close()
         listener.close()
+
+
+def check_tls(certfile: Path | None, keyfile: Path | None) -> tuple[Path, Path] | None:
+    """The certificate and key to serve TLS with, once they load; None without them.
+
+    Raises
+    ------
+    InputError
+        One of the two without the other, a file that is missing or not a
+        regular file, or a pair that does not load (not PEM, a key that is not
+        the certificate's, a key with a passphrase).
+    """
+    if certfile is None and keyfile is None:
+        return None
+    if certfile is None or keyfile is None:
+        raise InputError("TLS needs both --certfile and --keyfile")
+    import ssl
+
+    from relaxgrip.fileio import check_input_file
+
+    check_input_file(certfile, "--certfile file", InputError, max_bytes=1 << 20)
+    check_input_file(keyfile, "--keyfile file", InputError, max_bytes=1 << 20)
+    context = ssl.SSLContext(ssl.PROTOCOL_TLS_SERVER)
+    try:
+        # A passphrase would be asked on the terminal: refused instead of prompting.
+        context.load_cert_chain(certfile, keyfile, password=lambda: b"")
+    except (ssl.SSLError, OSError) as exc:
+        reason = getattr(exc, "reason", None) or getattr(exc, "strerror", None) or exc
+        raise InputError(f"--certfile {certfile} and --keyfile {keyfile} do not load as a "
+                         f"TLS certificate and its key: {reason}") from None
+    return certfile, keyfile
 
 
 class _InvalidTextFilter(logging.Filter):

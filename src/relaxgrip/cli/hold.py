@@ -73,8 +73,11 @@ def hold(
         "--mcu", help="The emulator's MCU: python (the protocol's state machine) or firmware "
                       "(the compiled firmware in simavr).")] = "python",
     record: Annotated[Path | None, typer.Option(
-        "--record", help="Record the run to this MCAP file (not with --compare).",
+        "--record", help="Record the run to this MCAP file (not with --compare); an existing "
+                         "file only with --overwrite.",
         show_default=False)] = None,
+    overwrite: Annotated[bool, typer.Option(
+        "--overwrite", help="Let --record replace an existing file.")] = False,
     temp_profile: Annotated[str | None, typer.Option(
         "--temp-profile", help="Setpoint over hold time: ramp:FROM_C:TO_C:START_S:OVER_S "
                                "(FROM_C: --temp-c) or step:TO_C:AT_S.",
@@ -93,7 +96,12 @@ def hold(
                          "models that have them (relax, twin backend).")] = False,
     rig: RigOption = None,
 ) -> None:
-    """Close on the force ball to the target and hold it, scoring the steady state (100-280 s)."""
+    """Close on the force ball to the target and hold it, scoring the steady state (100-280 s).
+
+    Ctrl-C, kill (SIGTERM) or a closed terminal stop it: motor stopped, heaters off, the
+    recording closed; the figures of the hold so far are printed ("interrupted": true with
+    --json) and the exit code is 130.
+    """
     from relaxgrip.control import EstimatorKind, check_target_n
     from relaxgrip.experiments.controlled_hold import (
         check_backend,
@@ -158,6 +166,12 @@ def hold(
     if record is not None and compare:
         raise InputError("--record records one run: record each estimator with "
                          "--estimator NAME --record FILE instead of --compare")
+    if record is not None:
+        from relaxgrip.fileio import check_new_file
+
+        check_new_file(record, "--record", overwrite, InputError)
+    elif overwrite:
+        raise InputError("--overwrite lets --record replace a file: give --record FILE")
     if plot is None and compare and seed_list is None:
         plot = DEFAULT_COMPARE_PLOT
     if plot is not None:
@@ -209,23 +223,30 @@ def hold(
         if figure is not None:
             console.print(f"figure: {figure}")
         return
-    with console.status(f"holding with {estimator} …") if not json_out else nullcontext():
-        if record is None:
-            result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
-                              config=config, backend=backend, temp_profile=temps,
-                              target_profile=targets, disturbance=push, observer=observer,
-                              budget=budget, mcu=mcu)
-        else:
-            from relaxgrip.recording import McapRecorder
+    from relaxgrip.experiments.controlled_hold import HoldInterrupted
 
-            given = {"temp_profile": temp_profile, "target_profile": target_profile,
-                     "disturbance": disturbance}
-            scenario = {k: v for k, v in given.items() if v is not None}
-            with McapRecorder(record, scenario=scenario) as recorder:
+    try:
+        with console.status(f"holding with {estimator} …") if not json_out else nullcontext():
+            if record is None:
                 result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
-                                  config=config, backend=backend, recorder=recorder,
-                                  temp_profile=temps, target_profile=targets, disturbance=push,
-                                  observer=observer, budget=budget, mcu=mcu)
+                                  config=config, backend=backend, temp_profile=temps,
+                                  target_profile=targets, disturbance=push, observer=observer,
+                                  budget=budget, mcu=mcu)
+            else:
+                from relaxgrip.recording import McapRecorder
+
+                given = {"temp_profile": temp_profile, "target_profile": target_profile,
+                         "disturbance": disturbance}
+                scenario = {k: v for k, v in given.items() if v is not None}
+                with McapRecorder(record, scenario=scenario) as recorder:
+                    result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
+                                      config=config, backend=backend, recorder=recorder,
+                                      temp_profile=temps, target_profile=targets,
+                                      disturbance=push, observer=observer, budget=budget,
+                                      mcu=mcu)
+    except HoldInterrupted as stopped:
+        _print_interrupted(stopped.result, json_out, record, time.perf_counter() - start)
+        raise typer.Exit(130) from None
     figure = None
     if plot is not None:
         from relaxgrip.plots.holding import plot_hold
@@ -339,11 +360,41 @@ def _print_table(rows: dict[str, dict[str, Any]], reductions: dict[str, float],
             console.print(f"{name}: the 95 % band covers the true force "
                           f"{d['band_coverage']:.1%} of the hold")
     for name, d in rows.items():
-        for event in d["events"]:
-            if event["kind"] not in ("contact", "hold_onset"):
-                err_console.print(f"{name}: {event['kind']} at {event['t_s']:.1f} s "
-                                  f"{event['detail']}")
+        from relaxgrip.control import EventKind
+        from relaxgrip.control.phases import Event, PhaseLog
+
+        log = PhaseLog(events=[Event(e["t_s"], EventKind(e["kind"]), e["detail"])
+                               for e in d["events"]])
+        for line in log.summary(skip=(EventKind.CONTACT, EventKind.HOLD_ONSET)):
+            err_console.print(f"{name}: {line}", markup=False, highlight=False)
     console.print(f"{first['twin_version']}, {seconds:.1f} s")
+
+
+def _print_interrupted(result: Any, json_out: bool, record: Path | None,
+                       seconds: float) -> None:
+    """The partial result of a hold a stop signal ended (a signal now does not cut it)."""
+    import signal
+
+    from relaxgrip.interrupts import STOP_SIGNALS
+
+    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in STOP_SIGNALS}
+    try:
+        d = result.to_dict()
+        if json_out:
+            emit_json(d)
+            return
+        if "mae_n" in d:
+            _print_table({result.estimator: d}, {}, d, seconds)
+        else:
+            for line in result.loop.log.summary():
+                err_console.print(line, markup=False, highlight=False)
+        where = f"; recording {record} closed" if record is not None else ""
+        err_console.print(f"interrupted after {result.held_s:.1f} s of the {d['duration_s']:g} s "
+                          f"hold: motor stopped, heaters off{where}", markup=False,
+                          highlight=False)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 @app.command("budget")

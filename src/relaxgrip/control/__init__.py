@@ -6,6 +6,7 @@ from relaxgrip.control.controller import (
     GraspController,
     GraspPlan,
     check_target_n,
+    twin_limits,
 )
 from relaxgrip.control.estimators import (
     EstimatorKind,
@@ -19,7 +20,7 @@ from relaxgrip.control.estimators import (
 )
 from relaxgrip.control.phases import PHASES, Event, EventKind, GraspPhase, PhaseLog
 from relaxgrip.control.pid import PID, PIDGains
-from relaxgrip.control.runner import LoopResult, run_loop
+from relaxgrip.control.runner import LoopInterrupted, LoopResult, run_loop
 from relaxgrip.control.temperature import (
     MODE_SETPOINTS_C,
     StiffnessMode,
@@ -44,6 +45,7 @@ __all__ = [
     "GraspPhase",
     "GraspPlan",
     "IcfnEstimator",
+    "LoopInterrupted",
     "LoopResult",
     "PIDGains",
     "PhaseLog",
@@ -56,4 +58,5 @@ __all__ = [
     "check_target_n",
     "make_estimator",
     "run_loop",
+    "twin_limits",
 ]

@@ -21,9 +21,14 @@ estimator, and steps the grasp phases:
 * **Lift** / **Sustain**: the arm lifts and waits with the force held.
 * **Release**: the motor opens until the marker is back at rest.
 
-Whatever the phase: a lost marker stops the motor until it is back; an
-estimate beyond the force limit backs the motor off; the temperature loop
-cuts heaters that are too hot or blind.
+Whatever the phase, the safe state (motor stopped, heaters off) comes at
+once on a fault (``docs/safety.md``): while the force cannot be read (the
+marker lost, an RGB frame older than 200 ms, a stale infrared frame, no valid
+estimate) the motor holds and the heaters are held off, until the reading is
+back; an estimate beyond the rig's force limit (a real over-force, or a model
+that outputs absurd forces), a finger above the rig's temperature cut-off and
+a heater fault stop the grasp.  Every command is clamped to the rig's
+speed and duty limits (:class:`~relaxgrip.limits.LimitsSpec`).
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -52,6 +58,7 @@ from relaxgrip.control.temperature import (
     fresh,
 )
 from relaxgrip.errors import InputError
+from relaxgrip.limits import OUR_LIMITS, LimitsSpec
 from relaxgrip.perception.features import marker_pose
 from relaxgrip.perception.marker import TrackStatus
 from relaxgrip.perception.pipeline import Percept, Perception
@@ -59,11 +66,14 @@ from relaxgrip.perception.proximity import ProximityTarget
 from relaxgrip.physics.thermal import HeatParams
 from relaxgrip.rig import RigGeometry
 
+if TYPE_CHECKING:
+    from relaxgrip.twin.config import TwinConfig
+
 __all__ = ["MAX_TARGET_N", "ForceControlConfig", "GraspController", "GraspPlan", "check_target_n",
            "onset_contact_m"]
 
-#: Largest force target the controller accepts (N): the paper's range is 0–10 N.
-MAX_TARGET_N = 10.0
+#: Largest force target our gripper accepts (N): the paper's range is 0–10 N (the rig's limits).
+MAX_TARGET_N = OUR_LIMITS.max_target_n
 #: How a hold-onset event's detail says where the grasped object was seen ("… mm").
 ONSET_OBJECT = "object at"
 
@@ -135,12 +145,14 @@ class GraspPlan:
             raise InputError(f"sustain time must be >= 0 s, got {self.sustain_s}")
 
 
+def twin_limits(config: TwinConfig) -> LimitsSpec:
+    """Our limits on a twin's gripper: its motor's stroke, at most its motor's speed."""
+    return OUR_LIMITS.for_motor(config.motor.stroke_mm, config.motor.max_velocity_mm_s)
+
+
 def check_target_n(value: float) -> float:
-    """Return a force target if it is within (0, 10] N."""
-    v = float(value)
-    if not (math.isfinite(v) and 0.0 < v <= MAX_TARGET_N):
-        raise InputError(f"target force {value} N is outside (0, {MAX_TARGET_N:g}] N")
-    return v
+    """Return a force target if our gripper's limits take it (within (0, 10] N)."""
+    return OUR_LIMITS.check_target_n(value)
 
 
 @dataclass(frozen=True)
@@ -158,11 +170,9 @@ class ForceControlConfig:
         Opening speed on release (mm/s).
     lift_mm_s : float
         Arm speed while lifting (mm/s).
-    max_force_n : float
-        Force limit: an estimate above it backs the motor off (N).
     icfn_margin_n : float
-        The per-frame ICFN is checked against ``max_force_n`` plus this too
-        (N): a second reading, independent of Eq. 10, which a temperature
+        The per-frame ICFN is checked against the rig's force limit plus this
+        too (N): a second reading, independent of Eq. 10, which a temperature
         change can throw far off; the margin leaves room for the ICFN's own
         over-reading as the finger relaxes (about 16 % after 280 s).
     contact_deflection_m : float
@@ -183,8 +193,6 @@ class ForceControlConfig:
         ``slip_window_s`` while lifted is a slip.
     slip_window_s : float
         Window of the slip test (s).
-    stroke_mm : float
-        Motor travel available (mm).
     target_move_mm_s : float
         A new target during the hold moves the motor at up to this speed by
         ``target_move_share`` of the travel the loading's stiffness says it
@@ -211,7 +219,6 @@ class ForceControlConfig:
     approach_mm_s: float = 10.0
     release_mm_s: float = 10.0
     lift_mm_s: float = 20.0
-    max_force_n: float = 12.0
     icfn_margin_n: float = 1.0
     contact_deflection_m: float = 3e-5
     contact_frames: int = 2
@@ -221,7 +228,6 @@ class ForceControlConfig:
     temp_settle_s: float = 3.0
     slip_drop_rel: float = 0.3
     slip_window_s: float = 0.5
-    stroke_mm: float = 148.0
     target_move_mm_s: float = 10.0
     target_move_share: float = 0.9
     loading_share: float = SLOPE_FORCE_SHARE
@@ -256,18 +262,30 @@ class GraspController:
         Force loop and phase settings.
     heat : HeatParams, optional
         Heat model for the temperature loop's feed-forward.
-    limits : ThermalLimits, optional
-        Temperature safety limits.
+    limits : LimitsSpec, optional
+        The rig's safety limits (default: our gripper's, the twin's): force
+        target and limit, setpoints and cut-off, speed, duty and stroke.
+
+    Raises
+    ------
+    InputError
+        A speed of ``config`` beyond the rig's speed limit.
     """
 
     def __init__(self, rig: RigGeometry, estimator: ForceEstimator,
                  config: ForceControlConfig | None = None, heat: HeatParams | None = None,
-                 limits: ThermalLimits | None = None) -> None:
+                 limits: LimitsSpec | None = None) -> None:
         self.rig = rig
         self.estimator = estimator
         self.config = config if config is not None else ForceControlConfig()
+        self.limits = limits if limits is not None else OUR_LIMITS
+        cfg = self.config
+        for name, speed in (("approach", cfg.approach_mm_s), ("release", cfg.release_mm_s),
+                            ("target move", cfg.target_move_mm_s),
+                            ("force PID", max(-cfg.gains.out_min, cfg.gains.out_max))):
+            self.limits.check_speed_mm_s(speed, f"the controller's {name} speed")
         self.perception = Perception(rig)
-        self.temperature = TemperatureLoop(heat, limits)
+        self.temperature = TemperatureLoop(heat, ThermalLimits.for_rig(self.limits))
         self.pid = PID(self.config.gains)
         self.plan = GraspPlan()
         self.log = PhaseLog()
@@ -310,6 +328,7 @@ class GraspController:
         if self.phase not in (GraspPhase.DONE, GraspPhase.STOPPED, GraspPhase.OPEN):
             raise InputError(f"a grasp is under way (phase {self.phase.value}): release or "
                              "stop it first")
+        self.limits.check_target_n(plan.target_n)
         if plan.mode is not None:
             self.temperature.check_mode(plan.mode)
         elif plan.temp_c is not None:
@@ -330,7 +349,7 @@ class GraspController:
 
     def set_target(self, target_n: float) -> None:
         """Change the force target from now on."""
-        self.plan = replace(self.plan, target_n=check_target_n(target_n))
+        self.plan = replace(self.plan, target_n=self.limits.check_target_n(target_n))
 
     def hold(self, t_s: float) -> None:
         """Hold the force from now on, however far the closing or lifting has got.
@@ -398,6 +417,12 @@ class GraspController:
         self.estimate = self.estimator.update(percept, motor)
         duty = self._heaters(percept, t)
         velocity, arm = self._motor(t, dt, motor, obs.arm_height_mm, percept)
+        if self.phase is GraspPhase.STOPPED:
+            velocity, duty, arm = 0.0, (0.0, 0.0), 0.0  # stopped in this period: all off now
+        elif self._lost is not None:
+            duty = (0.0, 0.0)  # blind to the force: nothing is driven on a reading not made
+            self.temperature.hold_off()
+        velocity, duty = self.limits.clamp(velocity, duty)
         self.command = Command(velocity, duty, arm)
         return self.command
 
@@ -408,8 +433,14 @@ class GraspController:
         status = self.temperature.status
         if status is not self._temp_status:
             if status is TemperatureStatus.OVER_TEMPERATURE:
-                self.log.event(t, EventKind.OVER_TEMPERATURE,
-                               f"above {self.temperature.limits.max_temp_c:g} °C: heater cut")
+                hottest = max((f.max_c for f in percept.thermal.fingers  # type: ignore[union-attr]
+                               if math.isfinite(f.max_c)), default=math.nan)
+                detail = (f"a finger read {hottest:.1f} °C, above the "
+                          f"{self.temperature.limits.max_temp_c:g} °C cut-off")
+                self.log.event(t, EventKind.OVER_TEMPERATURE, detail)
+                self._temp_status = status
+                self.stop(t, f"over-temperature: {detail}")
+                return (0.0, 0.0)
             elif status is TemperatureStatus.STALE:
                 self.log.event(t, EventKind.IR_STALE,
                                f"no infrared frame for {percept.ir_age_s:.1f} s: heaters off")
@@ -462,7 +493,8 @@ class GraspController:
         if not fresh(percept.t_s, t, rgb_limit):
             return EventKind.MARKER_LOST, _stale("RGB", percept.t_s, t, rgb_limit)
         if percept.marker.status is not TrackStatus.TRACKING:
-            return EventKind.MARKER_LOST, percept.marker.message or percept.marker.status.value
+            return EventKind.MARKER_LOST, percept.marker.message or \
+                f"marker {percept.marker.status.value}"
         return None
 
     def _held_while_lost(self, t: float, lost: tuple[EventKind, str] | None) -> bool:
@@ -559,25 +591,28 @@ class GraspController:
         est = self.estimate
         if self._held_while_lost(t, self._sensing_lost(t, percept, est)):
             return 0.0, 0.0  # hold position until the force can be read again
-        over = [f"{name} {f:.2f} N" for name, f, limit in (
-            ("estimate", est.force_n, cfg.max_force_n),
-            ("per-frame ICFN", est.f_icfn_n, cfg.max_force_n + cfg.icfn_margin_n)) if f > limit]
+        limit_n = self.limits.max_force_n
+        over = [f"{name} {f:.4g} N" for name, f, limit in (
+            ("estimate", est.force_n, limit_n),
+            ("per-frame ICFN", est.f_icfn_n, limit_n + cfg.icfn_margin_n)) if abs(f) > limit]
         if over:
-            self.log.event(t, EventKind.FORCE_LIMIT, "; ".join(over))
-            self.pid.reset(0.0)
-            return -cfg.approach_mm_s, 0.0
+            detail = f"{'; '.join(over)} beyond the ±{limit_n:g} N force limit"
+            self.log.event(t, EventKind.FORCE_LIMIT, detail)
+            self.stop(t, f"force limit: {detail}")
+            return 0.0, 0.0
         self._contact(t, percept)
         target = self.plan.target_n
         if phase is GraspPhase.CLOSE:
             if not self._in_contact:
-                if motor >= cfg.stroke_mm:
+                if motor >= self.limits.stroke_mm:
                     self.log.event(t, EventKind.STROKE_END, "no contact within the stroke")
                     self._enter(t, GraspPhase.RELEASE)
                     return 0.0, 0.0
                 return cfg.approach_mm_s, 0.0
             self._loading.append((motor, est.force_n))
-            if est.force_n >= target * (1.0 - cfg.hold_tolerance_rel) or motor >= cfg.stroke_mm:
-                if motor >= cfg.stroke_mm:
+            at_end = motor >= self.limits.stroke_mm
+            if est.force_n >= target * (1.0 - cfg.hold_tolerance_rel) or at_end:
+                if at_end:
                     self.log.event(t, EventKind.STROKE_END, f"estimate {est.force_n:.2f} N")
                 self._enter(t, GraspPhase.HOLD)
                 self._hold_started = False
@@ -603,7 +638,7 @@ class GraspController:
             return 0.0, 0.0
         velocity = (self._regulate(target, est.force_n, dt)
                     if self.estimator.regulates_hold else 0.0)
-        if motor >= cfg.stroke_mm:
+        if motor >= self.limits.stroke_mm:
             velocity = min(velocity, 0.0)
         arm = 0.0
         if phase is GraspPhase.HOLD:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -87,6 +88,34 @@ class PhaseLog:
     def entered(self, phase: GraspPhase) -> float | None:
         """When ``phase`` was first entered, if it was."""
         return next((t for t, p in self.transitions if p is phase), None)
+
+    def summary(self, skip: Collection[EventKind] = ()) -> list[str]:
+        """One line per run of events of one kind in a row, with the count of repeats.
+
+        A fault that repeats every period (a model's absurd force, read 30
+        times a second) is said once: ``"12.0 s force_limit estimate 1e+06 N
+        (and 241 more to 20.0 s)"``.  Kinds in ``skip`` are left out.
+        """
+        lines: list[str] = []
+        run: list[Event] = []
+
+        def close() -> None:
+            if run:
+                first, last = run[0], run[-1]
+                more = (f" (and {len(run) - 1} more to {last.t_s:.1f} s)" if len(run) > 1
+                        else "")
+                lines.append(f"{first.t_s:.1f} s {first.kind.value} {first.detail}".strip()
+                             + more)
+
+        for event in self.events:
+            if event.kind in skip:
+                continue
+            if run and event.kind is not run[0].kind:
+                close()
+                run = []
+            run.append(event)
+        close()
+        return lines
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-Python form."""

@@ -29,7 +29,7 @@ from relaxgrip.perception.marker import TrackStatus
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["LoopRecorder", "LoopResult", "run_loop"]
+__all__ = ["LoopInterrupted", "LoopRecorder", "LoopResult", "run_loop"]
 
 _STATUS = tuple(TrackStatus)
 _COLUMNS = (
@@ -94,6 +94,19 @@ class LoopResult:
                 "log": self.log.to_dict()}
 
 
+class LoopInterrupted(KeyboardInterrupt):
+    """Ctrl-C, ``kill`` or a hang-up stopped :func:`run_loop`: the motor is stopped, the
+    heaters off, and :attr:`result` holds the run up to the last period it completed.
+
+    A ``KeyboardInterrupt``: a caller that does not look for the partial run stops as
+    on Ctrl-C.
+    """
+
+    def __init__(self, result: LoopResult) -> None:
+        super().__init__("interrupted")
+        self.result = result
+
+
 class LoopRecorder(Protocol):
     """Something that records a run as it goes (e.g. :class:`relaxgrip.recording.McapRecorder`).
 
@@ -122,7 +135,7 @@ def run_loop(
     backend: Gripper,
     controller: GraspController,
     clock: Clock,
-    plan: GraspPlan,
+    plan: GraspPlan | None,
     max_duration_s: float,
     rate_hz: float = 30.0,
     on_step: Callable[[Observation, GraspController], bool | None] | None = None,
@@ -138,8 +151,9 @@ def run_loop(
         The host loop.
     clock : Clock
         The backend's clock (virtual or wall).
-    plan : GraspPlan
-        The grasp to run.
+    plan : GraspPlan or None
+        The grasp to run; ``None``: the grasp the controller is running goes on
+        (a run taken over mid-grasp, as the fault matrix does).
     max_duration_s : float
         Time limit (s).
     rate_hz : float
@@ -153,10 +167,17 @@ def run_loop(
     Returns
     -------
     LoopResult
+
+    Raises
+    ------
+    LoopInterrupted
+        On ``KeyboardInterrupt`` (the stop signals of :mod:`relaxgrip.interrupts`),
+        with the run so far; the motor stopped and the heaters off first.
     """
     dt = 1.0 / rate_hz
     t0 = clock.now()
-    controller.start(plan, t0)
+    if plan is not None:
+        controller.start(plan, t0)
     if recorder is not None:
         recorder.start(backend.info, controller, t0)
     rows: list[tuple[float, ...]] = []
@@ -165,6 +186,7 @@ def run_loop(
     # A period's work longer than the period (wall-clock time) makes the steps late:
     # the run ends by the clock, one period past its last step's time at most.
     deadline = t0 + (n_steps + 1) * dt
+    interrupted = False
     try:
         for k in range(n_steps + 1):
             if k > 0 and clock.now() > deadline:
@@ -180,11 +202,18 @@ def run_loop(
             if on_step is not None and on_step(obs, controller):
                 break
             clock.sleep_until(t0 + (k + 1) * dt)
+    except KeyboardInterrupt:
+        interrupted = True
     finally:
         backend.act(Command())  # motor stopped, heaters off, whatever happened
+    columns = zip(*rows, strict=True) if rows else ((),) * len(_COLUMNS)
     series = {name: np.array(col, dtype=np.float64)
-              for name, col in zip(_COLUMNS, zip(*rows, strict=True), strict=True)}
-    return LoopResult(backend.info, controller.estimator.name, plan, series, controller.log)
+              for name, col in zip(_COLUMNS, columns, strict=True)}
+    result = LoopResult(backend.info, controller.estimator.name, controller.plan, series,
+                        controller.log)
+    if interrupted:
+        raise LoopInterrupted(result)
+    return result
 
 
 def _row(obs: Observation, c: GraspController, command: Command) -> tuple[float, ...]:

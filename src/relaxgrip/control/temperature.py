@@ -43,6 +43,7 @@ from dataclasses import dataclass
 
 from relaxgrip.control.pid import PID, PIDGains
 from relaxgrip.errors import InputError
+from relaxgrip.limits import OUR_LIMITS, LimitsSpec
 from relaxgrip.perception.thermal import FingerThermal, ThermalFeatures, covered_beams
 from relaxgrip.physics.thermal import HeatParams, duty_for_mean_temp
 
@@ -89,6 +90,8 @@ class TemperatureStatus(enum.StrEnum):
     """No recent infrared frame: all heaters off."""
     HEATER_FAULT = "heater_fault"
     """A heater drove hard and its finger did not warm: all heaters off until a new setpoint."""
+    HELD_OFF = "held_off"
+    """The controller holds the heaters off while it cannot read the force (marker lost)."""
 
 
 @dataclass(frozen=True)
@@ -98,7 +101,8 @@ class ThermalLimits:
     Attributes
     ----------
     max_temp_c : float
-        Hottest reading allowed on a finger (°C); above it the heater is off.
+        Hottest reading allowed on a finger (°C); above it the heater is off
+        (the rig's :class:`~relaxgrip.limits.LimitsSpec`, see :meth:`for_rig`).
     hysteresis_k : float
         How far below the limit a finger must cool before heating again (K).
     stale_after_s : float
@@ -112,11 +116,11 @@ class ThermalLimits:
         warms a finger at ambient by about 25 K in 60 s at duty 1).
     """
 
-    max_temp_c: float = 70.0
+    max_temp_c: float = OUR_LIMITS.max_temp_c
     hysteresis_k: float = 2.0
     stale_after_s: float = 3.0
-    min_setpoint_c: float = 20.0
-    max_setpoint_c: float = 65.0
+    min_setpoint_c: float = OUR_LIMITS.min_setpoint_c
+    max_setpoint_c: float = OUR_LIMITS.max_setpoint_c
     fault_duty: float = 0.8
     fault_window_s: float = 60.0
     fault_min_rise_k: float = 2.0
@@ -132,6 +136,12 @@ class ThermalLimits:
                 and self.fault_min_rise_k > 0):
             raise InputError("the heater fault needs a duty in (0, 1], a window > 0 s and a "
                              "rise > 0 K")
+
+    @classmethod
+    def for_rig(cls, limits: LimitsSpec) -> ThermalLimits:
+        """The loop's limits with a rig's cut-off and setpoint range (the rest the defaults)."""
+        return cls(max_temp_c=limits.max_temp_c, min_setpoint_c=limits.min_setpoint_c,
+                   max_setpoint_c=limits.max_setpoint_c)
 
     def check_setpoint(self, temp_c: float) -> float:
         """Return ``temp_c`` if it is a setpoint the loop accepts."""
@@ -225,9 +235,25 @@ class TemperatureLoop:
     def _set(self, temp_c: float | None) -> None:
         self.fault = None  # a setpoint given (again) after a fault is the operator's call
         self._driving = [None, None]
+        if temp_c is None:
+            self.status = TemperatureStatus.OFF  # at once: shown before the next frame
         if temp_c != self.setpoint_c:
             self.setpoint_c = temp_c
             self._last_ir_t = None  # re-seed the integrators on the next frame
+
+    def hold_off(self) -> None:
+        """The caller keeps the heaters off this period (the controller, blind to the force).
+
+        The status says so; the heater-fault watch and the integrators start
+        again afresh when heating resumes (the heaters were not driven at the
+        duty the loop computed, so a finger that did not warm meanwhile is no
+        fault).
+        """
+        self._driving = [None, None]
+        self._last_ir_t = None
+        self._duty = (0.0, 0.0)
+        if self.setpoint_c is not None and self.fault is None:
+            self.status = TemperatureStatus.HELD_OFF
 
     def reading_c(self, finger: FingerThermal) -> float:
         """A finger seen whole: the pads (tip beams) if adhesive, else the mean (°C)."""

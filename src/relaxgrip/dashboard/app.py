@@ -1,19 +1,22 @@
-"""The dashboard's web application: one page, one WebSocket, a broadcast of the live state.
+"""The dashboard's web application: one page, one WebSocket, a small API, the live state.
 
 ``GET /`` serves the page; ``/static`` its script, style and the bundled
-uPlot; ``/ws`` is the WebSocket.  The server pushes ``{"type": "state", ...}``
-messages (the session's state, the RGB frame with the marker drawn and the
-infrared frame in false colour, as base64 JPEG) at ``broadcast_hz`` to every
-viewer through a :class:`~relaxgrip.dashboard.hub.Hub`; a viewer sends
-controls ``{"id": n, "op": ..., "value": ...}`` and gets
+uPlot; ``/ws`` is the WebSocket; ``GET /api/state`` the state as JSON and
+``POST /api/control`` one control (``{"op": ..., "value": ...}``), for
+programs.  The server pushes ``{"type": "state", ...}`` messages (the
+session's state, the RGB frame with the marker drawn and the infrared frame
+in false colour, as base64 JPEG) at ``broadcast_hz`` to every viewer through
+a :class:`~relaxgrip.dashboard.hub.Hub`, and one at once to a viewer that
+connects and after every control; a viewer sends controls
+``{"id": n, "op": ..., "value": ...}`` and gets
 ``{"type": "reply", "id": n, "ok": ..., "error": ...}``, where ``error`` is
 the one-line message of the :class:`~relaxgrip.errors.InputError` that
 refused it (nothing changed).
 
-With an access token, the page and the WebSocket need it as the ``token``
-query parameter or the ``X-Relaxgrip-Token`` header, else 403.  The lifespan
-starts the session's loop and, on shutdown, stops it: motor stopped, heaters
-off.
+Every request but the static files needs the access token and passes the
+Host and Origin checks of :mod:`relaxgrip.dashboard.access`, on loopback too:
+403, or a WebSocket closed with 1008, otherwise.  The lifespan starts the
+session's loop and, on shutdown, stops it: motor stopped, heaters off.
 """
 
 from __future__ import annotations
@@ -24,7 +27,6 @@ import contextlib
 import json
 import logging
 import math
-import secrets
 from collections.abc import AsyncIterator, Callable
 from importlib import resources
 from typing import Any
@@ -34,6 +36,7 @@ from fastapi import FastAPI, Request, WebSocket, WebSocketDisconnect
 from fastapi.responses import HTMLResponse, Response
 from fastapi.staticfiles import StaticFiles
 
+from relaxgrip.dashboard.access import TOKEN_HEADER, AccessGuard, check_token
 from relaxgrip.dashboard.hub import Hub
 from relaxgrip.dashboard.render import encode_jpeg, ir_view, rgb_view
 from relaxgrip.dashboard.session import LiveSession
@@ -42,7 +45,10 @@ from relaxgrip.serialize import json_safe
 
 __all__ = ["TOKEN_HEADER", "create_app"]
 
-TOKEN_HEADER = "x-relaxgrip-token"
+#: Headers of the page: never framed (clickjacking), its URL (with the token) never sent on.
+_PAGE_HEADERS = {"Content-Security-Policy": "frame-ancestors 'none'",
+                 "X-Frame-Options": "DENY", "Referrer-Policy": "no-referrer",
+                 "Cache-Control": "no-store"}
 _log = logging.getLogger(__name__)
 
 
@@ -77,7 +83,12 @@ class _Frames:
 
 
 def _control(session: LiveSession, op: str, value: Any) -> dict[str, Any]:
-    """Apply one control; the reply's extra fields."""
+    """Apply one control; the reply's extra fields.
+
+    ``applied`` is the number of controls the session has taken, this one
+    included: a state message whose ``controls`` has reached it shows the
+    control's effect (a client waits on that, not on time).
+    """
 
     def number() -> float:
         if isinstance(value, bool):  # float(True) is 1.0: a 1 N target, a 1 °C setpoint
@@ -110,10 +121,13 @@ def _control(session: LiveSession, op: str, value: Any) -> dict[str, Any]:
     if op not in actions:
         raise InputError(f"unknown control {op!r}; known: {', '.join(actions)}")
     result = actions[op]()
-    return {"path": str(result)} if op == "record" and result is not None else {}
+    extra: dict[str, Any] = {"applied": session.count_control()}
+    if op == "record" and result is not None:
+        extra["path"] = str(result)
+    return extra
 
 
-def create_app(session: LiveSession, *, token: str | None = None,
+def create_app(session: LiveSession, *, token: str, loopback_only: bool = True,
                broadcast_hz: float = 15.0, start_session: bool = True) -> FastAPI:
     """The dashboard application around a session.
 
@@ -121,9 +135,12 @@ def create_app(session: LiveSession, *, token: str | None = None,
     ----------
     session : LiveSession
         The live session (started by the lifespan unless ``start_session`` is false).
-    token : str, optional
-        Access token the page and the WebSocket must present; ``None``: none
-        (for a server bound to the loopback interface only).
+    token : str
+        Access token every request but the static files must present
+        (:func:`~relaxgrip.dashboard.access.check_token`).
+    loopback_only : bool
+        The server is bound to the loopback interface: requests addressed to
+        any other host name are refused (DNS rebinding).
     broadcast_hz : float
         State messages per second to each viewer.
     start_session : bool
@@ -138,6 +155,14 @@ def create_app(session: LiveSession, *, token: str | None = None,
     hub = Hub()
     frames = _Frames(session)
     static = resources.files("relaxgrip.dashboard") / "static"
+
+    async def publish_now() -> None:
+        """A fresh state to every viewer at once (after a control, for a new viewer)."""
+        # A failure is the periodic broadcast's to log; a control's reply is not held up.
+        with contextlib.suppress(Exception):
+            message = await asyncio.to_thread(frames.message)
+            if hub.viewers:
+                hub.publish(message)
 
     async def broadcast() -> None:
         period = 1.0 / broadcast_hz
@@ -154,7 +179,8 @@ def create_app(session: LiveSession, *, token: str | None = None,
                     failing = True
                 else:
                     failing = False
-                    hub.publish(message)
+                    if hub.viewers:  # the last one may have left while it was made
+                        hub.publish(message)
             t_next += period
             t_next = max(t_next, loop.time())
             await asyncio.sleep(t_next - loop.time())
@@ -177,25 +203,31 @@ def create_app(session: LiveSession, *, token: str | None = None,
                   redoc_url=None, openapi_url=None)
     app.state.hub = hub
     app.state.session = session
-
-    def allowed(query: str | None, header: str | None) -> bool:
-        if token is None:
-            return True
-        given = query if query is not None else header
-        return given is not None and secrets.compare_digest(given.encode(), token.encode())
+    # Checked here, not at the first request (the middleware is built then).
+    app.add_middleware(AccessGuard, token=check_token(token, "access token"),
+                       loopback_only=loopback_only)
 
     @app.get("/", response_class=HTMLResponse)
-    async def page(request: Request) -> Response:
-        if not allowed(request.query_params.get("token"), request.headers.get(TOKEN_HEADER)):
-            return Response("403: this dashboard needs its access token (?token=...)\n",
-                            status_code=403, media_type="text/plain")
-        return HTMLResponse((static / "index.html").read_text(encoding="utf-8"))
+    async def page() -> Response:
+        return HTMLResponse((static / "index.html").read_text(encoding="utf-8"),
+                            headers=_PAGE_HEADERS)
+
+    @app.get("/api/state")
+    async def api_state() -> Response:
+        state = await asyncio.to_thread(session.state)
+        return Response(json.dumps(json_safe(state), allow_nan=False),
+                        media_type="application/json", headers={"Cache-Control": "no-store"})
+
+    @app.post("/api/control")
+    async def api_control(request: Request) -> Response:
+        reply = await _reply(session, await request.body(), with_id=False)
+        await publish_now()
+        return Response(json.dumps(json_safe(reply), allow_nan=False),
+                        status_code=200 if reply["ok"] else 400,
+                        media_type="application/json")
 
     @app.websocket("/ws")
     async def ws(websocket: WebSocket) -> None:
-        if not allowed(websocket.query_params.get("token"), websocket.headers.get(TOKEN_HEADER)):
-            await websocket.close(code=1008)  # before accept: the handshake gets 403
-            return
         await websocket.accept()
         box = hub.subscribe()
         send_lock = asyncio.Lock()
@@ -209,38 +241,17 @@ def create_app(session: LiveSession, *, token: str | None = None,
                 await send(await box.get())
 
         sender = asyncio.create_task(pump())
+        await publish_now()  # the live state at once, not one cached before this viewer came
         try:
             while True:
-                ident: Any = None
-                try:
-                    message = await websocket.receive()
-                    if message["type"] == "websocket.disconnect":
-                        raise WebSocketDisconnect(message.get("code", 1000))
-                    if message.get("text") is None:
-                        raise InputError("a control is JSON text, not a binary frame")
-                    request = json.loads(message["text"])
-                    if not isinstance(request, dict):
-                        raise InputError("a control is a JSON object {id, op, value}")
-                    if not isinstance(request.get("id"), str | int | float | None):
-                        # Echoed in the reply: nested JSON could be too deep to encode.
-                        raise InputError("a control's id is a number, a string or null")
-                    ident = request.get("id")
-                    extra = await asyncio.to_thread(_control, session, str(request.get("op")),
-                                                    request.get("value"))
-                    reply: dict[str, Any] = {"type": "reply", "id": ident, "ok": True,
-                                             "error": None, **extra}
-                except InputError as exc:
-                    reply = {"type": "reply", "id": ident, "ok": False,
-                             "error": str(exc).splitlines()[0]}
-                except (ValueError, RecursionError):  # not JSON, or nested past decoding
-                    reply = {"type": "reply", "id": None, "ok": False,
-                             "error": "a control is a JSON object {id, op, value}"}
-                except WebSocketDisconnect:
-                    raise
-                except Exception as exc:  # a fault of ours: said, logged, the viewer kept
-                    _log.exception("control %r failed", ident)
-                    reply = {"type": "reply", "id": ident, "ok": False,
-                             "error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
+                message = await websocket.receive()
+                if message["type"] == "websocket.disconnect":
+                    raise WebSocketDisconnect(message.get("code", 1000))
+                if message.get("text") is None:
+                    reply = _refused(None, "a control is JSON text, not a binary frame")
+                else:
+                    reply = await _reply(session, message["text"], with_id=True)
+                    await publish_now()
                 await send(json.dumps(json_safe(reply), allow_nan=False))
         except WebSocketDisconnect:
             pass
@@ -252,3 +263,30 @@ def create_app(session: LiveSession, *, token: str | None = None,
 
     app.mount("/static", StaticFiles(directory=str(static)), name="static")
     return app
+
+
+def _refused(ident: Any, error: str) -> dict[str, Any]:
+    return {"type": "reply", "id": ident, "ok": False, "error": error}
+
+
+async def _reply(session: LiveSession, text: str | bytes, *, with_id: bool) -> dict[str, Any]:
+    """Apply one control given as JSON text; the reply (its ``error`` one line)."""
+    ident: Any = None
+    try:
+        request = json.loads(text)
+        if not isinstance(request, dict):
+            raise InputError("a control is a JSON object {id, op, value}")
+        if with_id and not isinstance(request.get("id"), str | int | float | None):
+            # Echoed in the reply: nested JSON could be too deep to encode.
+            raise InputError("a control's id is a number, a string or null")
+        ident = request.get("id") if with_id else None
+        extra = await asyncio.to_thread(_control, session, str(request.get("op")),
+                                        request.get("value"))
+    except InputError as exc:
+        return _refused(ident, str(exc).splitlines()[0])
+    except (ValueError, RecursionError):  # not JSON, or nested past decoding
+        return _refused(None, "a control is a JSON object {id, op, value}")
+    except Exception as exc:  # a fault of ours: said, logged, the viewer kept
+        _log.exception("control %r failed", ident)
+        return _refused(ident, f"{type(exc).__name__}: {exc}".splitlines()[0])
+    return {"type": "reply", "id": ident, "ok": True, "error": None, **extra}

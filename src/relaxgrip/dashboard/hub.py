@@ -1,6 +1,9 @@
 """A broadcast hub: the newest message to every viewer, old ones dropped for slow viewers.
 
-Every viewer has a mailbox holding at most one message.  Publishing replaces
+Every viewer has a mailbox holding at most one message.  A new viewer gets
+the latest message while others watch; with nobody watching, nothing is
+published, and the latest message is forgotten as the last viewer leaves, so
+that the next one is not shown a state from then.  Publishing replaces
 an unread message (the viewer drops a frame) instead of waiting, so a slow or
 stalled viewer never holds the others up.  All methods run on the server's
 event loop thread.
@@ -57,8 +60,10 @@ class Hub:
         return box
 
     def unsubscribe(self, box: Mailbox) -> None:
-        """Forget a viewer."""
+        """Forget a viewer; the last one gone, the latest message too (it goes stale)."""
         self._boxes.discard(box)
+        if not self._boxes:
+            self.latest = None
 
     def publish(self, message: str) -> None:
         """Give ``message`` to every viewer without waiting for any."""

@@ -41,13 +41,12 @@ from relaxgrip.clock import Clock, VirtualClock
 from relaxgrip.control import (
     EstimatorKind,
     EventKind,
-    ForceControlConfig,
     GraspController,
     GraspPhase,
     GraspPlan,
     StiffnessMode,
     bundle_estimator,
-    check_target_n,
+    twin_limits,
 )
 from relaxgrip.control.runner import LoopRecorder
 from relaxgrip.errors import InputError
@@ -169,6 +168,7 @@ class LiveSession:
         self.record_error: str | None = None
         self.periods = 0
         self.overruns = 0
+        self._controls = 0
         self._closed = False
         controller.temperature.set_mode(StiffnessMode.STIFF)
 
@@ -323,12 +323,18 @@ class LiveSession:
             "objects": list(self.objects),
             "modes": [m.value for m in StiffnessMode],
             "recording": None if self.record_path is None else str(self.record_path),
-            "events": [f"{e.t_s:.1f} s {e.kind.value} {e.detail}".strip()
-                       for e in c.log.events[-6:]],
+            "events": c.log.summary()[-6:],  # a repeated reason once, with its count
             "alive": self.alive,
             "error": self.error or self.record_error,
             "periods": self.periods,
+            "controls": self._controls,
         }
+
+    def count_control(self) -> int:
+        """Count one control taken; the count, which :meth:`state` shows from now on."""
+        with self._lock:
+            self._controls += 1
+            return self._controls
 
     # -- controls: check, then change --------------------------------------------------
 
@@ -342,7 +348,7 @@ class LiveSession:
 
     def set_target(self, target_n: float) -> None:
         """Force target (N) for the running grasp and the next ones."""
-        value = check_target_n(target_n)
+        value = self.controller.limits.check_target_n(target_n)
         with self._lock:
             self._wanted.target_n = value
             if self.controller.phase not in _IDLE:
@@ -535,8 +541,7 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
         try:
             gripper.reset()
             controller = GraspController(rig.geometry, bundle_estimator(kind, bundle, observer),
-                                         ForceControlConfig(stroke_mm=rig.motor.stroke_mm),
-                                         heat=rig.heat)
+                                         heat=rig.heat, limits=rig.limits)
         except BaseException:  # the port and the camera threads are not left open
             gripper.close()
             raise
@@ -545,8 +550,7 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
     cfg = replace(config if config is not None else TwinConfig(), object_name=object_name)
     virtual = VirtualClock(clock.now())
     controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
-                                 ForceControlConfig(stroke_mm=cfg.motor.stroke_mm),
-                                 heat=cfg.heat)
+                                 heat=cfg.heat, limits=twin_limits(cfg))
     if backend == "emulator":
         from relaxgrip.hardware.emulator import ready_emulated_gripper
 

@@ -32,13 +32,14 @@ from relaxgrip.clock import VirtualClock
 from relaxgrip.control import (
     EstimatorKind,
     EventKind,
-    ForceControlConfig,
     GraspController,
     GraspPlan,
+    LoopInterrupted,
     LoopResult,
     bundle_estimator,
     check_target_n,
     run_loop,
+    twin_limits,
 )
 from relaxgrip.control.runner import LoopRecorder
 from relaxgrip.errors import InputError
@@ -47,6 +48,7 @@ from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import reconstruct
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
+from relaxgrip.limits import OUR_LIMITS
 from relaxgrip.perception.proximity import ProximityTarget
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
 from relaxgrip.validate import check_positive
@@ -60,6 +62,7 @@ __all__ = [
     "MAX_HOLD_S",
     "MIN_HOLD_S",
     "HoldComparison",
+    "HoldInterrupted",
     "HoldResult",
     "check_backend",
     "check_hold",
@@ -76,9 +79,8 @@ __all__ = [
 #: The paper's hold and its steady-state interval (s).
 PAPER_DURATION_S = 280.0
 PAPER_WINDOW_S = (100.0, 280.0)
-#: Hold temperatures the experiment accepts (°C): from a few kelvin above ambient
-#: (the heaters cannot cool) to below the temperature loop's largest setpoint.
-HOLD_TEMP_RANGE_C = (28.0, 65.0)
+#: Hold temperatures the experiment accepts (°C): our gripper's setpoint range (its limits).
+HOLD_TEMP_RANGE_C = (OUR_LIMITS.min_setpoint_c, OUR_LIMITS.max_setpoint_c)
 #: Time allowed to reach the hold (zeroing, heating, closing), on top of the hold (s).
 SETUP_ALLOWANCE_S = 120.0
 #: The loop's rate, the camera's (Hz): a hold of ``duration_s`` lasts ``duration_s`` times
@@ -93,12 +95,8 @@ MIN_HOLD_S = 1.0
 
 
 def check_hold_temp_c(temp_c: float) -> float:
-    """Return a hold temperature if the experiment can hold it."""
-    lo, hi = HOLD_TEMP_RANGE_C
-    if not (math.isfinite(temp_c) and lo <= temp_c <= hi):
-        raise InputError(f"hold temperature {temp_c} °C is outside the safe range "
-                         f"{lo:g}-{hi:g} °C")
-    return float(temp_c)
+    """Return a hold temperature if our gripper's limits take it as a setpoint."""
+    return OUR_LIMITS.check_setpoint_c(temp_c, "hold temperature")
 
 
 def check_hold_duration_s(duration_s: float, name: str = "hold duration") -> float:
@@ -174,6 +172,10 @@ class HoldResult:
     twin_scatter : dict of str to float or None
         The run's scatter as the twin drew it (:meth:`relaxgrip.twin.twin.TwinMaterial.scatter`),
         ground truth beside the budget; only for a hold run with ``budget=True``.
+    interrupted : bool
+        The hold was stopped before its end (Ctrl-C, ``kill``, a hang-up): the
+        series end where it stopped, and the figures are those of the part of
+        the steady state it reached (none if it reached none).
     """
 
     estimator: str
@@ -189,6 +191,7 @@ class HoldResult:
     target_series_n: FloatArray | None = None
     fixed_aperture_n: FloatArray | None = None
     twin_scatter: dict[str, float] | None = None
+    interrupted: bool = False
 
     @property
     def target_t_n(self) -> FloatArray:
@@ -305,9 +308,23 @@ class HoldResult:
         out["total_n"] = sum(out.values())
         return out
 
+    @property
+    def held_s(self) -> float:
+        """How long the hold ran from its onset (s; 0 if it never started)."""
+        return float(self.t_s[-1]) if self.t_s.size else 0.0
+
     def to_dict(self) -> dict[str, Any]:
-        """The ``relaxgrip hold --json`` object."""
+        """The ``relaxgrip hold --json`` object (``"interrupted": true`` for a stopped one)."""
         lo, hi = self.window
+        if self.interrupted:
+            figures = self.metrics() if self._mask().any() else {}
+            return {
+                "interrupted": True, "twin_version": self.twin_version,
+                "estimator": self.estimator, "target_n": self.target_n, "temp_c": self.temp_c,
+                "seed": self.seed, "duration_s": self.duration_s, "held_s": self.held_s,
+                "window_s": [lo, hi], **figures,
+                "events": [e.to_dict() for e in self.loop.log.events],
+            }
         budget = {} if self.fixed_aperture_n is None else {"error_budget": self.error_budget()}
         if self.twin_scatter is not None:
             budget["twin_scatter"] = self.twin_scatter
@@ -317,6 +334,15 @@ class HoldResult:
             "duration_s": self.duration_s, "window_s": [lo, hi], **self.metrics(), **budget,
             "events": [e.to_dict() for e in self.loop.log.events],
         }
+
+
+class HoldInterrupted(KeyboardInterrupt):
+    """A stop signal ended :func:`run_hold`; :attr:`result` is the hold so far
+    (:attr:`HoldResult.interrupted`).  The motor was stopped and the heaters switched off."""
+
+    def __init__(self, result: HoldResult) -> None:
+        super().__init__("interrupted")
+        self.result = result
 
 
 def check_hold(estimator: EstimatorKind | str, target_n: float, temp_c: float,
@@ -473,8 +499,7 @@ def run_hold(
     twin = _make_backend(backend, cfg, seed, clock, mcu)
     try:  # closed however it ends: the emulator's thread and pty with it
         controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
-                                     ForceControlConfig(stroke_mm=cfg.motor.stroke_mm),
-                                     heat=cfg.heat)
+                                     heat=cfg.heat, limits=twin_limits(cfg))
         plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False,
                          grasped=_as_known(cfg) if locate_object else None)
         on_step = _scenario(twin, temp_profile, target_profile, disturbance, temp_c, target_n)
@@ -482,13 +507,26 @@ def run_hold(
         if budget:
             assert isinstance(twin, GripperTwin)
             on_step = _copy_at_onset(twin, frozen, on_step)
-        loop = run_loop(twin, controller, clock, plan, duration_s + SETUP_ALLOWANCE_S,
-                        rate_hz=CONTROL_RATE_HZ, recorder=recorder, on_step=on_step)
+        try:
+            loop = run_loop(twin, controller, clock, plan, duration_s + SETUP_ALLOWANCE_S,
+                            rate_hz=CONTROL_RATE_HZ, recorder=recorder, on_step=on_step)
+        except LoopInterrupted as stopped:
+            loop, interrupted = stopped.result, True
+        else:
+            interrupted = False
     finally:
         twin.close()
     onset = loop.hold_onset_s()
+    if interrupted:
+        t = loop["t_s"] - (math.inf if onset is None else onset)  # never started: no samples
+        keep = (t >= 0.0) & (t <= duration_s + 1e-9)
+        raise HoldInterrupted(HoldResult(
+            kind.value, target_n, temp_c, duration_s, seed, t[keep],
+            loop["truth_force_n"][keep], loop["estimate_n"][keep], loop,
+            target_series_n=None if target_profile is None
+            else target_profile.values(t[keep], target_n), interrupted=True))
     if onset is None:
-        events = "; ".join(f"{e.kind.value} {e.detail}".strip() for e in loop.log.events)
+        events = "; ".join(loop.log.summary())
         raise InputError(f"the hold never started ({events or 'no contact'})")
     t = loop["t_s"] - onset
     keep = (t >= 0.0) & (t <= duration_s + 1e-9)

@@ -39,10 +39,10 @@ from relaxgrip.backend import Command, Observation
 from relaxgrip.clock import VirtualClock
 from relaxgrip.control import (
     EstimatorKind,
-    ForceControlConfig,
     GraspController,
     GraspPlan,
     bundle_estimator,
+    twin_limits,
 )
 from relaxgrip.control.phases import PHASES, GraspPhase
 from relaxgrip.control.temperature import StiffnessMode
@@ -297,7 +297,7 @@ class _Scenario:
         self.models = models
         self.controller = GraspController(
             self.config.rig, bundle_estimator(settings.cup_estimator, models),
-            ForceControlConfig(stroke_mm=self.config.motor.stroke_mm), heat=self.config.heat)
+            heat=self.config.heat, limits=twin_limits(self.config))
         self.controller.temperature.set_mode(StiffnessMode.STIFF)
         self.rec = _Recorder(self.config.finger.smp)
         self.events: list[dict[str, Any]] = []

@@ -61,7 +61,6 @@ from relaxgrip.clock import VirtualClock
 from relaxgrip.control import (
     MODE_SETPOINTS_C,
     EstimatorKind,
-    ForceControlConfig,
     GraspController,
     GraspPhase,
     GraspPlan,
@@ -72,6 +71,7 @@ from relaxgrip.control import (
     bundle_estimator,
     check_target_n,
     run_loop,
+    twin_limits,
 )
 from relaxgrip.control.phases import PHASES
 from relaxgrip.errors import InputError
@@ -780,15 +780,15 @@ def run_grasp(
     clock = VirtualClock()
     twin = GripperTwin(cfg, seed=seed, clock=clock)
     recorder = _TruthRecorder(twin)
-    cc = ForceControlConfig(stroke_mm=cfg.motor.stroke_mm)
-    controller = GraspController(cfg.rig, bundle_estimator(est_kind, bundle), cc,
-                                 heat=cfg.heat)
+    controller = GraspController(cfg.rig, bundle_estimator(est_kind, bundle), heat=cfg.heat,
+                                 limits=twin_limits(cfg))
     plan = GraspPlan(target_n=target_n, mode=kind, hold_s=hold_s, lift_mm=lift_mm,
                      sustain_s=sustain_s, release=False)
     # Settling and re-zeroing, the full closing stroke at the approach speed, the
     # climb to the target, the lift: all bounded, with a margin for the force loop.
-    budget = (cc.temp_settle_s + 5.0 + cc.stroke_mm / cc.approach_mm_s + 15.0 + hold_s
-              + lift_mm / cc.lift_mm_s + sustain_s)
+    cc = controller.config
+    budget = (cc.temp_settle_s + 5.0 + controller.limits.stroke_mm / cc.approach_mm_s + 15.0
+              + hold_s + lift_mm / cc.lift_mm_s + sustain_s)
     try:
         loop = run_loop(recorder, controller, clock, plan, budget)
     finally:

@@ -26,9 +26,10 @@ import os
 import socket
 import stat
 import threading
+import time
 import tty
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -50,7 +51,7 @@ from relaxgrip.hardware.hx711 import Hx711Config, Hx711Model
 from relaxgrip.hardware.protocol.client import McuClient
 from relaxgrip.hardware.protocol.mcu import AppliedOutputs, McuConfig, McuCore, McuEndpoint
 from relaxgrip.hardware.protocol.transport import FdTransport, SerialTransport
-from relaxgrip.hardware.rig_file import LimitsSpec
+from relaxgrip.limits import OUR_LIMITS
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
 from relaxgrip.twin.objects import get_object
 
@@ -282,6 +283,11 @@ class TwinPlant:
         self._ticks = 0
         self._position_um = 0
         self._conversions: list[tuple[float, int]] = []
+        #: When the MCU's outputs changed, and to what: ``(time (s), outputs)``.
+        self.output_log: list[tuple[float, AppliedOutputs]] = []
+        self._applied = threading.Condition()
+        self.applied_s = -float("inf")
+        """Time of the MCU's latest poll (s on its clock)."""
 
     def _publish(self, kind: int, frame: Frame | None) -> None:
         if frame is not None and self._sent.get(kind) != frame.seq:
@@ -311,22 +317,69 @@ class TwinPlant:
         """Drive the twin's motor and heaters with ``outputs`` from ``now_s`` on."""
         self.twin.act(Command(motor_velocity_mm_s=outputs.velocity_mm_s,
                               heater_duty=outputs.heater_duty))
+        with self._applied:
+            if not self.output_log or self.output_log[-1][1] != outputs:
+                self.output_log.append((now_s, outputs))
+            self.applied_s = now_s
+            self._applied.notify_all()
+
+    def wait_applied(self, t_s: float, timeout_s: float = 2.0) -> bool:
+        """Wait (wall clock) until the MCU has polled at ``t_s`` or later; whether it did.
+
+        In lockstep the host moves the shared clock and the MCU thread catches
+        up on its next poll: a fault test that advances the clock with no host
+        traffic (a silent host, a cut cable) waits here for the MCU to see the
+        new time.
+        """
+        with self._applied:
+            return self._applied.wait_for(lambda: self.applied_s >= t_s, timeout_s)
 
 
 class _TamperableFd(FdTransport):
-    """The MCU's end of the pty; ``tamper`` rewrites what it sends (fault injection)."""
+    """The MCU's end of the pty; ``tamper`` rewrites what it sends (fault injection).
+
+    Once :meth:`cut`, the MCU's side of a cable that is gone: nothing it sends
+    arrives, nothing comes in, and the MCU goes on running (its watchdog with it).
+    """
 
     tamper: Callable[[bytes], bytes] | None = None
     fd_closed = False
+    is_cut = False
+
+    def __init__(self, fd: int) -> None:
+        super().__init__(fd)
+        # Held around every use of the descriptor: it is closed only between two uses.
+        self._fd_lock = threading.Lock()
 
     def write(self, data: bytes) -> None:
-        """Send ``data`` (after ``tamper``, if set)."""
-        if self.tamper is not None:
-            data = self.tamper(data)
-        super().write(data)
+        """Send ``data`` (after ``tamper``, if set); nothing once the cable is cut."""
+        with self._fd_lock:
+            if self.is_cut:
+                return
+            if self.tamper is not None:
+                data = self.tamper(data)
+            super().write(data)
+
+    def read(self, timeout_s: float) -> bytes:
+        """What arrived within ``timeout_s`` (wall clock); nothing once the cable is cut."""
+        with self._fd_lock:
+            if not self.is_cut:
+                return super().read(timeout_s)
+        time.sleep(timeout_s)  # an idle UART: the MCU's loop goes on at its pace
+        return b""
+
+    def cut(self) -> None:
+        """Cut the cable: the descriptor is closed (the host sees a dead line)."""
+        with self._fd_lock:
+            self.is_cut = True
+            self._close_fd_once()
 
     def close_fd(self) -> None:
         """Close the descriptor once (the peer then sees a dead line)."""
+        with self._fd_lock:
+            self._close_fd_once()
+
+    def _close_fd_once(self) -> None:
         if not self.fd_closed:
             os.close(self.fd)
             self.fd_closed = True
@@ -370,18 +423,26 @@ class McuEmulator:
         Run the compiled firmware in simavr (:mod:`relaxgrip.hardware.firmware_emulator`)
         instead of the Python MCU; ``mcu`` is then ignored (the firmware is built for
         the twin's motor and encoder).
+    twin : GripperTwin, optional
+        The twin to run (one taken over mid-grasp, on ``clock``); default a
+        new one of ``config`` and ``seed``.
     """
 
     def __init__(self, config: TwinConfig | None = None, seed: int = 0,
                  clock: Clock | None = None, mcu: McuConfig | None = None,
                  poll_s: float = 0.002,
                  load_cell: Hx711Config | None = DEFAULT_LOAD_CELL,
-                 firmware: bool = False) -> None:
-        self.config = config if config is not None else TwinConfig()
+                 firmware: bool = False, twin: GripperTwin | None = None) -> None:
         self.clock: Clock = clock if clock is not None else VirtualClock()
         # The firmware's AVR keeps the twin's time, a step ahead of the host's at most.
         twin_clock = VirtualClock(self.clock.now()) if firmware else self.clock
-        self.twin = GripperTwin(self.config, seed=seed, clock=twin_clock)
+        if twin is not None:
+            self.config = twin.config
+            self.twin = twin
+            twin.clock = twin_clock
+        else:
+            self.config = config if config is not None else TwinConfig()
+            self.twin = GripperTwin(self.config, seed=seed, clock=twin_clock)
         max_um_s = round(self.config.motor.max_velocity_mm_s * 1000.0)
         self.mcu_config = mcu if mcu is not None and not firmware else McuConfig(
             max_velocity_um_s=max_um_s, load_cell=load_cell is not None)
@@ -534,11 +595,14 @@ class McuEmulator:
         self._accept_thread.start()
 
     def disconnect(self) -> None:
-        """Unplug the cable: stop serving and close the pseudo-terminal's master side."""
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-        self.transport.close_fd()
+        """Cut the cable with the MCU powered: the host's port goes dead, the MCU runs on.
+
+        Nothing crosses the line any more; the emulated MCU keeps polling its
+        plant and its clock, so its watchdog trips 200 ms after the last
+        command it got and switches the motor and heaters off, as a real MCU
+        on a cut USB cable (powered from its own supply) does.
+        """
+        self.transport.cut()
 
     def stop(self) -> None:
         """Stop serving and release the pseudo-terminal and the frame channel."""
@@ -639,7 +703,8 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
                           mcu: McuConfig | None = None,
                           grace_s: float = 2.0,
                           reply_timeout_s: float = 0.1,
-                          firmware: bool = False) -> tuple[SerialGripper, McuEmulator]:
+                          firmware: bool = False,
+                          twin: GripperTwin | None = None) -> tuple[SerialGripper, McuEmulator]:
     """An in-process emulator thread and a :class:`SerialGripper` on its pty, in lockstep.
 
     Parameters
@@ -658,6 +723,8 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
         Host reply timeout in virtual time (s).
     firmware : bool
         Run the compiled firmware in simavr instead of the Python MCU.
+    twin : GripperTwin, optional
+        The twin the emulator runs (see :class:`McuEmulator`).
 
     Returns
     -------
@@ -665,7 +732,7 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
         The gripper (closing it stops the emulator) and the emulator.
     """
     clk = clock if clock is not None else VirtualClock()
-    emu = McuEmulator(config, seed, clk, mcu, firmware=firmware)
+    emu = McuEmulator(config, seed, clk, mcu, firmware=firmware, twin=twin)
     try:
         host_sock = emu.connect_host()
         emu.start()
@@ -673,13 +740,14 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
     except BaseException:
         emu.stop()
         raise
-    transport = GuardedTransport(serial, clk, grace_s)
+    transport = GuardedTransport(serial, clk, grace_s, sync=emu.plant.wait_applied)
     client = McuClient(transport, clk, reply_timeout_s=reply_timeout_s)
     channel = EmulatorChannel(host_sock, clk, lockstep=True, wait_timeout_s=grace_s)
     cfg = emu.config
     rgb = EmulatorFrameSource(channel, "rgb", max(0.2, 3.0 / cfg.rig.rgb.rate_hz))
     ir = EmulatorFrameSource(channel, "ir", max(2.5, 2.5 / cfg.rig.ir.rate_hz))
-    limits = LimitsSpec(max_motor_speed_mm_s=cfg.motor.max_velocity_mm_s)
+    # Our gripper's limits, at the speed of the emulated motor (a rig file's, for its twin).
+    limits = replace(OUR_LIMITS, max_motor_speed_mm_s=cfg.motor.max_velocity_mm_s)
     force_ref = None
     if emu.load_cell is not None and emu.mcu_config.load_cell:
         # Calibrated as a rig file would give it: the unit's scale and zero.

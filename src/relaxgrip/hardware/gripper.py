@@ -10,6 +10,12 @@ A :class:`~relaxgrip.hardware.force_ref.ForceReference` (the MCU's load
 cell, or another source) fills the observation's ``force_ref``; without one,
 an emulator's truth feed does.
 
+The MCU's own configuration is checked against the rig's limits at the
+handshake (its velocity limit may not be higher), and a Status saying the
+MCU has stopped its outputs itself (its watchdog, a hardware fault) is a
+fault too: a host whose commands stopped being applied (a link that repeats
+its sequence numbers) learns it there.
+
 On any fault (a dead, corrupted or truncated link, a protocol version
 mismatch, an MCU fault, a stalled camera) the gripper stops the motor and
 switches the heaters off (a zero Command if the link still answers; the
@@ -32,15 +38,17 @@ from relaxgrip.errors import InputError
 from relaxgrip.hardware.cameras import CameraError, FrameSource
 from relaxgrip.hardware.force_ref import ForceReference
 from relaxgrip.hardware.protocol.client import McuClient
-from relaxgrip.hardware.protocol.codec import PROTOCOL_VERSION, FaultFlag, Status
+from relaxgrip.hardware.protocol.codec import PROTOCOL_VERSION, TRIP_FAULTS, FaultFlag, Status
 from relaxgrip.hardware.protocol.errors import (
     LinkCorruptedError,
     LinkError,
+    McuFaultError,
     ProtocolError,
     VersionMismatchError,
 )
 from relaxgrip.hardware.protocol.transport import SerialTransport, Transport
-from relaxgrip.hardware.rig_file import LimitsSpec, RigFile
+from relaxgrip.hardware.rig_file import RigFile
+from relaxgrip.limits import OUR_LIMITS, LimitsSpec
 
 __all__ = [
     "GripperFaultError",
@@ -77,12 +85,23 @@ class GuardedTransport:
         The host clock.
     grace_s : float
         Longest wall-clock wait for the first byte in virtual time (s).
+    sync : callable, optional
+        In lockstep, ``sync(t_s)`` waits for the device (the emulated MCU) to
+        run at ``t_s``: the virtual timeout is then spent in 1 ms steps, the
+        device running at each, so that what it does meanwhile (its watchdog
+        trips 200 ms after the last command) happens when it would on
+        hardware, not at the end of a jump over the whole timeout.
     """
 
-    def __init__(self, inner: Transport, clock: Clock, grace_s: float = 2.0) -> None:
+    #: Step of a virtual-time wait with ``sync`` (s).
+    SYNC_STEP_S = 0.001
+
+    def __init__(self, inner: Transport, clock: Clock, grace_s: float = 2.0,
+                 sync: Callable[[float], object] | None = None) -> None:
         self.inner = inner
         self.clock = clock
         self.grace_s = grace_s
+        self.sync = sync
         self.tamper_rx: Callable[[bytes], bytes] | None = None
         """Applied to every read (fault injection in tests)."""
 
@@ -105,10 +124,25 @@ class GuardedTransport:
             raise
         except Exception as exc:
             raise LinkError(f"serial link lost: {exc}") from None
+        if not data and virtual and timeout_s > 0:
+            end = self.clock.now() + timeout_s
+            if self.sync is None:
+                self.clock.sleep_until(end)
+            while self.sync is not None and self.clock.now() < end and not data:
+                self.clock.sleep_until(min(end, self.clock.now() + self.SYNC_STEP_S))
+                self.sync(self.clock.now())
+                data = self._read_now()
         if self.tamper_rx is not None and data:
             data = self.tamper_rx(data)
-        if not data and virtual and timeout_s > 0:
-            self.clock.sleep_until(self.clock.now() + timeout_s)
+        return data
+
+    def _read_now(self) -> bytes:
+        try:
+            data: bytes = self.inner.read(0.0)
+        except LinkError:
+            raise
+        except Exception as exc:
+            raise LinkError(f"serial link lost: {exc}") from None
         return data
 
     def close(self) -> None:
@@ -173,7 +207,7 @@ class SerialGripper:
         self.clock: Clock = client.clock
         self.rgb = rgb
         self.ir = ir
-        self.limits = limits if limits is not None else LimitsSpec()
+        self.limits = limits if limits is not None else OUR_LIMITS
         self.name = name
         self.truth_feed = truth_feed
         self.twin_version = twin_version
@@ -226,7 +260,7 @@ class SerialGripper:
         deadline = self.clock.now() + self.boot_wait_s
         while True:
             try:
-                self.client.handshake()
+                ack = self.client.handshake()
                 break
             except LinkError as exc:  # silence or a bootloader's bytes: booting, maybe
                 if self.clock.now() >= deadline:
@@ -234,6 +268,10 @@ class SerialGripper:
                         raise type(exc)(f"{exc} (Hello said for {self.boot_wait_s:g} s: "
                                         "the MCU did not boot)") from None
                     raise
+        try:  # before enabling: an MCU that would let a faster motor through never drives
+            self.limits.check_mcu_speed_mm_s(ack.max_velocity_um_s / 1000.0)
+        except InputError as exc:
+            raise McuFaultError(str(exc)) from None
         if self.force_ref is not None:
             self.force_ref.start()
         self.client.set_enabled(True)
@@ -247,6 +285,10 @@ class SerialGripper:
     def _observe(self) -> Observation:
         status = self.client.request_status()
         self._last_status = status
+        tripped = status.fault_flags & int(TRIP_FAULTS)
+        if tripped or not status.enabled:
+            why = ", ".join(sorted(fault_names(tripped))) if tripped else "disabled"
+            raise McuFaultError(f"the MCU stopped its outputs itself ({why})")
         now = self.clock.now()
         rgb = self.rgb.read(now) if self.rgb is not None else None
         ir = self.ir.read(now) if self.ir is not None else None
@@ -284,11 +326,9 @@ class SerialGripper:
             raise GripperFaultError(f"gripper stopped earlier: {self._failed}")
         if self._closed:
             raise GripperFaultError("gripper is closed")
-        lim = self.limits
-        v = max(-lim.max_motor_speed_mm_s, min(lim.max_motor_speed_mm_s,
-                                               command.motor_velocity_mm_s))
-        d_max = 0.0 if self._overtemp else lim.heater_duty_limit
-        duty = (min(command.heater_duty[0], d_max), min(command.heater_duty[1], d_max))
+        v, duty = self.limits.clamp(command.motor_velocity_mm_s, command.heater_duty)
+        if self._overtemp:
+            duty = (0.0, 0.0)
         self._guard(lambda: self.client.command(v, duty))
 
     def close(self) -> None:

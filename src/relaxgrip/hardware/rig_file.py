@@ -40,6 +40,7 @@ import numpy as np
 
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import check_input_file, one_line
+from relaxgrip.limits import OUR_LIMITS, LimitsSpec
 from relaxgrip.physics.beam import (
     FingerParams,
     beam_grid,
@@ -373,26 +374,6 @@ class IrCameraSpec:
     def temp_c(self, raw: Any) -> Any:
         """Convert raw counts (array or number) to °C."""
         return raw * self.scale + self.offset_c
-
-
-@dataclass(frozen=True)
-class LimitsSpec:
-    """Safety limits the host enforces (the MCU enforces its own velocity limit too).
-
-    Attributes
-    ----------
-    max_motor_speed_mm_s : float
-        Largest motor speed the host commands (mm/s).
-    heater_duty_limit : float
-        Largest heater duty the host commands (0..1).
-    max_temp_c : float
-        Hottest finger temperature allowed on the infrared image (°C): above
-        it the host switches the heaters off.
-    """
-
-    max_motor_speed_mm_s: float = 20.0
-    heater_duty_limit: float = 1.0
-    max_temp_c: float = 70.0
 
 
 @dataclass(frozen=True)
@@ -908,12 +889,33 @@ def _zero_pose(t: _Table) -> ZeroPoseSpec:
                         frames, spread * 1e-3)
 
 
-def _limits(t: _Table) -> LimitsSpec:
-    return LimitsSpec(
-        t.number("max_motor_speed_mm_s", 20.0, positive=True, max_value=1000.0),
-        t.number("heater_duty_limit", 1.0, min_value=0.0, max_value=1.0),
-        t.number("max_temp_c", 70.0, min_value=25.0, max_value=150.0),
-    )
+def _limits(t: _Table, motor: MotorParams) -> LimitsSpec:
+    """``[limits]``: each key absent is our gripper's (:data:`relaxgrip.limits.OUR_LIMITS`),
+    except the motor's: the speed limit is at most the rig's motor's top speed, and the travel
+    its stroke (neither may exceed them)."""
+    ours = OUR_LIMITS
+    values = {
+        "max_target_n": t.number("max_target_n", ours.max_target_n, positive=True,
+                                 max_value=1000.0),
+        "max_force_n": t.number("max_force_n", ours.max_force_n, positive=True,
+                                max_value=1000.0),
+        "min_setpoint_c": t.number("min_setpoint_c", ours.min_setpoint_c, min_value=-50.0,
+                                   max_value=150.0),
+        "max_setpoint_c": t.number("max_setpoint_c", ours.max_setpoint_c, min_value=-50.0,
+                                   max_value=150.0),
+        "max_temp_c": t.number("max_temp_c", ours.max_temp_c, min_value=25.0, max_value=150.0),
+        "heater_duty_limit": t.number("heater_duty_limit", ours.heater_duty_limit,
+                                      min_value=0.0, max_value=1.0),
+        "max_motor_speed_mm_s": t.number(
+            "max_motor_speed_mm_s", min(ours.max_motor_speed_mm_s, motor.max_velocity_mm_s),
+            positive=True, max_value=motor.max_velocity_mm_s),
+        "stroke_mm": t.number("stroke_mm", motor.stroke_mm, positive=True,
+                              max_value=motor.stroke_mm),
+    }
+    try:
+        return LimitsSpec(**values)
+    except InputError as exc:  # limits that contradict each other: say where they were set
+        raise InputError(f"{t.where}: [limits] {str(exc).removeprefix('limits: ')}") from None
 
 
 #: Tables a rig file may have.
@@ -1038,7 +1040,7 @@ def parse_rig(data: dict[str, Any], where: str = "rig file") -> RigFile:
                  else _force_ref(ref_t, emulated))
     force_ball = twin.force_ball if ball_t is None else _force_ball(ball_t)
     limits_table = _Table(where, "limits", data.get("limits", {}))
-    limits = _limits(limits_table)
+    limits = _limits(limits_table, motor)
     for table in (*tables.values(), limits_table, *(t for t in gripper.values() if t)):
         table.done()
     emulator = None

@@ -31,7 +31,7 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import check_output_dir, one_line, read_manifest
+from relaxgrip.fileio import check_input_dir, check_output_dir, one_line, read_manifest
 from relaxgrip.interrupts import deferred
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA, FeatureSchema
 from relaxgrip.physics.fitting import MAX_FORCE_N, osculating_reduced
@@ -590,8 +590,7 @@ def load_dataset(directory: Path) -> Dataset:
     """
     d = Path(directory)
     manifest_path = d / "manifest.json"
-    if not d.is_dir():
-        raise InputError(f"{d}: no such dataset directory")
+    check_input_dir(d, "dataset directory", InputError)
     if not manifest_path.is_file():
         raise InputError(f"{d}: no manifest.json, not a relaxgrip dataset")
     manifest = read_manifest(manifest_path, DATASET_FORMAT, DATASET_VERSION, InputError,

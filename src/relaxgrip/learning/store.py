@@ -31,6 +31,7 @@ import sklearn  # type: ignore[import-untyped]
 import relaxgrip
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import (
+    check_input_dir,
     check_output_dir,
     check_writable,
     file_entry,
@@ -392,10 +393,7 @@ def load_models(
         npz, arrays missing or misshapen, or features other than expected.
     """
     directory = Path(directory)
-    if directory.exists() and not directory.is_dir():
-        raise ModelFileError(f"{directory}: not a directory (a model directory is expected)")
-    if not directory.is_dir():
-        raise ModelFileError(f"{directory}: no such model directory")
+    check_input_dir(directory, "model directory", ModelFileError)
     manifest_path = directory / MANIFEST_NAME
     manifest = _read_manifest(manifest_path)
     _check_features(manifest_path, manifest, "icfn", icfn_feature_schema)

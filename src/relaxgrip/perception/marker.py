@@ -20,10 +20,11 @@ With lens distortion the lines are fitted in undistorted coordinates.
 
 from __future__ import annotations
 
+import copy
 import enum
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import cv2
 import numba
@@ -692,6 +693,21 @@ class MarkerTracker:
         self._solver = PoseSolver(self.marker.size_m, self.intrinsics)
         self._modules = int(self.marker.aruco_dictionary.markerSize) + 2
         self.reset()
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> MarkerTracker:
+        """A copy with detectors of its own: OpenCV's cannot be copied (nor pickled).
+
+        A copy of a whole loop mid-grasp (the fault matrix's, an error budget's)
+        goes on tracking as the original would.
+        """
+        new = type(self).__new__(type(self))
+        memo[id(self)] = new
+        for name, value in self.__dict__.items():
+            if name not in ("_full", "_roi"):
+                setattr(new, name, copy.deepcopy(value, memo))
+        new._full = make_detector(self.marker.aruco_dictionary)
+        new._roi = make_detector(self.marker.aruco_dictionary, roi=True)
+        return new
 
     def reset(self) -> None:
         """Forget the zero pose and the last detection."""

@@ -69,6 +69,10 @@ class LinkStats:
         MCU frames missing according to their sequence numbers.
     unsolicited : int
         Status frames the MCU sent on its own (a fault tripped).
+    stale_frames : int
+        Valid frames dropped because their sequence number repeated or went
+        back (a line that replays old frames: an old Status's encoder reading
+        must not pass for a new one).
     """
 
     frames_sent: int = 0
@@ -76,6 +80,7 @@ class LinkStats:
     decode_errors: int = 0
     mcu_frames_lost: int = 0
     unsolicited: int = 0
+    stale_frames: int = 0
 
 
 def _is_answer(reply: Message, request: Message, seq: int) -> bool:
@@ -309,10 +314,14 @@ class McuClient:
                 self.stats.decode_errors += 1
                 self.recent_errors.append(item)
                 continue
+            if self._rx_seq is not None:
+                ahead = (item.seq - self._rx_seq) % SEQ_MODULUS
+                if ahead == 0 or ahead >= SEQ_MODULUS // 2:  # repeated or gone back: a replay
+                    self.stats.stale_frames += 1
+                    continue
+                self.stats.mcu_frames_lost += ahead - 1
             self.stats.frames_received += 1
             rx_s = self._last_rx_s = self.clock.now()
-            if self._rx_seq is not None:
-                self.stats.mcu_frames_lost += (item.seq - self._rx_seq - 1) % SEQ_MODULUS
             self._rx_seq = item.seq
             if isinstance(item.message, Status):
                 self.last_status = item.message
@@ -331,6 +340,7 @@ class McuClient:
         unreadable: list[str] = []
         self.transport.write(frame)
         self.stats.frames_sent += 1
+        stale_before = self.stats.stale_frames
         deadline = self.clock.now() + self.reply_timeout_s
         while True:
             data = self.transport.read(max(0.0, deadline - self.clock.now()))
@@ -351,7 +361,8 @@ class McuClient:
                     self._raise_rejected(what, reply)
                 return reply
             if self.clock.now() >= deadline:
-                self._raise_timeout(what, self.stats.decode_errors - errors_before, unreadable)
+                self._raise_timeout(what, self.stats.decode_errors - errors_before, unreadable,
+                                    self.stats.stale_frames - stale_before)
 
     def _raise_rejected(self, what: str, reply: ErrorReply) -> None:
         if reply.code == ErrorCode.NOT_ENABLED and reply.detail & int(TRIP_FAULTS):
@@ -363,9 +374,12 @@ class McuClient:
         detail = f" (detail {reply.detail})" if reply.detail else ""
         raise McuRejectedError(f"MCU rejected {what}: {reply.code_name}{detail}", reply.code)
 
-    def _raise_timeout(self, what: str, n_corrupt: int, unreadable: list[str]) -> None:
+    def _raise_timeout(self, what: str, n_corrupt: int, unreadable: list[str],
+                       n_stale: int = 0) -> None:
         ms = round(self.reply_timeout_s * 1000)
         notes = []
+        if n_stale:
+            notes.append(f"{n_stale} frame(s) with a repeated or old sequence number dropped")
         if n_corrupt:
             notes.append(f"{n_corrupt} corrupted frame(s) received ({self.recent_errors[-1]})")
         if unreadable:
