@@ -29,6 +29,6 @@ BENCHMARKS: dict[str, Callable[[int], BenchResult]] = {
 DEFAULT_BENCHMARKS: tuple[str, ...] = ("twin-hold", "twin-step", "perception", "estimation")
 
 
-def run_benchmarks(names: list[str], repeat: int) -> dict[str, Any]:
+def run_benchmarks(names: list[str], repeat: int, profile: bool = False) -> dict[str, Any]:
     """Run the named benchmarks; see :func:`relaxgrip.bench.core.run_benchmarks`."""
-    return core.run_benchmarks(BENCHMARKS, names, repeat)
+    return core.run_benchmarks(BENCHMARKS, names, repeat, profile=profile)

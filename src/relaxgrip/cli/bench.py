@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from contextlib import nullcontext
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.table import Table
@@ -25,8 +25,19 @@ def bench(
     ] = None,
     repeat: Annotated[int, int_option("--repeat", help="Timed runs per benchmark.")] = 5,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
+    profile: Annotated[bool, typer.Option(
+        "--profile", help="Also run each benchmark once under cProfile and list its functions "
+                          "with the most self time.")] = False,
+    compare: Annotated[str | None, typer.Option(
+        "--compare", metavar="REF",
+        help="Also run the same benchmarks on git ref REF (a temporary worktree, its own "
+             "PYTHONPATH, a subprocess) and print the speed-up.")] = None,
 ) -> None:
     """Measure how fast the twin and the pipeline run (all benchmarks by default).
+
+    Every benchmark reports its median, min and max over --repeat runs and its median as a
+    multiple of a fixed NumPy reference workload timed in the same run (``reference_ratio``),
+    which two machines or two loads can compare.
 
     ``relaxgrip bench faults`` injects every fault on every backend instead and prints the
     time each takes to reach the safe state (motor stopped, heaters off): the median and the
@@ -35,6 +46,8 @@ def bench(
     if names and "faults" in names:
         if names != ["faults"]:
             raise InputError("bench faults runs alone: give it without other benchmarks")
+        if profile or compare is not None:
+            raise InputError("bench faults takes neither --profile nor --compare")
         if not 1 <= repeat <= 100:
             raise InputError(f"--repeat must be 1-100 holds for faults, got {repeat}")
         _bench_faults(repeat, json_out)
@@ -45,24 +58,71 @@ def bench(
         raise InputError(f"unknown benchmark {unknown[0]!r}; known: {', '.join(BENCHMARKS)}")
     if not 1 <= repeat <= MAX_REPEAT:
         raise InputError(f"--repeat must be 1-{MAX_REPEAT}, got {repeat}")
-    report = run_benchmarks(chosen, repeat)
+    there = None
+    if compare is not None:
+        from relaxgrip.bench.compare import run_on_ref
+
+        # The ref first: one that does not run fails before minutes of benchmarks here.
+        there = run_on_ref(compare, chosen, repeat)
+    report = run_benchmarks(chosen, repeat, profile=profile)
+    rows = None
+    if compare is not None and there is not None:
+        from relaxgrip.bench.compare import compare_reports
+
+        rows = compare_reports(report, there)
+        report["compare"] = {"ref": compare, "commit": there["commit"],
+                             "ref_twin_version": there.get("twin_version"),
+                             "ref_reference_s": there["reference_s"], "benchmarks": rows,
+                             "ref_report": there}
     if json_out:
         emit_json(report)
         return
-    table = Table(title=f"relaxgrip bench ({report['twin_version']}, median of {repeat} runs)")
-    for col in ("benchmark", "median", "min", "max", "× real time", "notes"):
+    table = Table(title=f"relaxgrip bench ({report['twin_version']}, median of {repeat} runs)",
+                  caption=f"× ref: the median over the NumPy reference workload's "
+                          f"({format_duration(report['reference_s'])} in this run)")
+    for col in ("benchmark", "median", "min", "max", "× ref", "× real time", "notes"):
         table.add_column(col, justify="left" if col in ("benchmark", "notes") else "right")
     for r in report["benchmarks"]:
         rt = r["realtime_factor"]
         extra = {k: v for k, v in r.items() if k not in {
             "name", "description", "runs", "median_s", "min_s", "max_s", "simulated_s",
-            "realtime_factor"}}
+            "realtime_factor", "profile", "reference_ratio"}}
         table.add_row(
             r["name"], format_duration(r["median_s"]), format_duration(r["min_s"]),
-            format_duration(r["max_s"]), "" if rt is None else f"{rt:,.0f}×",
+            format_duration(r["max_s"]), f"{r['reference_ratio']:.3g}",
+            "" if rt is None else f"{rt:,.0f}×",
             ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}"
                       for k, v in extra.items()),
         )
+    console.print(table)
+    if profile:
+        for r in report["benchmarks"]:
+            _print_profile(r["name"], r["profile"])
+    if rows is not None:
+        _print_comparison(report["compare"])
+
+
+def _print_profile(name: str, entries: list[dict[str, Any]]) -> None:
+    table = Table(title=f"{name}: functions by self time (one run under cProfile)")
+    for col in ("function", "calls", "self", "share", "cumulative"):
+        table.add_column(col, justify="left" if col == "function" else "right")
+    for e in entries:
+        table.add_row(e["function"], str(e["calls"]), format_duration(e["self_s"]),
+                      f"{100 * e['self_share']:.1f} %", format_duration(e["cumulative_s"]))
+    console.print(table)
+
+
+def _print_comparison(compare: dict[str, Any]) -> None:
+    table = Table(title=f"against {compare['ref']} ({compare['commit'][:10]}, "
+                        f"{compare['ref_twin_version']})",
+                  caption="speed-up: the ref's median over this one's; normalised: each "
+                          "median over the reference workload timed beside it first")
+    for col in ("benchmark", f"{compare['ref']}", "this", "speed-up", "normalised"):
+        table.add_column(col, justify="left" if col == "benchmark" else "right")
+    for row in compare["benchmarks"]:
+        table.add_row(row["name"], format_duration(row["ref_median_s"]),
+                      format_duration(row["median_s"]), f"{row['speedup']:.2f}×",
+                      f"{row['speedup_normalised']:.2f}×")
     console.print(table)
 
 
