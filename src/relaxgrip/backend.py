@@ -51,6 +51,23 @@ class Frame:
     seq: int
     image: NDArray[np.generic]
 
+    def layout(self) -> object:
+        """What a check of the image's type, size and channels reads, without its pixels.
+
+        The image itself; a frame drawn on demand (the twin's) returns an
+        array of the image's shape and dtype that holds no pixels.
+        """
+        return self.image
+
+    def region(self, y0: int, y1: int, x0: int, x1: int) -> NDArray[np.generic]:
+        """The pixels ``[y0:y1, x0:x1]`` of the image, equal to slicing :attr:`image`.
+
+        A frame drawn on demand (the twin's) draws only these if the whole
+        image has not been drawn: a tracker that reads the marker's
+        neighbourhood costs the twin that region, not a frame.
+        """
+        return self.image[y0:y1, x0:x1]
+
 
 @dataclass(frozen=True)
 class Command:

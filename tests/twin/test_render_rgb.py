@@ -288,3 +288,54 @@ def test_a_tab_half_out_of_the_frame_is_the_crop_of_a_larger_frame():
     assert coverage.any()
     np.testing.assert_allclose(tab, wide_tab[rows, cols], atol=1)
     np.testing.assert_allclose(coverage, wide_coverage[rows, cols], atol=1)
+
+
+@pytest.mark.parametrize("config", [RgbSensorConfig(), RgbSensorConfig(drawing="supersampled"),
+                                    RgbSensorConfig(blur_sigma_px=0.8),
+                                    RgbSensorConfig(lighting_flicker=0.05),
+                                    RgbSensorConfig(noise_dn=0.0)])
+def test_a_region_drawn_alone_is_the_crop_of_the_whole_frame(config: RgbSensorConfig) -> None:
+    """What a tracker reads of a frame drawn on demand is what the whole frame holds there."""
+    renderer = RgbRenderer(RIG, config, 3)
+    ball = (RgbObject((0.0, 0.01, 0.12), 0.03, (200, 100, 50)),)
+    h, w = RIG.rgb.intrinsics.shape
+    for seq, (deflection, slope) in enumerate([(0.0, 0.0), (0.004, 0.03), (-0.002, -0.01)]):
+        pose = RIG.marker2cam(deflection, slope)
+        whole = renderer.render(seq, pose, ball)
+        corners = renderer.marker_corners_px(pose)
+        (cx, cy), half = corners.mean(axis=0).astype(int), 40
+        regions = [(cy - half, cy + half, cx - half, cx + half),  # the marker
+                   (cy - 5, cy + 5, cx - 200, cx),  # across the tab's box
+                   (0, 17, 0, 23), (h - 9, h + 20, w - 30, w), (-5, 12, -3, 40),  # at the edges
+                   (10, 10, 5, 50), (0, h, 0, w)]
+        for y0, y1, x0, x1 in regions:
+            drawing = renderer.prepare(seq, pose, ball)
+            part = drawing.region(y0, y1, x0, x1)
+            crop = whole[max(y0, 0):max(min(y1, h), 0), max(x0, 0):max(min(x1, w), 0)]
+            assert part.dtype == np.uint8
+            assert np.array_equal(part, crop), (config, seq, (y0, y1, x0, x1))
+            # Twice from one drawing (the tab painted once), then the whole frame after it.
+            assert np.array_equal(drawing.region(y0, y1, x0, x1), crop)
+            assert np.array_equal(drawing.image(), whole)
+
+
+def test_a_twin_frame_drawn_on_demand_copies_and_pickles_as_a_plain_frame() -> None:
+    import copy
+    import pickle
+
+    from relaxgrip.backend import Frame
+    from relaxgrip.twin import GripperTwin
+
+    obs = GripperTwin(seed=2).observe()
+    frame = obs.rgb
+    assert frame is not None
+    layout = frame.layout()
+    assert isinstance(layout, np.ndarray)
+    assert layout.shape == (*RIG.rgb.intrinsics.shape, 3)
+    assert layout.dtype == np.uint8
+    part = frame.region(100, 140, 200, 260)
+    for other in (copy.deepcopy(frame), pickle.loads(pickle.dumps(frame))):
+        assert type(other) is Frame
+        assert (other.t_s, other.seq) == (frame.t_s, frame.seq)
+        assert np.array_equal(other.image, frame.image)
+        assert np.array_equal(other.region(100, 140, 200, 260), part)

@@ -89,6 +89,11 @@ _ROT90 = np.array([1.0, -1.0])
 _HALF_TURN_X = np.diag([1.0, -1.0, -1.0])
 
 
+def _pixels(frame: Frame, y0: int, y1: int, x0: int, x1: int) -> NDArray[np.uint8]:
+    """The RGB (or grey) pixels ``[y0:y1, x0:x1]`` of a checked frame."""
+    return np.asarray(frame.region(y0, y1, x0, x1), dtype=np.uint8)
+
+
 def to_gray(image: NDArray[np.uint8]) -> GrayImage:
     """Grey levels of an RGB ``(H, W, 3)`` or grey ``(H, W)`` uint8 image (the image if grey)."""
     if image.ndim == 2:
@@ -748,11 +753,12 @@ class MarkerTracker:
                                message=f"frame time {frame.t_s} is before the last frame's")
         lost_for = 0.0 if self._last_t is None else max(0.0, frame.t_s - self._last_t)
         try:
-            image = check_rgb_frame(frame.image, self.intrinsics)
+            # Checked without its pixels: a frame drawn on demand draws only what is read.
+            check_rgb_frame(frame.layout(), self.intrinsics)
         except FrameError as exc:
             return MarkerState(frame.t_s, TrackStatus.INVALID, lost_for_s=lost_for,
                                message=str(exc))
-        found, search, reason = self._find(image)
+        found, search, reason = self._find(frame)
         if found is None:
             if reason:
                 return MarkerState(frame.t_s, TrackStatus.REJECTED, lost_for_s=lost_for,
@@ -801,19 +807,23 @@ class MarkerTracker:
         return MarkerState(frame.t_s, TrackStatus.TRACKING, pose, pose.tvec_m - t0, delta_r,
                            search=search, message=reason)
 
-    def _find(self, image: NDArray[np.uint8]) -> tuple[FloatArray | None, Search, str]:
-        """The marker's corners, how they were found, and why none were if one was seen."""
+    def _find(self, frame: Frame) -> tuple[FloatArray | None, Search, str]:
+        """The marker's corners, how they were found, and why none were if one was seen.
+
+        Between full-frame searches only the marker's neighbourhood is read
+        (:meth:`Frame.region`).
+        """
         if self._last is not None:
             if self.edge_refine and self._followed + 1 < self.verify_every:
-                followed = self._follow_edges(image, self._last.corners_px)
+                followed = self._follow_edges(frame, self._last.corners_px)
                 if followed is not None:
                     self._followed += 1
                     return followed, "edges", ""
-            found = self._search_roi(image, self._last.corners_px)
+            found = self._search_roi(frame, self._last.corners_px)
             if found is not None:
                 self._followed = 0
                 return found, "roi", ""
-        gray = to_gray(image)
+        gray = to_gray(np.asarray(frame.image, dtype=np.uint8))
         det, reason = self._pick(detect_markers(gray, self._full))
         if det is None:
             return None, ("full" if reason else "none"), reason
@@ -845,19 +855,19 @@ class MarkerTracker:
 
         return min(mine, key=distance_px), ""
 
-    def _follow_edges(self, image: NDArray[np.uint8], corners: FloatArray) -> FloatArray | None:
+    def _follow_edges(self, frame: Frame, corners: FloatArray) -> FloatArray | None:
         """Re-fit the edges around where the marker is expected, without the detector."""
         predicted = corners
         if self._previous_corners is not None:  # constant velocity
             predicted = 2.0 * corners - self._previous_corners
-        h, w = image.shape[:2]
+        h, w = self.intrinsics.shape
         xs, ys = predicted[:, 0].tolist(), predicted[:, 1].tolist()
         pad = _PROFILE_HALF_PX + 4.0
         x0, y0 = max(int(min(xs) - pad), 0), max(int(min(ys) - pad), 0)
         x1, y1 = min(int(max(xs) + pad) + 1, w), min(int(max(ys) + pad) + 1, h)
         if x1 - x0 < 16 or y1 - y0 < 16:  # predicted out of the frame
             return None
-        gray = to_gray(image[y0:y1, x0:x1])
+        gray = to_gray(_pixels(frame, y0, y1, x0, x1))
         shift = np.array([x0, y0], dtype=np.float64)
         fitted = self._fit_edges(gray, predicted - shift, (x0, y0))
         return None if fitted is None else fitted + shift
@@ -885,8 +895,8 @@ class MarkerTracker:
                 break
         return guess
 
-    def _search_roi(self, image: NDArray[np.uint8], corners: FloatArray) -> FloatArray | None:
-        h, w = image.shape[:2]
+    def _search_roi(self, frame: Frame, corners: FloatArray) -> FloatArray | None:
+        h, w = self.intrinsics.shape
         xs, ys = corners[:, 0].tolist(), corners[:, 1].tolist()
         lo_x, hi_x, lo_y, hi_y = min(xs), max(xs), min(ys), max(ys)
         pad = self.roi_margin * max(hi_x - lo_x, hi_y - lo_y) + 4.0
@@ -894,7 +904,7 @@ class MarkerTracker:
         x1, y1 = min(int(hi_x + pad) + 1, w), min(int(hi_y + pad) + 1, h)
         if x1 - x0 < 16 or y1 - y0 < 16:
             return None
-        gray = to_gray(image[y0:y1, x0:x1])
+        gray = to_gray(_pixels(frame, y0, y1, x0, x1))
         det, _ = self._pick(detect_markers(gray, self._roi), (x0, y0))
         return None if det is None else self._refined(gray, det.corners_px, (x0, y0))
 

@@ -39,7 +39,7 @@ from relaxgrip.twin.sensors import RgbSensorConfig
 FloatArray = NDArray[np.float64]
 Image = NDArray[np.uint8]
 
-__all__ = ["RgbObject", "RgbRenderer"]
+__all__ = ["RgbDrawing", "RgbObject", "RgbRenderer"]
 
 #: Texture pixels per marker module per unit of supersampling (48 at the default 4x): a
 #: texel is then about a supersampled pixel where the twin's camera sees the marker (13 px
@@ -181,24 +181,23 @@ class RgbRenderer:
         ndarray, shape (H, W, 3), uint8
             The RGB frame.
         """
+        return self.prepare(seq, marker2cam, objects).image()
+
+    def prepare(self, seq: int, marker2cam: FloatArray,
+                objects: Sequence[RgbObject] = ()) -> RgbDrawing:
+        """Frame ``seq`` ready to draw, whole (:meth:`RgbDrawing.image`) or a region of it
+        (:meth:`RgbDrawing.region`), with the same pixels either way."""
+        return RgbDrawing(self, seq, marker2cam, tuple(objects))
+
+    def _draw(self, seq: int, marker2cam: FloatArray, objects: tuple[RgbObject, ...]) -> Image:
+        """The whole frame, blurred or lit other than nominally (what no region can be)."""
         cfg = self.config
         jitter, bank, oy, ox = self._draws(seq)
-        scene = self._scene(tuple(objects))
+        scene = self._scene(objects)
         gain = cfg.lighting_gain * (1.0 + cfg.lighting_flicker * jitter)
         h, w = self.intrinsics.shape
         noise = self._noise[bank, oy : oy + h, ox : ox + w]
         box = self._tab_box(marker2cam)
-        if _FUSED and cfg.noise_dn > 0 and cfg.blur_sigma_px == 0 and gain == 1.0:
-            # The frame is the scene plus noise but where the tab is: one pass over it
-            # fewer than copying the scene first, with the same pixels.
-            img: Image = np.empty_like(scene)
-            _add_noise(scene, noise, img)
-            if box is not None:
-                rows, cols = box.rows, box.cols
-                roi = scene[rows, cols].copy()
-                self._paint_tab(roi, box, marker2cam)
-                _add_noise(roi, noise[rows, cols], img[rows, cols])
-            return img
         img = scene.copy()
         if box is not None:
             self._paint_tab(img[box.rows, box.cols], box, marker2cam)
@@ -358,6 +357,92 @@ class RgbRenderer:
                           [edge, -quiet - 1e-3, 0.0], [-quiet - 1e-3, -quiet - 1e-3, 0.0]])
         cam = patch @ marker2cam[:3, :3].T + marker2cam[:3, 3]
         _fill(roi, self.intrinsics.project(cam) - origin, (55, 52, 50))
+
+
+class RgbDrawing:
+    """One frame of an :class:`RgbRenderer`, drawn when and where it is read.
+
+    The nominal frame (pixel noise, no blur, nominal lighting) is the scene
+    plus noise but where the tab is, and there the tab painted over the scene
+    plus the same noise: each pixel depends on its own inputs alone, so a
+    region is drawn on its own with the pixels the whole frame has there.
+    The tab (the box it lands in, painted and noised once per frame) is kept
+    for every region that reads it.  Any other frame is drawn whole on the
+    first read, and regions are cut from it.
+    """
+
+    __slots__ = ("_box", "_full", "_marker2cam", "_noise", "_objects", "_renderer", "_scene",
+                 "_seq", "_tab")
+
+    def __init__(self, renderer: RgbRenderer, seq: int, marker2cam: FloatArray,
+                 objects: tuple[RgbObject, ...]) -> None:
+        self._renderer = renderer
+        self._seq = seq
+        self._marker2cam = marker2cam
+        self._objects = objects
+        self._full: Image | None = None
+        self._tab: Image | None = None
+        self._scene: Image | None = None
+        self._noise: Image | None = None
+        self._box: _TabBox | None = None
+        cfg = renderer.config
+        if _FUSED and cfg.noise_dn > 0 and cfg.blur_sigma_px == 0:
+            jitter, bank, oy, ox = renderer._draws(seq)
+            if cfg.lighting_gain * (1.0 + cfg.lighting_flicker * jitter) == 1.0:
+                h, w = renderer.intrinsics.shape
+                self._scene = renderer._scene(objects)
+                self._noise = renderer._noise[bank, oy : oy + h, ox : ox + w]
+                self._box = renderer._tab_box(marker2cam)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """``(H, W, 3)`` of the frame."""
+        h, w = self._renderer.intrinsics.shape
+        return h, w, 3
+
+    def image(self) -> Image:
+        """The whole frame (drawn on the first call)."""
+        if self._full is None:
+            if self._scene is None:
+                self._full = self._renderer._draw(self._seq, self._marker2cam, self._objects)
+            else:
+                self._full = self.region(0, self.shape[0], 0, self.shape[1])
+        return self._full
+
+    def region(self, y0: int, y1: int, x0: int, x1: int) -> Image:
+        """The frame's pixels ``[y0:y1, x0:x1]`` (bounds clipped to the frame), a new array
+        unless the whole frame is drawn already."""
+        h, w, _ = self.shape
+        y0, y1 = max(0, min(y0, h)), max(0, min(y1, h))
+        x0, x1 = max(0, min(x0, w)), max(0, min(x1, w))
+        y1, x1 = max(y0, y1), max(x0, x1)
+        if self._full is not None or self._scene is None or self._noise is None:
+            return self.image()[y0:y1, x0:x1]
+        out: Image = np.empty((y1 - y0, x1 - x0, 3), np.uint8)
+        if out.size == 0:
+            return out
+        _add_noise(self._scene[y0:y1, x0:x1], self._noise[y0:y1, x0:x1], out)
+        box = self._box
+        if box is not None:
+            ty0, ty1 = max(y0, box.y0), min(y1, box.y1)
+            tx0, tx1 = max(x0, box.x0), min(x1, box.x1)
+            if ty0 < ty1 and tx0 < tx1:
+                tab = self._painted_tab(box)
+                out[ty0 - y0 : ty1 - y0, tx0 - x0 : tx1 - x0] = \
+                    tab[ty0 - box.y0 : ty1 - box.y0, tx0 - box.x0 : tx1 - box.x0]
+        return out
+
+    def _painted_tab(self, box: _TabBox) -> Image:
+        """The box the tab lands in: the tab painted over the scene, noise added."""
+        if self._tab is None:
+            assert self._scene is not None
+            assert self._noise is not None
+            rows, cols = box.rows, box.cols
+            roi = self._scene[rows, cols].copy()
+            self._renderer._paint_tab(roi, box, self._marker2cam)
+            _add_noise(roi, self._noise[rows, cols], roi)
+            self._tab = roi
+        return self._tab
 
 
 def _frame_draws(seed: int, seq: int) -> tuple[float, int, int, int]:

@@ -27,11 +27,11 @@ from relaxgrip.rig import invert_transform, transform_points
 from relaxgrip.twin.config import TwinConfig
 from relaxgrip.twin.objects import ObjectSpec
 from relaxgrip.twin.render_ir import IrObject, IrRenderer
-from relaxgrip.twin.render_rgb import RgbObject, RgbRenderer
+from relaxgrip.twin.render_rgb import RgbDrawing, RgbObject, RgbRenderer
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["SceneState", "SensorSuite"]
+__all__ = ["DrawnFrame", "SceneState", "SensorSuite"]
 
 
 @dataclass(frozen=True)
@@ -63,6 +63,43 @@ class SceneState:
     ambient_c: float
     objects: tuple[tuple[ObjectSpec, tuple[float, float, float]], ...]
     finger_bend_m: tuple[FloatArray, FloatArray] | None = None
+
+
+class DrawnFrame(Frame):
+    """An RGB frame of the twin, drawn when it is read.
+
+    :attr:`image` draws the whole frame (once); :meth:`region` draws only the
+    region asked for while the whole has not been drawn, with the pixels the
+    whole frame has there (:class:`~relaxgrip.twin.render_rgb.RgbDrawing`).
+    Pickled or copied, it is a plain :class:`~relaxgrip.backend.Frame`.
+    """
+
+    def __init__(self, t_s: float, seq: int, drawing: RgbDrawing) -> None:
+        object.__setattr__(self, "t_s", t_s)
+        object.__setattr__(self, "seq", seq)
+        object.__setattr__(self, "_drawing", drawing)
+
+    @property
+    def image(self) -> NDArray[np.uint8]:
+        """The whole frame, ``(H, W, 3)`` uint8."""
+        drawing: RgbDrawing = self.__dict__["_drawing"]
+        return drawing.image()
+
+    def layout(self) -> object:
+        """A zero-strided array of the frame's shape and dtype (no pixels drawn)."""
+        drawing: RgbDrawing = self.__dict__["_drawing"]
+        return np.broadcast_to(np.uint8(0), drawing.shape)
+
+    def region(self, y0: int, y1: int, x0: int, x1: int) -> NDArray[np.uint8]:
+        """The pixels ``[y0:y1, x0:x1]``, drawn alone unless the whole frame is."""
+        drawing: RgbDrawing = self.__dict__["_drawing"]
+        return drawing.region(y0, y1, x0, x1)
+
+    def __reduce__(self) -> tuple[type[Frame], tuple[float, int, NDArray[np.uint8]]]:
+        return Frame, (self.t_s, self.seq, self.image)
+
+    def __deepcopy__(self, memo: dict[int, object]) -> Frame:
+        return Frame(self.t_s, self.seq, self.image.copy())
 
 
 class _Stream:
@@ -158,8 +195,8 @@ class SensorSuite:
         if stream.frame is None or stream.frame.seq != seq:
             marker2cam = self.config.rig.marker2cam(scene.marker_deflection_m,
                                                     scene.marker_slope_rad)
-            stream.frame = Frame(t_s, seq, renderer.render(seq, marker2cam,
-                                                           self._rgb_objects(scene)))
+            stream.frame = DrawnFrame(t_s, seq, renderer.prepare(seq, marker2cam,
+                                                                 self._rgb_objects(scene)))
         return stream.frame
 
     def ir_frame(self) -> Frame | None:
