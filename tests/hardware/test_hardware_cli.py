@@ -61,7 +61,7 @@ def test_check_rig_exits_1_when_the_files_marker_is_not_on_the_frame(
 def test_hold_rejects_an_unknown_backend() -> None:
     out = _run("hold", "--backend", "robot", "--duration-s", "10")
     assert out.returncode == 2
-    assert "--backend must be twin or emulator, got 'robot'" in out.stderr
+    assert "--backend must be twin, emulator or serial:RIG.toml, got 'robot'" in out.stderr
 
 
 def _emulator_rig(tmp_path: Path, port: Path, socket: Path) -> Path:

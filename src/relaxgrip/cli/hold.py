@@ -67,8 +67,10 @@ def hold(
         "--jobs", help="Parallel holds with --compare or --seeds.")] = 2,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     backend: Annotated[str, typer.Option(
-        "--backend", help="twin, or emulator: the twin behind the MCU emulator over a pty "
-                          "serial link (virtual time).")] = "twin",
+        "--backend", help="twin; emulator: the twin behind the MCU emulator over a pty "
+                          "serial link (virtual time); serial:RIG.toml: the gripper that rig "
+                          "file names (wall-clock time, scored against its force reference).")
+    ] = "twin",
     mcu: Annotated[str, typer.Option(
         "--mcu", help="The emulator's MCU: python (the protocol's state machine) or firmware "
                       "(the compiled firmware in simavr).")] = "python",
@@ -148,9 +150,19 @@ def hold(
                              "are for one run (relaxgrip budget --seeds gives the budget over "
                              "seeds)")
     check_jobs(jobs)
-    if backend not in ("twin", "emulator"):
-        raise InputError(f"--backend must be twin or emulator, got {backend!r}")
+    serial = backend.startswith("serial:")
+    if backend not in ("twin", "emulator") and not serial:
+        raise InputError(f"--backend must be twin, emulator or serial:RIG.toml, got {backend!r}")
     check_backend(backend, push)  # a push needs the twin, before --record opens its file
+    if serial:
+        if rig is not None:
+            raise InputError("--rig chooses the twin's gripper; a serial backend is the "
+                             "gripper of its own rig file (serial:RIG.toml): give one of them")
+        if seed_list is not None or budget:
+            raise InputError("a serial rig holds once: --seeds and --budget are the twin's")
+        from relaxgrip.hardware.rig_file import load_rig
+
+        load_rig(backend.removeprefix("serial:"))  # its errors before anything starts
     check_mcu(mcu, backend)
     if mcu != "python" and seed_list is not None:
         raise InputError("--mcu firmware runs one hold: give --seed, not --seeds")
@@ -179,7 +191,7 @@ def hold(
     if observer_dir is not None and not (compare or estimator == "observer"):
         raise InputError("--observer sets the observer estimator's parameters: use it with "
                          "--estimator observer or --compare")
-    config = twin_config(rig)
+    config = None if serial else twin_config(rig)
     bundle = load_default_models() if models is None else load_models(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
     observer = None if observer_dir is None else load_observer(observer_dir)

@@ -38,6 +38,7 @@ _COLUMNS = (
     "setpoint_c", "band_lo_n", "band_hi_n", "band_drift_n", "calibration_n", "chain_n",
     "marker_status",
     "truth_force_n", "truth_temp_0_c", "truth_temp_1_c", "truth_aperture_mm", "truth_lifted",
+    "force_ref_n", "force_ref_t_s",
 )
 
 
@@ -58,8 +59,10 @@ class LoopResult:
         :data:`relaxgrip.control.phases.PHASES`), encoder (mm), arm height
         (mm), commands (mm/s, duty), the estimate and its parts (N, s),
         infrared finger temperatures (°C), setpoint (°C, nan when off), the
-        estimate's band and calibration (N), marker status code, and the
-        truth (nan when the backend has none).
+        estimate's band and calibration (N), marker status code, the
+        truth (nan when the backend has none), and the force reference's
+        latest reading of the period with its own time (N, s; nan in a
+        period that brought none).
     log : PhaseLog
         Phase transitions and events.
     """
@@ -120,6 +123,13 @@ class LoopRecorder(Protocol):
     def step(self, obs: Observation, controller: GraspController, command: Command) -> None:
         """One control period has been decided (``command`` applied)."""
         ...
+
+
+def _force_ref_row(obs: Observation) -> tuple[float, float]:
+    ref = obs.force_ref
+    if ref is None or not ref.force_n.size:
+        return (math.nan, math.nan)
+    return (float(ref.force_n[-1]), float(ref.t_s[-1]))
 
 
 def _truth_row(obs: Observation) -> tuple[float, float, float, float, float]:
@@ -232,5 +242,5 @@ def _row(obs: Observation, c: GraspController, command: Command) -> tuple[float,
         est.force_n, est.f_icfn_n, est.f_onset_n, est.k_n, est.tau_s, est.hold_s, *temps,
         math.nan if setpoint is None else setpoint, est.band_lo_n, est.band_hi_n,
         est.band_drift_n, est.calibration_n, est.chain_n, status,
-        *_truth_row(obs),
+        *_truth_row(obs), *_force_ref_row(obs),
     )

@@ -8,6 +8,12 @@ the hold over the steady-state interval (100–280 s of a 280 s hold, scaled
 with the duration): the true force against the target, and the estimate
 against the true force.
 
+On a serial rig (``backend="serial:RIG.toml"``: real hardware, or an
+emulator process standing in for it) there is no truth: the rig's force
+reference (``/relaxgrip/force_ref``, tared before the grasp) is the true
+force instead, interpolated at each period on its own timestamps, and the
+result says so (:attr:`HoldResult.reference`).
+
 For ``relax`` it can also say where the estimate's error comes from
 (:meth:`HoldResult.error_budget`): a copy of the twin taken at the hold onset
 is held at the onset's aperture, with the loop's heater duties, and its true
@@ -72,6 +78,7 @@ __all__ = [
     "check_scenario_times",
     "compare_holds",
     "map_holds",
+    "reference_force_n",
     "run_hold",
     "steady_window_s",
 ]
@@ -176,6 +183,9 @@ class HoldResult:
         The hold was stopped before its end (Ctrl-C, ``kill``, a hang-up): the
         series end where it stopped, and the figures are those of the part of
         the steady state it reached (none if it reached none).
+    reference : str
+        What ``truth_n`` is: ``truth`` (the twin's contact force) or
+        ``force_ref`` (the rig's force reference, a serial rig having no truth).
     """
 
     estimator: str
@@ -192,6 +202,7 @@ class HoldResult:
     fixed_aperture_n: FloatArray | None = None
     twin_scatter: dict[str, float] | None = None
     interrupted: bool = False
+    reference: str = "truth"
 
     @property
     def target_t_n(self) -> FloatArray:
@@ -214,7 +225,8 @@ class HoldResult:
 
     def _mask(self) -> NDArray[np.bool_]:
         lo, hi = self.window
-        return (self.t_s >= lo - 1e-9) & (self.t_s <= hi + 1e-9)
+        # A force reference has no reading at the edges of its coverage: those samples go.
+        return (self.t_s >= lo - 1e-9) & (self.t_s <= hi + 1e-9) & np.isfinite(self.truth_n)
 
     def metrics(self) -> dict[str, Any]:
         """The paper's hold statistics over the steady-state interval.
@@ -237,7 +249,7 @@ class HoldResult:
         est = est[np.isfinite(est)]
         q25, q75 = np.percentile(err, [25, 75])
         a25, a75 = np.percentile(np.abs(err), [25, 75])
-        coverage = band_coverage(self.series("truth_force_n"), self.series("band_lo_n"),
+        coverage = band_coverage(self.truth_n, self.series("band_lo_n"),
                                  self.series("band_hi_n"))
         extra = {} if math.isnan(coverage) else {"band_coverage": coverage}
         return {**extra,
@@ -313,13 +325,23 @@ class HoldResult:
         """How long the hold ran from its onset (s; 0 if it never started)."""
         return float(self.t_s[-1]) if self.t_s.size else 0.0
 
+    @property
+    def reference_note(self) -> dict[str, str]:
+        """What the figures' true force is, for a hold without the twin's truth."""
+        if self.reference == "truth":
+            return {}
+        return {"reference": self.reference,
+                "reference_note": "no ground truth on this backend: the true force of every "
+                                  "figure is the rig's force reference (/relaxgrip/force_ref), "
+                                  "tared before the grasp"}
+
     def to_dict(self) -> dict[str, Any]:
         """The ``relaxgrip hold --json`` object (``"interrupted": true`` for a stopped one)."""
         lo, hi = self.window
         if self.interrupted:
             figures = self.metrics() if self._mask().any() else {}
             return {
-                "interrupted": True, "twin_version": self.twin_version,
+                "interrupted": True, **self.reference_note, "twin_version": self.twin_version,
                 "estimator": self.estimator, "target_n": self.target_n, "temp_c": self.temp_c,
                 "seed": self.seed, "duration_s": self.duration_s, "held_s": self.held_s,
                 "window_s": [lo, hi], **figures,
@@ -329,6 +351,7 @@ class HoldResult:
         if self.twin_scatter is not None:
             budget["twin_scatter"] = self.twin_scatter
         return {
+            **self.reference_note,
             "twin_version": self.twin_version, "estimator": self.estimator,
             "target_n": self.target_n, "temp_c": self.temp_c, "seed": self.seed,
             "duration_s": self.duration_s, "window_s": [lo, hi], **self.metrics(), **budget,
@@ -359,8 +382,14 @@ def check_hold(estimator: EstimatorKind | str, target_n: float, temp_c: float,
     return kind
 
 
-#: Backends a hold runs on: the twin itself, or the twin behind the MCU emulator.
+#: Backends a hold runs on: the twin itself, or the twin behind the MCU emulator; and
+#: ``serial:RIG.toml``, the gripper a rig file names (:data:`SERIAL_PREFIX`).
 HOLD_BACKENDS = ("twin", "emulator")
+#: A backend ``serial:RIG.toml``: the real gripper (or an emulator process) of that rig file.
+SERIAL_PREFIX = "serial:"
+#: Time allowed on a serial rig to reach the hold, on top of it (s): its fingers start at
+#: room temperature and heat to the hold's (1-3 min at full duty).
+SERIAL_SETUP_ALLOWANCE_S = 300.0
 #: The MCU behind the emulator: the protocol's Python state machine, or the compiled
 #: firmware in simavr (docs/firmware.md).
 HOLD_MCUS = ("python", "firmware")
@@ -390,8 +419,12 @@ def check_backend(backend: str, disturbance: Profile | None = None) -> str:
     InputError
         An unknown backend, or a disturbance asked of the emulator.
     """
-    if backend not in HOLD_BACKENDS:
-        raise InputError(f"unknown backend {backend!r}; known: {', '.join(HOLD_BACKENDS)}")
+    if backend.startswith(SERIAL_PREFIX):
+        if not backend.removeprefix(SERIAL_PREFIX):
+            raise InputError("--backend serial:RIG.toml names the rig file after 'serial:'")
+    elif backend not in HOLD_BACKENDS:
+        raise InputError(f"unknown backend {backend!r}; known: {', '.join(HOLD_BACKENDS)}, "
+                         "serial:RIG.toml")
     if disturbance is not None and backend != "twin":
         raise InputError("a disturbance (a push on the object) needs the twin backend")
     return backend
@@ -445,10 +478,13 @@ def run_hold(
     config : TwinConfig, optional
         Twin (default: our gripper, the force ball at its usual contact, cameras on;
         :func:`relaxgrip.hardware.rig_twin.twin_config_for_rig` gives any rig's).
-    backend : {"twin", "emulator"}
+    backend : {"twin", "emulator", "serial:RIG.toml"}
         ``twin`` drives the twin directly; ``emulator`` puts the same twin
         behind the MCU emulator, so that every command and frame crosses a
-        real pseudo-terminal serial link (in virtual-time lockstep).
+        real pseudo-terminal serial link (in virtual-time lockstep);
+        ``serial:RIG.toml`` holds on the gripper that rig file names, in
+        wall-clock time, scored against its force reference (``config`` and
+        ``seed`` are the twin's: not used).
     recorder : LoopRecorder, optional
         Records every period (e.g. :class:`relaxgrip.recording.McapRecorder`);
         the caller closes it.
@@ -493,6 +529,13 @@ def run_hold(
         raise InputError("an error budget splits relax's Eq. 10 on the twin: use --estimator "
                          "relax with the twin backend")
     bundle = models if models is not None else load_default_models()
+    if backend.startswith(SERIAL_PREFIX):
+        if config is not None:
+            raise InputError("a serial backend is the gripper of its own rig file "
+                             "(serial:RIG.toml): no twin config with it")
+        return _serial_hold(kind, target_n, duration_s, temp_c, seed, bundle,
+                            backend.removeprefix(SERIAL_PREFIX), recorder, temp_profile,
+                            target_profile, observer, locate_object)
     base = config if config is not None else TwinConfig()
     cfg = replace(base, initial_temp_c=temp_c)
     clock = VirtualClock()
@@ -544,6 +587,87 @@ def run_hold(
     return HoldResult(kind.value, target_n, temp_c, duration_s, seed, t[keep],
                       loop["truth_force_n"][keep], loop["estimate_n"][keep], loop,
                       target_series_n=targets, fixed_aperture_n=fixed, twin_scatter=scatter)
+
+
+def _serial_hold(kind: EstimatorKind, target_n: float, duration_s: float, temp_c: float,
+                 seed: int, bundle: ModelBundle, rig_path: str, recorder: LoopRecorder | None,
+                 temp_profile: Profile | None, target_profile: Profile | None,
+                 observer: ObserverModel | None, locate_object: bool) -> HoldResult:
+    """:func:`run_hold` on the gripper of a rig file, scored against its force reference."""
+    from relaxgrip.clock import WallClock
+    from relaxgrip.hardware.gripper import open_rig_gripper
+    from relaxgrip.hardware.rig_file import load_rig
+    from relaxgrip.perception.marker import warm_up
+
+    rig = load_rig(rig_path)
+    rig.limits.check_target_n(target_n)
+    rig.limits.check_setpoint_c(temp_c)
+    clock = WallClock()
+    # Everything slow first: once enabled, the MCU's watchdog wants a command every 200 ms.
+    controller = GraspController(rig.geometry, bundle_estimator(kind, bundle, observer),
+                                 heat=rig.heat, limits=rig.limits)
+    warm_up()
+    gripper = open_rig_gripper(rig, clock)
+    try:  # closed however it ends: motor stopped, heaters off, MCU disabled
+        gripper.reset()
+        gripper.tare_force_ref()  # the fingers open: nothing touches the force ball yet
+        ball = rig.force_ball
+        grasped = ProximityTarget(ball.width_m, ball.color_rgb,
+                                  grasp_position_m=rig.finger.contact_m)
+        plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False,
+                         grasped=grasped if locate_object else None)
+        on_step = _scenario(gripper, temp_profile, target_profile, None, temp_c, target_n)
+        try:
+            loop = run_loop(gripper, controller, clock, plan,
+                            duration_s + SERIAL_SETUP_ALLOWANCE_S, rate_hz=CONTROL_RATE_HZ,
+                            recorder=recorder, on_step=on_step)
+        except LoopInterrupted as stopped:
+            loop, interrupted = stopped.result, True
+        else:
+            interrupted = False
+        version = f"{gripper.info.name} rig {rig.name!r}: {gripper.info.version}"
+    finally:
+        gripper.close()
+    reference = reference_force_n(loop)
+    onset = loop.hold_onset_s()
+    if onset is None and not interrupted:
+        events = "; ".join(loop.log.summary())
+        raise InputError(f"the hold never started ({events or 'no contact'})")
+    t = loop["t_s"] - (math.inf if onset is None else onset)
+    keep = (t >= 0.0) & (t <= duration_s + 1e-9)
+    targets = None if target_profile is None else target_profile.values(t[keep], target_n)
+    result = HoldResult(kind.value, target_n, temp_c, duration_s, seed, t[keep],
+                        reference[keep], loop["estimate_n"][keep], loop, twin_version=version,
+                        target_series_n=targets, interrupted=interrupted,
+                        reference="force_ref")
+    if interrupted:
+        raise HoldInterrupted(result)
+    return result
+
+
+#: Longest gap between two force-reference readings that a loop period's reference is
+#: interpolated across (s).
+MAX_REFERENCE_GAP_S = 0.5
+
+
+def reference_force_n(loop: LoopResult) -> FloatArray:
+    """The force reference at each period of ``loop`` (N): its readings (columns
+    ``force_ref_t_s``, ``force_ref_n``) interpolated on their own timestamps; nan outside
+    them and in a gap longer than :data:`MAX_REFERENCE_GAP_S`."""
+    t_ref, f_ref = loop["force_ref_t_s"], loop["force_ref_n"]
+    ok = np.isfinite(t_ref) & np.isfinite(f_ref)
+    t_ref, f_ref = t_ref[ok], f_ref[ok]
+    t = loop["t_s"]
+    out = np.full(t.shape, math.nan)
+    if t_ref.size < 2:
+        return out
+    order = np.argsort(t_ref, kind="stable")
+    t_ref, f_ref = t_ref[order], f_ref[order]
+    inside = (t >= t_ref[0]) & (t <= t_ref[-1])
+    k = np.clip(np.searchsorted(t_ref, t, side="right"), 1, t_ref.size - 1)
+    short = (t_ref[k] - t_ref[k - 1]) <= MAX_REFERENCE_GAP_S
+    out[inside & short] = np.interp(t[inside & short], t_ref, f_ref)
+    return out
 
 
 def _as_known(config: TwinConfig) -> ProximityTarget | None:

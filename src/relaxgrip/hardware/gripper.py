@@ -7,8 +7,12 @@ the rig file names: live cameras or the emulator's frame channel).  Every
 not feed the watchdog), every :meth:`act` sends one Command (which does).
 
 A :class:`~relaxgrip.hardware.force_ref.ForceReference` (the MCU's load
-cell, or another source) fills the observation's ``force_ref``; without one,
-an emulator's truth feed does.
+cell, an external force gauge, an emulator's force ball) fills the
+observation's ``force_ref``; :func:`open_rig_gripper` makes the one the rig
+file names.  Only the in-process emulator
+(:func:`~relaxgrip.hardware.emulator.open_emulated_gripper`) has a truth
+feed: a gripper opened from a rig file, an emulator rig's too, carries no
+truth, and its force reference is the only force it knows.
 
 The MCU's own configuration is checked against the rig's limits at the
 handshake (its velocity limit may not be higher), and a Status saying the
@@ -36,7 +40,11 @@ from relaxgrip.backend import BackendInfo, Command, ForceSamples, Frame, Observa
 from relaxgrip.clock import Clock, VirtualClock
 from relaxgrip.errors import InputError
 from relaxgrip.hardware.cameras import CameraError, FrameSource
-from relaxgrip.hardware.force_ref import ForceReference
+from relaxgrip.hardware.force_ref import (
+    ForceReference,
+    ForceRefError,
+    rig_force_reference,
+)
 from relaxgrip.hardware.protocol.client import McuClient
 from relaxgrip.hardware.protocol.codec import PROTOCOL_VERSION, TRIP_FAULTS, FaultFlag, Status
 from relaxgrip.hardware.protocol.errors import (
@@ -194,14 +202,19 @@ class SerialGripper:
     force_ref : ForceReference, optional
         The rig's reference force sensor (started by :meth:`reset`, after the
         handshake); it fills ``Observation.force_ref``.
+    watchdog_s : float, optional
+        The MCU watchdog's period, set at every :meth:`reset` before the
+        outputs are enabled (s); default: the firmware's.
     """
 
     def __init__(self, client: McuClient, rgb: FrameSource | None, ir: FrameSource | None, *,
                  limits: LimitsSpec | None = None, name: str = "serial",
                  truth_feed: TruthFeed | None = None, twin_version: str | None = None,
                  on_close: Callable[[], None] | None = None, boot_wait_s: float = 0.0,
-                 force_ref: ForceReference | None = None) -> None:
+                 force_ref: ForceReference | None = None,
+                 watchdog_s: float | None = None) -> None:
         self.client = client
+        self.watchdog_s = watchdog_s
         self.force_ref = force_ref
         self.boot_wait_s = boot_wait_s
         self.clock: Clock = client.clock
@@ -272,6 +285,8 @@ class SerialGripper:
             self.limits.check_mcu_speed_mm_s(ack.max_velocity_um_s / 1000.0)
         except InputError as exc:
             raise McuFaultError(str(exc)) from None
+        if self.watchdog_s is not None:
+            self.client.set_watchdog(self.watchdog_s)
         if self.force_ref is not None:
             self.force_ref.start()
         self.client.set_enabled(True)
@@ -425,7 +440,7 @@ class SerialGripper:
     def _guard(self, call: Callable[[], Any]) -> Any:
         try:
             return call()
-        except (ProtocolError, CameraError) as exc:
+        except (ProtocolError, CameraError, ForceRefError) as exc:
             self.fault_time_s = self.clock.now()
             what = _describe(exc)
             # A silent link or an MCU of another version cannot take a command; a
@@ -450,6 +465,8 @@ class SerialGripper:
                 f"{self._watchdog_ms()} ms")
 
     def _watchdog_ms(self) -> int:
+        if self.watchdog_s is not None:
+            return round(self.watchdog_s * 1000.0)
         ack = self.client.hello_ack
         return ack.watchdog_ms if ack is not None else 200
 
@@ -457,7 +474,7 @@ class SerialGripper:
 def _describe(exc: Exception) -> str:
     if isinstance(exc, VersionMismatchError):
         return f"wrong protocol version: {exc}"
-    if isinstance(exc, CameraError):
+    if isinstance(exc, (CameraError, ForceRefError)):
         return str(exc)
     if isinstance(exc, LinkError):
         return f"MCU link fault: {exc}"
@@ -475,7 +492,12 @@ def open_rig_gripper(rig: RigFile, clock: Clock, *,
                      sources: tuple[FrameSource, FrameSource] | None = None,
                      force_ref: Callable[[McuClient], ForceReference] | None = None,
                      ) -> SerialGripper:
-    """A :class:`SerialGripper` on the port and cameras a rig file names (not yet reset).
+    """A :class:`SerialGripper` on the port, cameras and force reference a rig file names.
+
+    Not yet reset.  The force reference is the rig's ``[force_ref]``
+    (:func:`~relaxgrip.hardware.force_ref.rig_force_reference`): the MCU's
+    load cell with its scale and offset, an external gauge on its own port,
+    or (an emulator rig) the twin's force ball.  There is no truth feed.
 
     Parameters
     ----------
@@ -486,20 +508,26 @@ def open_rig_gripper(rig: RigFile, clock: Clock, *,
     sources : (FrameSource, FrameSource), optional
         RGB and thermal sources (default: those the rig file names).
     force_ref : callable, optional
-        Makes the rig's force reference from the MCU's client (e.g. an
-        :class:`~relaxgrip.hardware.force_ref.McuLoadCell` with the rig's
-        calibration); default: none.
+        Makes the force reference from the MCU's client instead of the rig
+        file's (tests).
 
     Returns
     -------
     SerialGripper
     """
-    from relaxgrip.hardware.cameras import open_frame_sources
+    from relaxgrip.hardware.cameras import EmulatorChannel, open_frame_sources
 
+    channel = None
+    if sources is None and "emulator" in (rig.rgb.source, rig.ir.source):
+        assert rig.emulator is not None  # the rig file checks it
+        channel = EmulatorChannel(rig.emulator.socket, clock)
     transport = GuardedTransport(SerialTransport(rig.serial.port, rig.serial.baud), clock)
     client = McuClient(transport, clock, reply_timeout_s=rig.serial.reply_timeout_s)
-    rgb, ir = sources if sources is not None else open_frame_sources(rig, clock)
+    rgb, ir = sources if sources is not None else open_frame_sources(rig, clock,
+                                                                     channel=channel)
+    ref = (force_ref(client) if force_ref is not None
+           else rig_force_reference(rig.force_ref, client, clock, channel))
     return SerialGripper(client, rgb, ir, limits=rig.limits,
                          name="emulator" if rig.rgb.source == "emulator" else "serial",
-                         boot_wait_s=rig.serial.boot_wait_s,
-                         force_ref=None if force_ref is None else force_ref(client))
+                         boot_wait_s=rig.serial.boot_wait_s, force_ref=ref,
+                         watchdog_s=rig.serial.watchdog_s)

@@ -299,12 +299,17 @@ class SerialSpec:
         How long the host says Hello again before the MCU answers (s): opening
         the port resets an Arduino-class MCU (DTR), whose bootloader is silent
         for a second or two.
+    watchdog_s : float or None
+        The MCU watchdog's period the host sets before enabling the outputs
+        (s, 0.02-2): a host silent this long stops the motor and heaters.
+        None: the firmware's own (200 ms).
     """
 
     port: str
     baud: int = 115_200
     reply_timeout_s: float = 0.1
     boot_wait_s: float = 2.5
+    watchdog_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -1001,6 +1006,8 @@ def parse_rig(data: dict[str, Any], where: str = "rig file") -> RigFile:
         ser.integer("baud", 115_200, min_value=300, max_value=10_000_000),
         ser.number("reply_timeout_ms", 100.0, min_value=5.0, max_value=1000.0) * 1e-3,
         ser.number("boot_wait_ms", 2500.0, min_value=0.0, max_value=30_000.0) * 1e-3,
+        (ser.number("watchdog_ms", min_value=20.0, max_value=2000.0) * 1e-3
+         if ser.has("watchdog_ms") else None),
     )
     ser.done()
     tables = {key: _Table(where, key, data.get(key, {}), strict)

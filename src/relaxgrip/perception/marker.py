@@ -57,6 +57,7 @@ __all__ = [
     "refine_corners_by_edges",
     "rotation_angle",
     "to_gray",
+    "warm_up",
 ]
 
 #: Samples per edge and their spacing across it (pixels) for the edge fit.
@@ -945,3 +946,21 @@ class MarkerTracker:
         return (f"marker {1e3 * travel_m:.1f} mm from {what}, beyond the "
                 f"{1e3 * self.marker.max_travel_m:g} mm a bent finger reaches (the rig's "
                 f"marker max_travel_mm): another marker of id {self.marker.marker_id}?")
+
+
+def warm_up() -> None:
+    """Load the corner refinement's compiled code now rather than at the first marker.
+
+    The first refinement loads its machine code from numba's cache (about a
+    quarter of a second); in wall-clock time, on an MCU whose watchdog wants
+    a command every 200 ms, that first frame must not be the one to pay it.
+    A drawn marker of known corners is refined once.
+    """
+    side, pad = 60, 20
+    marker = cv2.aruco.generateImageMarker(
+        cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50), 0, side)
+    gray = np.full((side + 2 * pad, side + 2 * pad), 255, dtype=np.uint8)
+    gray[pad:pad + side, pad:pad + side] = marker
+    lo, hi = pad - 0.5, pad + side - 0.5
+    corners = np.array([[lo, lo], [hi, lo], [hi, hi], [lo, hi]], dtype=np.float64)
+    refine_corners_by_edges(gray, corners, modules=6)

@@ -11,7 +11,11 @@ What a recording must contain:
 
 * the session message, RGB and infrared frames, observations (encoder), the
   phase (all of them are always recorded);
-* a force ground truth (truth or force_ref) at least in the periods used;
+* a force ground truth (truth or force_ref) at least in the periods used:
+  the twin's truth of the period, else the force reference's readings
+  interpolated at the period's time on their own timestamps
+  (:class:`ReferenceForce`; a load cell reads at 10-80 Hz, the loop runs at
+  30 Hz, and a reading comes with the Status after it);
 * for an RCFN sequence: a ``hold_onset`` event, and a hold at a fixed
   aperture (the encoder within :data:`FIXED_APERTURE_TOL_MM` of its onset
   value throughout: the ``fixed`` estimator) lasting at least
@@ -107,6 +111,51 @@ def recording_files(paths: Sequence[Path | str]) -> list[Path]:
     return files
 
 
+#: Longest gap between two force-reference readings that a period's label is interpolated
+#: across (s); a period in a longer gap, or outside the readings, has no label.
+MAX_REF_GAP_S = 0.5
+
+
+class ReferenceForce:
+    """The force reference of a recording (``/relaxgrip/force_ref``) on its own timestamps.
+
+    Parameters
+    ----------
+    path : Path
+        The recording.
+
+    Attributes
+    ----------
+    t_s, force_n : ndarray
+        Every reading, in time order (s, N).
+    """
+
+    def __init__(self, path: Path) -> None:
+        from relaxgrip.recording.reader import iter_messages
+
+        t: list[float] = []
+        f: list[float] = []
+        for topic, _, message in iter_messages(path):
+            if topic == "/relaxgrip/force_ref":
+                t.extend(float(v) for v in message["t_s"])
+                f.extend(float(v) for v in message["force_n"])
+        order = np.argsort(np.asarray(t, dtype=np.float64), kind="stable")
+        self.t_s = np.asarray(t, dtype=np.float64)[order]
+        self.force_n = np.asarray(f, dtype=np.float64)[order]
+
+    def at(self, t_s: float) -> float:
+        """The reference at ``t_s`` (linear between the readings around it; nan without)."""
+        t = self.t_s
+        if not t.size or not t[0] <= t_s <= t[-1]:
+            return math.nan
+        k = int(np.searchsorted(t, t_s, side="right"))
+        if k >= t.size:
+            return float(self.force_n[-1])
+        if t[k] - t[k - 1] > MAX_REF_GAP_S:
+            return math.nan
+        return float(np.interp(t_s, t[k - 1:k + 1], self.force_n[k - 1:k + 1]))
+
+
 def truth_force_n(period_messages: dict[str, dict[str, Any]]) -> float:
     """True force of a period: the twin's truth, else the force sensor's last reading."""
     truth = period_messages.get("/relaxgrip/truth")
@@ -154,10 +203,13 @@ def _one(index: int, path: Path, split: str, models: ModelBundle, icfn_every_s: 
     motor_spread = 0.0
     hold_t: list[float] = []
     hold_f: list[float] = []
+    reference = ReferenceForce(path)
     for period, percept, _ in replay_periods(path, models, estimator="icfn"):
         obs = period.messages["/relaxgrip/observation"]
         motor = float(obs["motor_position_mm"])
-        force = truth_force_n(period.messages)
+        truth_msg = period.messages.get("/relaxgrip/truth")
+        force = (float(truth_msg["contact_force_n"]) if truth_msg is not None
+                 else reference.at(period.t_s))
         truth = period.get("/relaxgrip/truth")
         phase = period.messages["/relaxgrip/phase"]["phase"]
         t = period.t_s
