@@ -163,6 +163,18 @@ def test_command_status_round_trips_and_pins(link: SimLink) -> None:
     assert (st.velocity_um_s, st.heater_duty_permyriad) == (1_000, (3, 4))
 
 
+def test_the_setpoint_read_from_sram_is_the_status_s(link: SimLink) -> None:
+    """The fault matrix reads the firmware's setpoint from its SRAM: the layout it assumes
+    is the firmware's (checked against what Status reports, and disabled after a Hello)."""
+    ready(link)
+    for velocity, duty in ((5_000, (2_500, 7_000)), (-3_000, (0, 10_000)), (0, (1, 2))):
+        st = answer(link, c.Command(velocity, duty))
+        assert isinstance(st, c.Status)
+        assert link.sim.mcu_setpoint() == (True, st.velocity_um_s, st.heater_duty_permyriad)
+    answer(link, c.Hello(1))
+    assert link.sim.mcu_setpoint() == (False, 0, (0, 0))
+
+
 def test_encoder_position_follows_the_quadrature_edges(link: SimLink) -> None:
     ready(link)
     sim = link.sim

@@ -87,6 +87,41 @@ def test_the_firmware_watchdog_stops_the_twin_when_the_host_goes_quiet(
 
 
 @needs_toolchain
+def test_a_twin_taken_over_mid_grasp_has_its_travel_counted_by_the_firmware() -> None:
+    """The firmware counts the encoder from power-up: a twin whose motor is 60 mm closed
+    has that travel turned in during the boot, and the host reads where the motor is; the
+    emulator's output log is the firmware's own (its setpoint, its heater pins)."""
+    from relaxgrip.twin import GripperTwin
+
+    clock = VirtualClock(5.0)
+    twin = GripperTwin(seed=4, clock=VirtualClock(0.0))
+    twin.reset()
+    for _ in range(150):  # 15 s at 4 mm/s
+        twin.act(Command(motor_velocity_mm_s=4.0))
+        twin.clock.advance(0.1)  # type: ignore[attr-defined]
+        twin.observe()
+    clock = VirtualClock(twin.clock.now())
+    gripper, emu = open_emulated_gripper(clock=clock, grace_s=2.0, firmware=True, twin=twin)
+    try:
+        gripper.reset()
+        obs = gripper.observe()
+        assert obs.motor_position_mm > 50.0
+        # Within a few counts: the motor coasts on its lag while the link answers.
+        assert obs.motor_position_mm == pytest.approx(twin.motor_position_mm, abs=0.05)
+        gripper.act(Command(motor_velocity_mm_s=2.0, heater_duty=(0.5, 0.0)))
+        clock.advance(0.1)
+        gripper.observe()
+        assert emu.wait_applied(clock.now())
+        t, moving, duty = emu.outputs()[-1]
+        assert moving == 2.0
+        assert duty[1] == 0.0
+        assert emu.fault_flags == 0
+    finally:
+        gripper.close()
+        emu.stop()
+
+
+@needs_toolchain
 def test_a_short_hold_through_the_firmware_matches_the_twin() -> None:
     """The emulator's criterion: the MAE within max(0.02 N, 50 %) of the twin's, same seed."""
     twin = run_hold("relax", 5.0, 12.0, 40.0, seed=1, backend="twin")

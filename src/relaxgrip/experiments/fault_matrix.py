@@ -20,11 +20,13 @@ Each cell also checks the reason the system gives (one line) and the
 recording (every cell records to MCAP): closed complete, read strictly.
 
 **Backends.**  A column is a :class:`FaultBackend`: ``twin`` (the twin
-itself; its controller is the safety) and ``emulator`` (the twin behind the
-Python MCU on a pseudo-terminal; the host and the MCU's watchdog).  A fault a
-backend cannot have (a serial-link fault on the twin) is ``n/a`` with the
-reason.  Another backend is one more :class:`FaultBackend` in
-:data:`BACKENDS` (``docs/safety.md`` says how).
+itself; its controller is the safety), ``emulator`` (the twin behind the
+Python MCU on a pseudo-terminal; the host and the MCU's watchdog) and
+``firmware`` (the same with the compiled firmware in simavr as the MCU; its
+outputs are its velocity setpoint and its heater pins).  A fault a backend
+cannot have (a serial-link fault on the twin; any fault on the firmware
+without its toolchain) is ``n/a`` with the reason.  Another backend is one
+more :class:`FaultBackend` in :data:`BACKENDS` (``docs/safety.md``).
 """
 
 from __future__ import annotations
@@ -276,25 +278,39 @@ class _SeqTamper:
 
 
 class EmulatorBackend:
-    """The twin behind the Python MCU emulator on a pseudo-terminal, in lockstep."""
+    """The twin behind the MCU emulator on a pseudo-terminal, in lockstep.
 
-    name = "emulator"
+    Parameters
+    ----------
+    firmware : bool
+        The compiled firmware in simavr as the MCU (column ``firmware``) instead of
+        the Python MCU (column ``emulator``).
+    """
 
-    def __init__(self) -> None:
+    def __init__(self, firmware: bool = False) -> None:
+        self.firmware = firmware
+        self.name = "firmware" if firmware else "emulator"
         self._emu: Any = None
         self._gripper: Any = None
         self.rgb_stall_s: float | None = None
         self.ir_stall_s: float | None = None
 
     def unsupported(self, fault: Fault) -> str | None:
-        """Every fault exists here."""
+        """Every fault exists here; without avr-gcc or simavr there is no firmware."""
+        if self.firmware:
+            from relaxgrip.hardware.firmware_sim import toolchain_missing
+
+            missing = toolchain_missing()
+            if missing:
+                return f"no firmware toolchain: {', '.join(missing)} missing"
         return None
 
     def open(self, twin: GripperTwin, clock: VirtualClock) -> Gripper:
         """An emulated MCU running ``twin``, and a serial gripper on its pty (reset)."""
         from relaxgrip.hardware.emulator import open_emulated_gripper
 
-        gripper, emu = open_emulated_gripper(clock=clock, grace_s=0.5, twin=twin)
+        gripper, emu = open_emulated_gripper(clock=clock, grace_s=0.5, twin=twin,
+                                             firmware=self.firmware)
         self._emu, self._gripper = emu, gripper
         self.rgb_stall_s = gripper.rgb.stall_s if gripper.rgb is not None else None
         self.ir_stall_s = gripper.ir.stall_s if gripper.ir is not None else None
@@ -302,16 +318,15 @@ class EmulatorBackend:
         return gripper
 
     def outputs(self) -> list[tuple[float, float, tuple[float, float]]]:
-        """The MCU's outputs at each change, from its own log."""
+        """The MCU's outputs at each change, from its own log (the firmware's pins)."""
         if self._emu is None:
             return []
-        with self._emu.plant._applied:
-            log = list(self._emu.plant.output_log)
-        return [(t, abs(o.velocity_mm_s), o.heater_duty) for t, o in log]
+        outputs: list[tuple[float, float, tuple[float, float]]] = self._emu.outputs()
+        return outputs
 
     def sync(self, t_s: float) -> None:
         """Wait (wall clock) for the MCU thread to poll at ``t_s``."""
-        if self._emu is not None and not self._emu.plant.wait_applied(t_s, 5.0):
+        if self._emu is not None and not self._emu.wait_applied(t_s, 5.0):
             raise RuntimeError(f"the emulated MCU did not run to {t_s:.3f} s")
 
     def inject(self, fault: Fault, gripper: Gripper) -> bool:
@@ -347,7 +362,7 @@ class EmulatorBackend:
 
         if self._emu is None:
             return None
-        flags = self._emu.endpoint.core.fault_flags & int(TRIP_FAULTS)
+        flags = self._emu.fault_flags & int(TRIP_FAULTS)
         if not flags:
             return None
         return f"the MCU switched its outputs off: {', '.join(sorted(fault_names(flags)))}"
@@ -362,6 +377,7 @@ class EmulatorBackend:
 BACKENDS: dict[str, Callable[[], FaultBackend]] = {
     "twin": TwinBackend,
     "emulator": EmulatorBackend,
+    "firmware": lambda: EmulatorBackend(firmware=True),
 }
 
 

@@ -498,6 +498,32 @@ class McuEmulator:
             raise InputError("this emulator runs the compiled firmware: see .firmware")
         return self._python
 
+    def wait_applied(self, t_s: float, timeout_s: float = 2.0) -> bool:
+        """Wait (wall clock) until the MCU, Python or firmware, has run to host time
+        ``t_s`` while the host is quiet; whether it did (the lockstep's sync)."""
+        if self.firmware is not None:
+            return self.firmware.wait_ran(t_s, timeout_s)
+        return self.plant.wait_applied(t_s, timeout_s)
+
+    def outputs(self) -> list[tuple[float, float, tuple[float, float]]]:
+        """What the MCU drove, at each change: ``(time (s), |motor velocity| (mm/s),
+        heater duties)``, from its own outputs (the firmware's: its velocity setpoint, 0 when
+        disabled, and its heater pins)."""
+        if self.firmware is not None:
+            with self.firmware._ran:
+                log = list(self.firmware.output_log)
+            return [(t, abs(v), (float(duty[0]), float(duty[1]))) for t, (v, duty) in log]
+        with self.plant._applied:
+            applied = list(self.plant.output_log)
+        return [(t, abs(o.velocity_mm_s), o.heater_duty) for t, o in applied]
+
+    @property
+    def fault_flags(self) -> int:
+        """The MCU's fault flags: the Python MCU's state, or the firmware's latest Status."""
+        if self.firmware is not None:
+            return self.firmware.fault_flags
+        return self.endpoint.core.fault_flags
+
     @property
     def port(self) -> str:
         """Path of the pseudo-terminal's slave side: the host's serial port."""
@@ -740,7 +766,7 @@ def open_emulated_gripper(config: TwinConfig | None = None, seed: int = 0,
     except BaseException:
         emu.stop()
         raise
-    transport = GuardedTransport(serial, clk, grace_s, sync=emu.plant.wait_applied)
+    transport = GuardedTransport(serial, clk, grace_s, sync=emu.wait_applied)
     client = McuClient(transport, clk, reply_timeout_s=reply_timeout_s)
     channel = EmulatorChannel(host_sock, clk, lockstep=True, wait_timeout_s=grace_s)
     cfg = emu.config

@@ -62,6 +62,8 @@ __all__ = ["FirmwareEndpoint", "MotorDrive", "firmware_for_twin"]
 
 #: Steps the firmware runs before the emulator's start (it sets up its UART in microseconds).
 _BOOT_STEPS = 5
+#: Cycles between encoder edges while a twin's travel is turned in during the boot.
+_BOOT_EDGE_CYCLES = 200
 #: A Status of minor 1 on the wire (bytes) and the firmware's time to make it (s): the
 #: lockstep's first step after a host frame covers both.
 _ANSWER_BYTES = 43
@@ -164,16 +166,25 @@ class FirmwareEndpoint:
         self._step = max(1, round(step_s * CPU_HZ))
         self._coarse = self._step * max(1, round(coarse_s / step_s))
         # The MCU has booted (its UART set up) when the emulator starts: its first
-        # BOOT_STEPS steps run before the twin's time 0, outputs off.
-        boot = _BOOT_STEPS * self._step
+        # BOOT_STEPS steps run before the twin's time 0, outputs off.  A twin whose motor
+        # is not fully open (one taken over mid-grasp) has its travel from encoder 0 turned
+        # in during the boot, an edge every _BOOT_EDGE_CYCLES: the firmware counts from
+        # power-up, as a real MCU that followed the motor from fully open would have.
+        self._res_mm = self.twin.config.motor.encoder_resolution_mm
+        counts = round(self.twin.motor_position_mm / self._res_mm)
+        setup = _BOOT_STEPS * self._step  # the firmware's set-up: its interrupts on
+        turn = math.ceil(abs(counts) * _BOOT_EDGE_CYCLES / self._step) * self._step
+        boot = setup + (turn + self._step if counts else 0)
         self._t0 = clock.now() - boot / CPU_HZ
-        self.sim.run_until(boot)
+        self.sim.run_until(setup)
+        if counts:
+            self.sim.encoder_to(counts, setup + turn)
+            self.sim.run_until(boot)
         self._at = boot  # the end of the last step, on the grid (cycles)
         self._lockstep = isinstance(clock, VirtualClock)
         self._command = Command()
         self._cell_sensor = False
         self._steps = 0
-        self._res_mm = self.twin.config.motor.encoder_resolution_mm
         self.sim.take_pins()
         self.frames_sent = 0
         self.bytes_in = 0
@@ -182,6 +193,13 @@ class FirmwareEndpoint:
         self._mcu_frames = FrameDecoder()
         self._waiting: list[int | None] = []  # host frames not answered yet: seq, or None
         self._observed = False  # a GetStatus (the host's observe) came since the last tick
+        self._sent = FrameDecoder()  # everything the firmware sent, for its latest Status
+        #: What the firmware drives, at each change: ``(time (s), (motor velocity setpoint
+        #: (mm/s, 0 when disabled), heater duties from the pins))``.
+        self.output_log: list[tuple[float, tuple[float, tuple[float, ...]]]] = []
+        self.fault_flags = 0
+        """Fault flags of the latest Status the firmware sent (delivered or not)."""
+        self._ran = threading.Condition()
 
     # ------------------------------------------------------------------ time
 
@@ -216,8 +234,28 @@ class FirmwareEndpoint:
             for t_c, value in cell.feed(t_end, force):
                 sim.hx711_push(value, round((t_c - self._t0) * CPU_HZ))
         self._steps += 1
-        self._command = self.drive.command(sim.step(counts, end))
-        self._at = end
+        command = self.drive.command(sim.step(counts, end))
+        # What the MCU drives: the heaters as their pins do; the motor as its setpoint
+        # says (at velocity 0 the velocity loop holds position, its duty is no motion).
+        enabled, velocity_um_s, _ = sim.mcu_setpoint()
+        outputs = (velocity_um_s / 1000.0 if enabled else 0.0, command.heater_duty)
+        with self._ran:
+            if not self.output_log or self.output_log[-1][1] != outputs:
+                self.output_log.append((t_end, outputs))
+            self._command = command
+            self._at = end
+            self._ran.notify_all()
+
+    def wait_ran(self, t_s: float, timeout_s: float = 2.0) -> bool:
+        """Wait (wall clock) until the AVR has run as far as host time ``t_s`` takes it
+        while the host is quiet (the last coarse boundary at or before it); whether it did.
+
+        The counterpart of :meth:`~relaxgrip.hardware.emulator.TwinPlant.wait_applied`:
+        a fault test that moves the clock with no host traffic waits here.
+        """
+        target = self._coarse_before(t_s)
+        with self._ran:
+            return self._ran.wait_for(lambda: self._at >= target, timeout_s)
 
     def run_to(self, cycle: int) -> None:
         """Co-simulate the AVR and the twin up to ``cycle`` (a boundary of the fine grid).
@@ -295,6 +333,9 @@ class FirmwareEndpoint:
                     out += more
                 self._waiting.clear()  # an MCU that did not answer: the host's timeout says so
         out += self.sim.read()
+        for item in self._sent.feed(out):
+            if isinstance(item, Packet) and isinstance(item.message, Status):
+                self.fault_flags = item.message.fault_flags
         # The host reads frames and truth after its GetStatus (SerialGripper.observe): in
         # lockstep a tick then is all it needs; in wall-clock time every poll sends one.
         if self._observed or not self._lockstep:

@@ -62,6 +62,14 @@ PINS = ("motor_en", "motor_in1", "motor_in2", "heater0", "heater1")
 """The output pins the simulation measures, in ``rgsim.c``'s order."""
 #: Deepest the painted SRAM may be found untouched from (0x100 + .data + .bss), to RAMEND.
 _RAMEND = 0x8FF
+#: Offsets in ``rg_mcu_t`` (``src/rg_mcu.h``; avr-gcc aligns every field to a byte): its
+#: configuration (the 16-byte firmware id, i32, u16, u16, u8), then handshaken, enabled,
+#: session_minor, fault_flags (u16), watchdog_ms (u16), now_us, last_feed_us (u32),
+#: last_seq (u16), velocity_um_s (i32), heater_duty (2 x u16).
+_MCU_ENABLED = 16 + 4 + 2 + 2 + 1 + 1
+_MCU_VELOCITY = _MCU_ENABLED + 2 + 2 + 2 + 4 + 4 + 2
+_MCU_DUTY = _MCU_VELOCITY + 4
+_MCU_SPAN = _MCU_DUTY + 4 - _MCU_ENABLED
 _PAINT = 0xA5
 _APT = "apt-get install gcc-avr avr-libc simavr libsimavr-dev"
 
@@ -165,6 +173,14 @@ class FirmwareImage:
     data_bytes: int
     bss_bytes: int
     options: Mapping[str, int | str]
+
+    def symbol(self, name: str) -> int:
+        """Data-space address of the firmware's variable ``name`` (from ``avr-nm``)."""
+        for line in _run(["avr-nm", str(self.elf)]).splitlines():
+            parts = line.split()
+            if len(parts) == 3 and parts[2] == name and parts[1] in "bBdD":
+                return int(parts[0], 16) - 0x800000  # avr-gcc puts SRAM at 0x800000
+        raise InputError(f"{self.elf}: no variable {name!r} in the firmware")
 
     @property
     def flash_bytes(self) -> int:
@@ -334,6 +350,7 @@ class SimAvr:
         self._edges = (ctypes.c_uint64 * n)()
         self._rx = (ctypes.c_uint8 * 65536)()
         self._duty = (ctypes.c_double * n)()
+        self._mcu_addr: int | None = None
 
     def _handle(self) -> int:
         if self._h is None:
@@ -437,6 +454,26 @@ class SimAvr:
     def hx711_lost(self) -> int:
         """Conversions replaced before the firmware read them."""
         return int(self._lib.rgsim_hx711_lost(self._handle()))
+
+    def read_data(self, addr: int, n: int) -> bytes:
+        """``n`` bytes of the AVR's data space (registers, I/O, SRAM) from ``addr``."""
+        buf = (ctypes.c_uint8 * n)()
+        if self._lib.rgsim_read_data(self._handle(), addr, buf, n) != 0:
+            raise InputError(f"AVR data 0x{addr:x}+{n} is outside its data space")
+        return bytes(buf)
+
+    def mcu_setpoint(self) -> tuple[bool, int, tuple[int, int]]:
+        """The firmware's protocol state (``rg_mcu_t mcu`` in ``src/main.c``): whether it
+        is enabled, its velocity setpoint (µm/s) and its heater duty setpoints
+        (permyriad), read from its SRAM."""
+        if self._mcu_addr is None:
+            self._mcu_addr = self.image.symbol("mcu")
+        raw = self.read_data(self._mcu_addr + _MCU_ENABLED, _MCU_SPAN)
+        enabled = raw[0] != 0
+        velocity = int.from_bytes(raw[_MCU_VELOCITY - _MCU_ENABLED:][:4], "little", signed=True)
+        d = _MCU_DUTY - _MCU_ENABLED
+        duty = (int.from_bytes(raw[d:d + 2], "little"), int.from_bytes(raw[d + 2:d + 4], "little"))
+        return enabled, velocity, duty
 
     def stack_bytes(self) -> int:
         """Deepest the stack has reached since power-up (bytes below RAMEND), from the SRAM
