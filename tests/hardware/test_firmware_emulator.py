@@ -112,7 +112,7 @@ def test_a_twin_taken_over_mid_grasp_has_its_travel_counted_by_the_firmware() ->
         clock.advance(0.1)
         gripper.observe()
         assert emu.wait_applied(clock.now())
-        t, moving, duty = emu.outputs()[-1]
+        _, moving, duty = emu.outputs()[-1]
         assert moving == 2.0
         assert duty[1] == 0.0
         assert emu.fault_flags == 0
