@@ -25,6 +25,22 @@ console = Console(emoji=False)
 err_console = Console(stderr=True, emoji=False)
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from relaxgrip import __version__
+
+        sys.stdout.write(f"relaxgrip {__version__}\n")
+        raise typer.Exit()
+
+
+@app.callback()
+def main(
+    version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True,
+                                 help="Print relaxgrip's version and exit."),
+) -> None:
+    """Variable-stiffness soft gripper with relaxation-aware force sensing."""
+
+
 def emit_json(obj: dict[str, Any]) -> None:
     """Print exactly one JSON object on standard output."""
     sys.stdout.write(json.dumps(json_safe(obj), allow_nan=False) + "\n")
