@@ -32,6 +32,7 @@ from relaxgrip.cli import (  # noqa: F401  (registers commands)
     hardware,
     hold,
     learning,
+    material,
     perceive,
     recording,
 )

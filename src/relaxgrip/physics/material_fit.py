@@ -754,8 +754,10 @@ def refine(meas: Measurements, model: str, law_params: FloatArray, ref_temp_c: f
         return np.hstack([j_law, j_prony])
 
     x0 = np.concatenate([law_params, [max(e_inf, 0.0) / scale], moduli / scale, np.log10(taus)])
-    lo = np.concatenate([lo_law, np.zeros(1 + n), np.full(n, -np.inf)])
-    hi = np.concatenate([hi_law, np.full(1 + 2 * n, np.inf)])
+    t_lo, t_hi = _tau_bounds(meas.domain, u_of(law_params))
+    t_lo, t_hi = min(t_lo, float(np.log10(taus).min())), max(t_hi, float(np.log10(taus).max()))
+    lo = np.concatenate([lo_law, np.zeros(1 + n), np.full(n, t_lo - 1.0)])
+    hi = np.concatenate([hi_law, np.full(1 + n, np.inf), np.full(n, t_hi + 1.0)])
     x0 = np.clip(x0, lo + 1e-12, np.where(np.isfinite(hi), hi - 1e-12, np.inf))
     r = least_squares(resid, x0, jac=jac, bounds=(lo, hi), x_scale="jac", max_nfev=300)
     dof = max(r.fun.size - r.x.size, 1)
