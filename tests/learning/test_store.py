@@ -250,7 +250,8 @@ def test_missing_directory(tmp_path):
 
 def test_a_file_is_not_a_model_directory(tmp_path):
     (tmp_path / "good.csv").write_text("t,f\n")
-    with pytest.raises(ModelFileError, match=r"good.csv: a file, not a directory \(a model directory"):
+    with pytest.raises(ModelFileError,
+                       match=r"good.csv: a file, not a directory \(a model directory"):
         load_models(tmp_path / "good.csv")
 
 
