@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from relaxgrip.errors import InputError
-from relaxgrip.rig import RigGeometry, transform_points
+from relaxgrip.rig import CameraIntrinsics, RigGeometry, transform_points
 from relaxgrip.twin.sensors import IrSensorConfig
 from relaxgrip.validate import ABSOLUTE_ZERO_C, check_finite, check_temp_c
 
@@ -149,6 +149,33 @@ class _Samples(NamedTuple):
     spheres: list[NDArray[np.bool_]]
 
 
+@lru_cache(maxsize=8)
+def _camera_rays(intrinsics: CameraIntrinsics, k: int) -> tuple[
+        FloatArray, FloatArray, FloatArray | None, FloatArray | None]:
+    """Directions (x/z, y/z) of the ray through each pixel centre, distortion included,
+    ``(H, W)`` each; with ``k > 1`` samples a pixel also those of the ``k * k`` rays spread
+    over each pixel's area, ``(H, W, k * k)``, cast only near outlines.  Made once per
+    camera and shared by every renderer (read-only): a dataset makes a twin per unit."""
+    h, w = intrinsics.shape
+    grid = np.stack(np.meshgrid(np.arange(w), np.arange(h)), axis=-1).astype(np.float64)
+    normalized = intrinsics.normalized(grid)
+    rays: list[FloatArray | None] = [np.ascontiguousarray(normalized[..., 0]),
+                                     np.ascontiguousarray(normalized[..., 1]), None, None]
+    if k > 1:
+        offsets = (np.arange(k) + 0.5) / k - 0.5
+        sub = np.stack(np.meshgrid(offsets, offsets), axis=-1).reshape(-1, 2)  # (k*k, 2)
+        samples = intrinsics.normalized(grid[:, :, None, :] + sub)
+        rays[2] = np.ascontiguousarray(samples[..., 0])
+        rays[3] = np.ascontiguousarray(samples[..., 1])
+    for ray in rays:
+        if ray is not None:
+            ray.flags.writeable = False
+    x, y, sx, sy = rays
+    assert x is not None
+    assert y is not None
+    return x, y, sx, sy
+
+
 class IrRenderer:
     """Renders the frames of the infrared camera on the gripper base.
 
@@ -177,26 +204,11 @@ class IrRenderer:
         self._offset_k = float(
             np.random.default_rng([int(unit), 3]).uniform(-config.max_offset_k, config.max_offset_k)
         )
-        # Direction (x/z, y/z, 1) of the ray through each pixel centre, distortion included.
-        h, w = self.intrinsics.shape
-        grid = np.stack(np.meshgrid(np.arange(w), np.arange(h)), axis=-1).astype(np.float64)
-        normalized = self.intrinsics.normalized(grid)
-        self._ray_x = np.ascontiguousarray(normalized[..., 0])
-        self._ray_y = np.ascontiguousarray(normalized[..., 1])
+        self._ray_x, self._ray_y, self._sample_ray_x, self._sample_ray_y = _camera_rays(
+            self.intrinsics, config.samples_per_px)
         self._hit_cache: tuple[
             tuple[object, ...], list[_FaceHits], list[_SphereHits | None], _Samples | None
         ] | None = None
-        #: With several samples a pixel: the directions of the ``k * k`` rays spread
-        #: over each pixel's area, ``(H, W, k * k)``, cast only near outlines.
-        self._sample_ray_x: FloatArray | None = None
-        self._sample_ray_y: FloatArray | None = None
-        k = config.samples_per_px
-        if k > 1:
-            offsets = (np.arange(k) + 0.5) / k - 0.5
-            sub = np.stack(np.meshgrid(offsets, offsets), axis=-1).reshape(-1, 2)  # (k*k, 2)
-            samples = self.intrinsics.normalized(grid[:, :, None, :] + sub)
-            self._sample_ray_x = np.ascontiguousarray(samples[..., 0])
-            self._sample_ray_y = np.ascontiguousarray(samples[..., 1])
 
     @property
     def offset_k(self) -> float:
