@@ -16,14 +16,21 @@ import typer
 if TYPE_CHECKING:
     from relaxgrip.twin import TwinConfig
 
-__all__ = ["RigOption", "twin_config"]
+__all__ = ["MaterialOption", "RigOption", "twin_config"]
 
 RigOption = Annotated[Path | None, typer.Option(
     "--rig", help="Rig file whose twin runs (docs/rig-file.md; default: our gripper, "
                   "docs/rigs/relaxgrip.toml).", show_default=False)]
 
 
-def twin_config(rig: Path | None, base: TwinConfig | None = None) -> TwinConfig:
+MaterialOption = Annotated[Path | None, typer.Option(
+    "--material", metavar="FILE.json", help="Material file (relaxgrip fit-material --out) "
+    "whose SMP the twin's fingers are made of (docs/material.md; default: the rig's).",
+    show_default=False)]
+
+
+def twin_config(rig: Path | None, base: TwinConfig | None = None,
+                material: Path | None = None) -> TwinConfig:
     """The twin a command runs: of the ``--rig`` file, or our gripper.
 
     Parameters
@@ -32,6 +39,9 @@ def twin_config(rig: Path | None, base: TwinConfig | None = None) -> TwinConfig:
         ``--rig``.
     base : TwinConfig, optional
         The twin-only settings to start from (default: ``TwinConfig()``).
+    material : Path or None
+        ``--material``: the SMP and its branches from this material file,
+        over the rig's own (:meth:`TwinConfig.with_material`).
 
     Raises
     ------
@@ -40,4 +50,9 @@ def twin_config(rig: Path | None, base: TwinConfig | None = None) -> TwinConfig:
     """
     from relaxgrip.hardware.rig_twin import load_twin_config
 
-    return load_twin_config(rig, base)
+    config = load_twin_config(rig, base)
+    if material is not None:
+        from relaxgrip.hardware.material_file import load_material_file
+
+        config = config.with_material(load_material_file(material))
+    return config

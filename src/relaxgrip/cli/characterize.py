@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from relaxgrip.cli._app import app, console, emit_json
-from relaxgrip.cli._twin import RigOption, twin_config
+from relaxgrip.cli._twin import MaterialOption, RigOption, twin_config
 from relaxgrip.experiments.characterization import characterize as run_characterization
 from relaxgrip.plots.common import check_plot_path
 
@@ -21,11 +21,12 @@ def characterize(
         Path | None, typer.Option("--plot", help="Save the z(x) figure (.png/.pdf/.svg).")
     ] = None,
     rig: RigOption = None,
+    material: MaterialOption = None,
 ) -> None:
     """Characterize finger stiffness over 2-8 N and 27-60 °C (paper Fig. 'deform')."""
     if plot is not None:
         check_plot_path(plot)
-    result = run_characterization(twin_config(rig).finger)
+    result = run_characterization(twin_config(rig, material=material).finger)
     if plot is not None:
         from relaxgrip.plots.characterization import plot_characterization
 

@@ -16,7 +16,7 @@ from typing import Annotated, Any
 import typer
 
 from relaxgrip.cli._app import app, console, int_option
-from relaxgrip.cli._twin import RigOption, twin_config
+from relaxgrip.cli._twin import MaterialOption, RigOption, twin_config
 from relaxgrip.dashboard.access import is_loopback
 from relaxgrip.errors import InputError
 
@@ -88,6 +88,7 @@ def dashboard(
         "--observer", help="Observer directory (relaxgrip fit-observer; default: the shipped "
                            "observer).", show_default=False)] = None,
     rig: RigOption = None,
+    material: MaterialOption = None,
 ) -> None:
     """Serve the live dashboard and run the gripper loop in real time (30 Hz) behind it."""
     from relaxgrip.dashboard import require_web_stack
@@ -118,7 +119,7 @@ def dashboard(
     from relaxgrip.dashboard.app import create_app
     from relaxgrip.dashboard.session import open_session
 
-    config = None if rig is None else twin_config(rig)
+    config = None if rig is None and material is None else twin_config(rig, material=material)
     listener = _bind(address, host, port)  # a port in use is known before anything starts
     try:
         session = open_session(backend, clock=WallClock(), seed=seed, estimator=estimator,

@@ -10,7 +10,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedCo
 from rich.table import Table
 
 from relaxgrip.cli._app import app, console, emit_json, err_console, int_option
-from relaxgrip.cli._twin import RigOption, twin_config
+from relaxgrip.cli._twin import MaterialOption, RigOption, twin_config
 from relaxgrip.errors import InputError
 
 if TYPE_CHECKING:
@@ -25,6 +25,7 @@ def task(
     seed: Annotated[int, int_option("--seed", help="Twin seed.")] = 0,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
     rig: RigOption = None,
+    material: MaterialOption = None,
 ) -> None:
     """Run one of the paper's grasping tasks on the twin and check its success criteria.
 
@@ -35,7 +36,7 @@ def task(
     if seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
     run = task_function(name)
-    result = run(seed=seed, config=twin_config(rig))
+    result = run(seed=seed, config=twin_config(rig, material=material))
     if json_out:
         emit_json(result.to_dict())
     else:
@@ -67,6 +68,7 @@ def reproduce(
     section: Annotated[list[str] | None, typer.Option(
         "--section", help="Run only this section (repeatable).", show_default=False)] = None,
     rig: RigOption = None,
+    material: MaterialOption = None,
 ) -> None:
     """Run every experiment of the paper, write DIR/report.md, DIR/results.json and figures."""
     from relaxgrip.reproduce import Section, check_request
@@ -75,7 +77,7 @@ def reproduce(
     if seed < 0:
         raise InputError(f"--seed must be >= 0, got {seed}")
     check_request(out, jobs, section)  # before the progress bar: a bad flag prints one line
-    config = twin_config(rig)
+    config = twin_config(rig, material=material)
     with Progress("[progress.description]{task.description}", BarColumn(), MofNCompleteColumn(),
                   TimeElapsedColumn(), console=err_console) as bar:
         job = bar.add_task("experiments", total=None)

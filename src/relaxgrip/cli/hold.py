@@ -12,7 +12,7 @@ import typer
 from rich.table import Table
 
 from relaxgrip.cli._app import app, console, emit_json, err_console, float_option, int_option
-from relaxgrip.cli._twin import RigOption, twin_config
+from relaxgrip.cli._twin import MaterialOption, RigOption, twin_config
 from relaxgrip.errors import InputError
 
 if TYPE_CHECKING:
@@ -97,6 +97,7 @@ def hold(
                          "at the onset's aperture, and the calibration and closed chain of "
                          "models that have them (relax, twin backend).")] = False,
     rig: RigOption = None,
+    material: MaterialOption = None,
 ) -> None:
     """Close on the force ball to the target and hold it, scoring the steady state (100-280 s).
 
@@ -191,7 +192,7 @@ def hold(
     if observer_dir is not None and not (compare or estimator == "observer"):
         raise InputError("--observer sets the observer estimator's parameters: use it with "
                          "--estimator observer or --compare")
-    config = None if serial else twin_config(rig)
+    config = None if serial else twin_config(rig, material=material)
     bundle = load_default_models() if models is None else load_models(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
     observer = None if observer_dir is None else load_observer(observer_dir)

@@ -14,7 +14,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedCo
 from rich.table import Table
 
 from relaxgrip.cli._app import app, console, emit_json, err_console, float_option, int_option
-from relaxgrip.cli._twin import RigOption, twin_config
+from relaxgrip.cli._twin import MaterialOption, RigOption, twin_config
 from relaxgrip.errors import InputError
 
 if TYPE_CHECKING:  # the CLI imports its commands' modules lazily
@@ -41,6 +41,7 @@ def dataset_build(
                        ] = "loky",
     json_out: Annotated[bool, typer.Option("--json", help="Print the manifest as JSON.")] = False,
     rig: RigOption = None,
+    material: MaterialOption = None,
 ) -> None:
     """Generate ICFN and RCFN datasets on the twin, through the real perception pipeline."""
     from relaxgrip.learning.build import BACKENDS, build_dataset, check_backend
@@ -53,7 +54,7 @@ def dataset_build(
     check_backend(backend)  # its optional dependency, before the progress bar shows
     check_jobs(jobs)
     check_dataset_out(out)
-    config = twin_config(rig)
+    config = twin_config(rig, material=material)
     spec = DatasetSpec(rcfn_sequences=rcfn_sequences, seed=seed, hold_s=hold_s)
     if icfn_samples is not None:
         spec = replace(spec, icfn_samples=icfn_samples)

@@ -81,6 +81,7 @@ class Characterization:
     contact_m: float
     position_load_n: float
     twin_version: str = TWIN_VERSION
+    material: dict[str, Any] | None = None
 
     @property
     def k80_drop_pct(self) -> FloatArray:
@@ -108,6 +109,7 @@ class Characterization:
         area = self.area_at_mm2(biggest)
         return {
             "twin_version": self.twin_version,
+            "material": self.material,
             "contact_mm": self.contact_m * 1e3,
             "temps_c": [float(t) for t in self.temps_c],
             "k80_drop_pct": dict(zip(loads, self.k80_drop_pct.tolist(), strict=True)),
@@ -197,4 +199,5 @@ def characterize(
         local_stiffness_n_per_m=local,
         contact_m=contact_m,
         position_load_n=position_load_n,
+        material=None if finger.smp.material is None else finger.smp.material.material.provenance,
     )

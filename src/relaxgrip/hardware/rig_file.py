@@ -757,7 +757,22 @@ _SMP_KEYS = ("tg_c", "e_glassy_mpa", "e_rubbery_mpa", "transition_width_k", "wlf
 
 
 def _material(finger: _Table) -> tuple[SMPParams, RelaxationParams, bool]:
-    """The finger's SMP and its relaxation, and whether the file left them to the twin."""
+    """The finger's SMP and its relaxation, and whether the file left them to the twin.
+
+    ``material = "FILE.json"`` in ``[finger]`` (relative to the rig file) is a
+    material file of ``relaxgrip fit-material``; it excludes ``[finger.smp]``.
+    """
+    if finger.has("material"):
+        from relaxgrip.hardware.material_file import load_material_file
+        from relaxgrip.twin import TwinConfig
+
+        name = finger.string("material")
+        if "smp" in finger.data:
+            raise finger.fail("material", "and [finger.smp] both describe the SMP; keep one")
+        finger.taken.add("smp")
+        cfg = TwinConfig().with_material(
+            load_material_file(Path(finger.where).parent / name))
+        return cfg.finger.smp, cfg.relax, False
     t = finger.sub("smp")
     if t is None:  # the twin's SMP, until a rig names its material
         twin = _twin()

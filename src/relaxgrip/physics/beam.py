@@ -42,6 +42,7 @@ __all__ = [
     "deflection_share",
     "finger_from_k80",
     "local_stiffness_n_per_m",
+    "smp_share",
     "stiffening_factor",
     "unit_profile_m_per_n",
 ]
@@ -131,6 +132,18 @@ def bending_stiffness_n_m2(temp_c: ArrayLike, finger: FingerParams) -> FloatArra
     e_ref = storage_modulus_pa(finger.ref_temp_c, finger.smp)
     soft = 1.0 - finger.skeleton_temp_coeff_per_k * (t - finger.ref_temp_c)
     return skeleton * (soft + ratio * storage_modulus_pa(t, finger.smp) / e_ref)
+
+
+def smp_share(temp_c: ArrayLike, finger: FingerParams) -> FloatArray:
+    """The SMP beams' share ``EI_smp / EI`` of the bending stiffness on :func:`beam_grid`."""
+    x = beam_grid(finger)
+    t = np.broadcast_to(np.asarray(temp_c, dtype=np.float64), x.shape)
+    xi = x / finger.length_m
+    skeleton = finger.ei_skeleton_base_n_m2 * (1.0 - finger.skeleton_taper * xi)
+    ratio = finger.smp_ratio_base + (finger.smp_ratio_tip - finger.smp_ratio_base) * xi
+    smp = skeleton * ratio * storage_modulus_pa(t, finger.smp) / storage_modulus_pa(
+        finger.ref_temp_c, finger.smp)
+    return np.asarray(smp / bending_stiffness_n_m2(t, finger), dtype=np.float64)
 
 
 def _cumtrapz(y: FloatArray, x: FloatArray) -> FloatArray:

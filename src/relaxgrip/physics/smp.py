@@ -26,18 +26,50 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from relaxgrip.physics.material import Material
+
 FloatArray = NDArray[np.float64]
 
 GAS_CONSTANT_J_PER_MOL_K = 8.314462618
 ZERO_CELSIUS_K = 273.15
 
 __all__ = [
+    "SMPMaterial",
     "SMPParams",
+    "branch_shares",
     "glassy_fraction",
     "relaxation_fraction",
     "shift_factor",
     "storage_modulus_pa",
 ]
+
+
+#: The twin's characteristic loading time (s): a grasp closes onto its object in about 1 s.
+LOADING_TIME_S = 1.0
+
+
+@dataclass(frozen=True)
+class SMPMaterial:
+    """A measured material (``fit-material``) standing in for the SMP's constants.
+
+    Attributes
+    ----------
+    material : Material
+        The fitted material.
+    anchor_c : float
+        The material's temperature that :attr:`SMPParams.tg_c` stands for: a
+        batch whose Tg is ``d`` K higher behaves as the material at ``T - d``.
+    loading_time_s : float
+        Loading time at which the modulus counts as instantaneous (s).
+    """
+
+    material: Material
+    anchor_c: float
+    loading_time_s: float = LOADING_TIME_S
+
+    def modulus_pa(self, temp_c: ArrayLike) -> FloatArray:
+        """``E(t_load, T)`` (Pa)."""
+        return self.material.relaxation_modulus_pa(self.loading_time_s, temp_c)
 
 
 @dataclass(frozen=True)
@@ -72,6 +104,26 @@ class SMPParams:
     relax_fraction_rubbery: float = 0.66
     relax_onset_c: float = 60.0
     relax_onset_width_k: float = 4.0
+    material: SMPMaterial | None = None
+
+    @classmethod
+    def from_material(cls, material: Material, loading_time_s: float = LOADING_TIME_S
+                      ) -> SMPParams:
+        """The SMP of a measured material.
+
+        ``tg_c`` is the temperature, within the measured range, where
+        ``E(t_load, T)`` falls fastest (the transition the twin's scatter of
+        a batch's Tg moves); the glassy and rubbery moduli are
+        ``E(t_load, T)`` at the ends of the measured range.
+        """
+        lo, hi = material.temp_range_c
+        temps = np.linspace(lo, hi, 601)
+        log_e = np.log(material.relaxation_modulus_pa(loading_time_s, temps))
+        anchor = float(temps[int(np.argmin(np.gradient(log_e, temps)))])
+        e_g = float(np.exp(log_e.max()))
+        e_r = min(float(np.exp(log_e.min())), 0.999 * e_g)
+        return cls(tg_c=anchor, e_glassy_pa=e_g, e_rubbery_pa=e_r,
+                   material=SMPMaterial(material, anchor, loading_time_s))
 
     def __post_init__(self) -> None:
         if not (self.e_glassy_pa > self.e_rubbery_pa > 0):
@@ -130,6 +182,8 @@ def storage_modulus_pa(temp_c: ArrayLike, params: SMPParams) -> FloatArray:
     ndarray
         Modulus (Pa), same shape as ``temp_c``.
     """
+    if params.material is not None:
+        return params.material.modulus_pa(_material_temp(temp_c, params))
     s = glassy_fraction(temp_c, params)
     return params.e_rubbery_pa + (params.e_glassy_pa - params.e_rubbery_pa) * s
 
@@ -158,6 +212,9 @@ def shift_factor(temp_c: ArrayLike, params: SMPParams) -> FloatArray:
     t = np.asarray(temp_c, dtype=np.float64)
     if np.any(t <= -ZERO_CELSIUS_K):
         raise ValueError("temperature must be above absolute zero")
+    if params.material is not None:  # relative to the material's reference temperature
+        return np.asarray(10.0 ** params.material.material.shift.log10_at(
+            _material_temp(t, params)), dtype=np.float64)
     dt = t - params.tg_c
     above = dt >= 0
     wlf = -params.wlf_c1 * np.log(10.0) * dt / (params.wlf_c2_k + np.where(above, dt, 0.0))
@@ -188,8 +245,45 @@ def relaxation_fraction(temp_c: ArrayLike, params: SMPParams) -> FloatArray:
     ndarray
         ``sum k_i / k_inst`` in [0, 1), same shape as ``temp_c``.
     """
+    if params.material is not None:
+        return np.asarray(np.sum(branch_shares(temp_c, params), axis=-1), dtype=np.float64)
     t = np.asarray(temp_c, dtype=np.float64)
     z = (t - params.relax_onset_c) / params.relax_onset_width_k
     rise = 0.5 * (1.0 + np.tanh(0.5 * z))
     lo, hi = params.relax_fraction_glassy, params.relax_fraction_rubbery
     return lo + (hi - lo) * rise
+
+
+def _material_temp(temp_c: ArrayLike, params: SMPParams) -> FloatArray:
+    """The material's temperature for this batch: shifted by its Tg's offset from the anchor."""
+    assert params.material is not None
+    return np.asarray(temp_c, dtype=np.float64) - (params.tg_c - params.material.anchor_c)
+
+
+def branch_shares(temp_c: ArrayLike, params: SMPParams) -> FloatArray:
+    """Each Prony term's share of the SMP's modulus at the loading time (measured material).
+
+    ``w_i(T) = E_i exp(-t_load / (tau_i a_T)) / E(t_load, T)``: the part of
+    the loaded modulus that relaxes through term ``i`` after loading; terms
+    much faster than the loading have relaxed already and carry nothing.
+
+    Returns
+    -------
+    ndarray, shape ``temp_c.shape + (n_terms,)``
+        Shares in [0, 1), summing to the SMP's relaxing share.
+
+    Raises
+    ------
+    ValueError
+        ``params`` carries no material.
+    """
+    if params.material is None:
+        raise ValueError("branch_shares needs an SMP made from a material")
+    sm = params.material
+    t = _material_temp(temp_c, params)
+    log_at = sm.material.shift.log10_at(t)
+    reduced = sm.loading_time_s * 10.0 ** (-np.asarray(log_at))
+    part = np.exp(-reduced[..., None] / np.asarray(sm.material.tau_s)) * np.asarray(
+        sm.material.moduli_pa)
+    total = sm.material.e_inf_pa + part.sum(axis=-1)
+    return np.asarray(part / total[..., None], dtype=np.float64)

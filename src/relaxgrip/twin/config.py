@@ -7,6 +7,8 @@ from dataclasses import dataclass, field, replace
 from relaxgrip.errors import InputError
 from relaxgrip.physics.beam import FingerParams
 from relaxgrip.physics.contact import AdhesionParams
+from relaxgrip.physics.material import Material
+from relaxgrip.physics.smp import SMPParams
 from relaxgrip.physics.thermal import HeatParams
 from relaxgrip.physics.viscoelastic import RelaxationParams
 from relaxgrip.rig import RigGeometry
@@ -185,6 +187,27 @@ class TwinConfig:
     max_step_s: float = 1.0 / 30.0
     thermal_step_s: float = 0.1
     rigid_finger: int | None = None
+
+    def with_material(self, material: Material) -> TwinConfig:
+        """This twin with its SMP and Maxwell branches from a measured material.
+
+        The SMP's modulus over temperature is the material's at the twin's
+        loading time and its branches are the material's Prony terms
+        (:meth:`relaxgrip.physics.smp.SMPParams.from_material`,
+        docs/material.md); everything else stays.
+        """
+        smp = SMPParams.from_material(material)
+        total = float(sum(material.moduli_pa))
+        head = tuple(e / total for e in material.moduli_pa[:-1])
+        relax = RelaxationParams(branch_weights=(*head, 1.0 - sum(head)),
+                                 tau_ref_s=material.tau_s)
+        return replace(self, finger=replace(self.finger, smp=smp), relax=relax)
+
+    @property
+    def material_provenance(self) -> dict[str, object] | None:
+        """Where the SMP's material came from (its file's provenance), or None (the defaults)."""
+        sm = self.finger.smp.material
+        return None if sm is None else sm.material.provenance
 
     def __post_init__(self) -> None:
         if isinstance(self.unit, bool) or not isinstance(self.unit, int) or self.unit < 0:

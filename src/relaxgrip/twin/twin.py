@@ -25,10 +25,11 @@ from relaxgrip.physics.beam import (
     FingerParams,
     beam_grid,
     bending_stiffness_n_m2,
+    smp_share,
     unit_profile_m_per_n,
 )
 from relaxgrip.physics.contact import adhesion_pulloff_n, friction_capacity_n, series_contact
-from relaxgrip.physics.smp import relaxation_fraction, shift_factor
+from relaxgrip.physics.smp import branch_shares, relaxation_fraction, shift_factor
 from relaxgrip.physics.thermal import (
     discrete_heat_system,
     duty_for_mean_temp,
@@ -146,13 +147,25 @@ class _FingerStiffness:
         weight = np.clip(contact_m - x, 0.0, None) ** 2 / bending_stiffness_n_m2(field_c, finger)
         temp_eff = float(np.sum(weight * field_c) / np.sum(weight))
         smp = finger.smp
-        g_lo = smp.relax_fraction_glassy * relax_scale
-        g_extra = (float(relaxation_fraction(temp_eff, smp)) - smp.relax_fraction_glassy)
-        g = min(0.95, g_lo + g_extra * relax_scale * relax_scale_rubbery)
         k_inst = stiffness_scale / c_a
-        w = np.asarray(config.relax.branch_weights)
-        self.k_e = k_inst * (1.0 - g)
-        self.k_i = k_inst * g * w
+        if smp.material is not None:
+            # A measured material (docs/material.md): each Prony term's share of the SMP's
+            # loaded modulus, times the SMP's share of the contact compliance's stiffness
+            # (d ln C / d ln E_smp, weighted as temp_eff is).
+            s_share = float(np.sum(weight * smp_share(field_c, finger)) / np.sum(weight))
+            shares = branch_shares(temp_eff, smp) * s_share * relax_scale
+            total = float(shares.sum())
+            if total > 0.95:
+                shares = shares * (0.95 / total)
+            self.k_e = k_inst * (1.0 - float(shares.sum()))
+            self.k_i = k_inst * shares
+        else:
+            g_lo = smp.relax_fraction_glassy * relax_scale
+            g_extra = (float(relaxation_fraction(temp_eff, smp)) - smp.relax_fraction_glassy)
+            g = min(0.95, g_lo + g_extra * relax_scale * relax_scale_rubbery)
+            w = np.asarray(config.relax.branch_weights)
+            self.k_e = k_inst * (1.0 - g)
+            self.k_i = k_inst * g * w
         a_t = float(shift_factor(temp_eff, smp))
         self.tau = np.asarray(config.relax.tau_ref_s) * a_t * tau_scale
         self._coeffs: tuple[float, tuple[float, ...], tuple[float, ...], float] | None = None
