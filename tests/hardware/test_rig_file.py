@@ -128,7 +128,7 @@ def test_the_second_rig_differs_and_its_measured_k80_is_its_finger() -> None:
     ("finger", "skeleton_taper", 1.0, r"\[finger\] skeleton_taper must be <= 0.99"),
     ("finger", "k80_n_per_mm", [1.4, 0.9], r"\[finger\] k80_n_per_mm and ei_skeleton_base_n_m2 "
                                            r"/ smp_ratio_base describe the same stiffness"),
-    ("finger", "material", "smp.json", r"\[finger\] has unknown key 'material'"),
+    ("finger", "material", "smp.json", r"\[finger\] material and \[finger.smp\] both describe"),
     ("motor", "stroke_mm", 160.0, r"\[motor\] stroke_mm 160 exceeds \[rig\] open_aperture_mm "
                                   r"150: the fingers would cross"),
     ("motor", "lag_ms", 0, r"\[motor\] lag_ms must be > 0"),
