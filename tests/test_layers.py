@@ -22,7 +22,7 @@ LAYERS: dict[str, int] = {
     "recording": 7,
     "experiments": 8,
     "plots": 9,
-    **dict.fromkeys(("reproduce", "bench", "dashboard"), 10),
+    **dict.fromkeys(("reproduce", "bench", "dashboard", "bringup"), 10),
     **dict.fromkeys(("cli", "__main__"), 11),
 }
 

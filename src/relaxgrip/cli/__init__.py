@@ -24,6 +24,7 @@ except ImportError:  # pragma: no cover - older typer on click itself
 
 from relaxgrip.cli import (  # noqa: F401  (registers commands)
     bench,
+    bringup,
     camera,
     characterize,
     dashboard,

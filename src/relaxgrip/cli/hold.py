@@ -195,6 +195,8 @@ def hold(
     config = None if serial else twin_config(rig, material=material)
     bundle = load_default_models() if models is None else load_models(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
+    if observer_dir is None and models is not None and (models / "observer").is_dir():
+        observer_dir = models / "observer"  # a bring-up's model directory carries its observer
     observer = None if observer_dir is None else load_observer(observer_dir)
     start = time.perf_counter()
     if seed_list is not None:
