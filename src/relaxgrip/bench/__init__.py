@@ -6,6 +6,7 @@ from collections.abc import Callable
 from typing import Any
 
 from relaxgrip.bench import core
+from relaxgrip.bench.bringup import bench_bringup
 from relaxgrip.bench.control import bench_control_hold
 from relaxgrip.bench.core import BenchResult
 from relaxgrip.bench.firmware import bench_firmware
@@ -24,6 +25,7 @@ BENCHMARKS: dict[str, Callable[[int], BenchResult]] = {
     "learning-pipeline": bench_learning_pipeline,
     "control-hold": bench_control_hold,
     "firmware": bench_firmware,
+    "bringup": bench_bringup,
 }
 #: What ``relaxgrip bench`` runs without names: everything that takes seconds, not minutes.
 DEFAULT_BENCHMARKS: tuple[str, ...] = ("twin-hold", "twin-step", "perception", "estimation")
