@@ -25,16 +25,17 @@ def bench_bringup(repeat: int) -> BenchResult:
 
     seconds: list[float] = []
     steps: dict[str, float] = {}
+    last = [time.perf_counter()]
+
+    def progress(step: str, done: int, total: int) -> None:
+        now = time.perf_counter()
+        kind = step.split("-")[0].removeprefix("take ")
+        steps[kind] = steps.get(kind, 0.0) + now - last[0]
+        last[0] = now
+
     for _ in range(max(1, repeat)):
         with tempfile.TemporaryDirectory() as tmp:
-            last = [time.perf_counter()]
-
-            def progress(step: str, done: int, total: int) -> None:
-                now = time.perf_counter()
-                kind = step.split("-")[0].removeprefix("take ")
-                steps[kind] = steps.get(kind, 0.0) + now - last[0]
-                last[0] = now
-
+            last[0] = time.perf_counter()
             start = time.perf_counter()
             Bringup(BRINGUP_RIG, Path(tmp) / "bringup", takes=BRINGUP_TAKES,
                     hold_s=BRINGUP_HOLD_S, progress=progress).run()
