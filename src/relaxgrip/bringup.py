@@ -10,7 +10,7 @@ the step it was in:
 2. **dataset** (``DIR/dataset``): :func:`~relaxgrip.recording.dataset.dataset_from_recordings`,
    labelled by the force reference;
 3. **models** (``DIR/models``): the ICFN and RCFN trained on it, and the
-   observer calibrated on its calibration holds (``relaxgrip calibrate``);
+   observer identified on its holds (``DIR/models/observer``);
 4. **calibration takes** and **calibration**: at most twelve regulated
    ``relax`` holds, recorded, and relax's closed-loop error measured on them
    against the force reference, written into ``DIR/models``;
@@ -254,6 +254,7 @@ class Bringup:
         return open_rig_gripper(self.rig, clock), clock
 
     def _record(self, take: Take, gripper: Any) -> None:
+        from relaxgrip.learning.observer import load_observer
         from relaxgrip.learning.store import load_models
         from relaxgrip.learning.training import load_default_models
         from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
@@ -262,16 +263,17 @@ class Bringup:
         final = self.recordings / take.name
         part = self.recordings / f".{take.name}.part"
         if take.kind == "data":
-            models = load_default_models()
+            models, observer = load_default_models(), None
         else:
             models = load_models(self.models_dir, icfn_feature_schema=ICFN_SCHEMA,
                                  rcfn_feature_schema=RCFN_SCHEMA)
+            observer = load_observer(self.models_dir / "observer")
         try:
             if not self.serial:
                 from relaxgrip.hardware.rig_twin import twin_config_for_rig
 
                 record_take(take, self.plan.hold_s, part, models,
-                            config=twin_config_for_rig(self.rig))
+                            config=twin_config_for_rig(self.rig), observer=observer)
             else:
                 assert self.prompt is not None
                 device, clock = gripper
@@ -279,7 +281,7 @@ class Bringup:
                 device.reset()
                 device.tare_force_ref()
                 record_take(take, self.plan.hold_s, part, models, rig=self.rig,
-                            gripper=device, clock=clock)
+                            gripper=device, clock=clock, observer=observer)
             part.replace(final)
         finally:
             part.unlink(missing_ok=True)
@@ -300,58 +302,70 @@ class Bringup:
 
     def _step_models(self) -> dict[str, Any]:
         from relaxgrip.learning.datastore import load_dataset
+        from relaxgrip.learning.observer import fit_observer, load_default_observer
         from relaxgrip.learning.training import train_models
 
         start = time.perf_counter()
         staging = self.out / ".models.part"
         shutil.rmtree(staging, ignore_errors=True)
         dataset = load_dataset(self.out / "dataset")
-        trained = train_models(dataset, random_state=self.seed)
+        trained = train_models(dataset, random_state=self.seed, history=load_default_observer())
         trained.save(staging)
+        # Holds of 20-60 s do not separate three relaxation times.
+        terms = 3 if self.plan.hold_s >= 80.0 else 2
+        observer = fit_observer(self.out / "dataset", staging / "observer",
+                                models_dir=staging, n_terms=terms)
         shutil.rmtree(self.models_dir, ignore_errors=True)
         staging.replace(self.models_dir)
         record = trained.training
         return {"seconds": time.perf_counter() - start,
                 "icfn_val_mae_n": min(r["val_mae_n"] for r in trained.icfn_candidates),
+                "observer_terms": observer.n_terms, "observer_sequences": observer.n_sequences_,
                 "training_keys": sorted(record)}
 
     def _step_calibration(self) -> dict[str, Any]:
-        from relaxgrip.experiments.calibration import calibrate
-        from relaxgrip.learning.store import load_models
+        from relaxgrip.experiments.recorded_calibration import calibration_from_recordings
+        from relaxgrip.learning.store import load_models, set_hold_bias
         from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 
         bundle = load_models(self.models_dir, icfn_feature_schema=ICFN_SCHEMA,
                              rcfn_feature_schema=RCFN_SCHEMA)
         files = self._files("calibration")
-        run = calibrate(self.models_dir, bundle, recordings=files,
-                        command=f"relaxgrip bringup {self.rig_path} --out {self.out}")
-        return {"holds": len(files), "coef": list(run.calibration.coef),
-                "band_rel": run.calibration.band_rel}
+        result = calibration_from_recordings(files, bundle)
+        record = {**result.record(),
+                  "commands": [f"relaxgrip bringup {self.rig_path} --out {self.out}"]}
+        set_hold_bias(self.models_dir, result.bias, record, measured_on=bundle.manifest)
+        summary = result.summary()
+        return {"holds": len(files),
+                "conditions": {k: {"est_error_mean_n": v["est_error_mean_n"],
+                                   "mae_n": v["mae_n"]} for k, v in summary.items()}}
 
     def _step_check(self) -> dict[str, Any]:
         from dataclasses import replace
 
         from relaxgrip.experiments.controlled_hold import run_hold
+        from relaxgrip.learning.observer import load_observer
         from relaxgrip.learning.store import load_models
         from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 
         take = self.plan.check
         bundle = load_models(self.models_dir, icfn_feature_schema=ICFN_SCHEMA,
                              rcfn_feature_schema=RCFN_SCHEMA)
+        observer = load_observer(self.models_dir / "observer")
         out: dict[str, Any] = {}
         for estimator in ("relax", "observer"):
             if self.serial:
                 assert self.prompt is not None
                 self.prompt(f"check hold ({estimator}): " + take.instruction())
                 result = run_hold(estimator, take.force_n, self.plan.hold_s, take.temp_c,
-                                  models=bundle, backend=self.backend)
+                                  models=bundle, observer=observer, backend=self.backend)
             else:
                 from relaxgrip.hardware.rig_twin import twin_config_for_rig
 
                 cfg = replace(twin_config_for_rig(self.rig),
                               contact_position_m=take.contact_mm * 1e-3)
                 result = run_hold(estimator, take.force_n, self.plan.hold_s, take.temp_c,
-                                  take.seed, bundle, config=cfg)
+                                  take.seed, bundle, config=cfg, observer=observer)
             d = result.to_dict()
             d.pop("events", None)
             out[estimator] = d
@@ -392,8 +406,8 @@ def _report_text(b: Bringup, split: str, scores: dict[str, Any],
         f"Rig file `{b.rig_path}`, on {backend}, seed {b.seed}: {len(plan.data)} data holds "
         f"and {len(plan.calibration)} calibration holds of {plan.hold_s:g} s, every one "
         "labelled by the rig's force reference (`/relaxgrip/force_ref`), never by the twin's "
-        "truth.  `models/` is the model directory (`--models`), the observer's "
-        "calibration in its manifest.",
+        "truth.  `models/` is the model directory (`--models`), with the observer in "
+        "`models/observer`.",
         "",
         "## Dataset",
         "",
@@ -417,12 +431,14 @@ def _report_text(b: Bringup, split: str, scores: dict[str, Any],
         "",
         "## Calibration",
         "",
-        f"The observer's error against the force reference, on "
-        f"{results['calibration']['holds']} regulated holds (relaxgrip calibrate): "
-        "e = c0 + c1 F_inst + c2 R(t) with (c0, c1, c2) = ("
-        + ", ".join(f"{c:+.4f}" for c in results["calibration"]["coef"])
-        + f"); 95 % band ±{results['calibration']['band_rel']:.4f} (1 N + F_inst).",
+        f"relax's closed-loop error, estimate − force reference over the steady state, on "
+        f"{results['calibration']['holds']} regulated holds (taken off relax's estimate):",
+        "",
+        "| condition | mean error (N) | reference − target MAE (N) |",
+        "|---|---|---|",
     ]
+    for name, c in results["calibration"]["conditions"].items():
+        lines.append(f"| {name} | {c['est_error_mean_n']:+.3f} | {c['mae_n']:.3f} |")
     check = results["check"]
     lines += ["", f"## Check hold: {plan.check.force_n:g} N at {plan.check.temp_c:g} °C, "
               f"{plan.hold_s:g} s", "",

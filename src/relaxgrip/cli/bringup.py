@@ -34,7 +34,7 @@ def bringup_command(
 ) -> None:
     """Record a rig's holds with its force reference, train and calibrate its models, report.
 
-    DIR/models is then a model directory for --models (the observer's calibration in it),
+    DIR/models is then a model directory for --models (its observer in DIR/models/observer),
     DIR/report.md says how well the models do on the held-out recordings.  Stopped (Ctrl-C,
     a fault), it resumes where it stopped when run again with the same arguments.
     """

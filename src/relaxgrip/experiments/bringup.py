@@ -280,7 +280,7 @@ def twin_of_take(config: TwinConfig, take: Take) -> TwinConfig:
 def record_take(take: Take, hold_s: float, path: Path, models: ModelBundle, *,
                 config: TwinConfig | None = None, rig: RigFile | None = None,
                 gripper: Gripper | None = None, clock: Clock | None = None,
-                ) -> LoopResult:
+                observer: Any = None) -> LoopResult:
     """Run one take and record it to ``path`` (its truth left out).
 
     On the twin (``config``, the twin of the rig), a twin is made for the
@@ -298,6 +298,8 @@ def record_take(take: Take, hold_s: float, path: Path, models: ModelBundle, *,
     models : ModelBundle
         The controller's models: the shipped ones for data takes (the
         reference stops the closing), the rig's own for the others.
+    observer : ObserverModel, optional
+        The ``observer``'s parameters (unused by ``fixed`` and ``relax``).
 
     Returns
     -------
@@ -309,7 +311,7 @@ def record_take(take: Take, hold_s: float, path: Path, models: ModelBundle, *,
         The hold never started (no contact, the force never reached).
     """
     kind = EstimatorKind.FIXED if take.kind == "data" else EstimatorKind.RELAX
-    estimator = bundle_estimator(kind, models)
+    estimator = bundle_estimator(kind, models, observer)
     if config is not None:
         cfg = twin_of_take(config, take)
         virtual = VirtualClock()
