@@ -39,9 +39,8 @@ def test_calibrate_fits_the_force_reference_not_the_truth_and_writes_the_manifes
     assert len(read) == 4
     assert run.written == models_dir / MANIFEST_NAME
     again = load_models(models_dir)
+    assert again.calibration == run.calibration
     assert again.calibration is not None
-    assert again.calibration.coef == run.calibration.coef
-    assert again.calibration.band_rel == run.calibration.band_rel
     assert again.calibration.record["seeds"] == [1000, 1001, 1002, 1003]
     for hold in run.holds:
         # The force reference is noisy: it is not the truth the metrics read.

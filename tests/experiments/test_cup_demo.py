@@ -56,6 +56,10 @@ def test_paper_cup_not_crushed_and_force_held(hot_left: CupDemoResult) -> None:
     f = hot_left.figures
     assert f["s3_max_force_n"] < f["cup_yield_n"]
     assert f["cup_plastic_mm"] == 0.0
+    # Untared, the 29-feature unrelaxed ICFN read the freshly heated fingers 0.25 N high
+    # at rest, and the cup was held 0.22 N under 1 N (the tare has taken that off since).
+    # The shipped one reads the pose and the warmest beams: within the tare's 0.15 N at
+    # rest, and the cup held 0.039 N off 1 N (seed 0).
     assert f["s3_force_mae_n"] < 0.1
     assert f["s5_force_mae_n"] < 0.5
     assert f["mass_poured_kg"] == pytest.approx(

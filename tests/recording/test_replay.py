@@ -100,7 +100,7 @@ def test_replay_tells_the_estimator_of_contact_onset_and_release(
     calls: dict[str, list[tuple[str, float]]] = {"live": [], "replay": []}
 
     def spying(kind: str, name: str) -> object:
-        est = make_estimator(kind, models.icfn, models.rcfn, models.calibration)
+        est = make_estimator(kind, models.icfn, models.rcfn, unrelaxed=models.unrelaxed)
         for method in ("contact", "start_hold", "end_hold"):
             real = getattr(est, method)
 

@@ -71,7 +71,7 @@ def replay_cmd(
                       f"({', '.join(differ)} differ): the differences include theirs")
     if m["calibration_valid_agreement"] < 1.0:
         console.print("the calibration taken off the estimate was not the same: the model "
-                      "directory was calibrated (relaxgrip calibrate) differently from the "
+                      "directory was calibrated (relaxgrip calibrate-hold) differently from the "
                       "recording's")
     if plot is not None:
         console.print(f"figure: {plot}")

@@ -57,7 +57,6 @@ from relaxgrip.learning.rcfn import reconstruct
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.limits import OUR_LIMITS
-from relaxgrip.perception.proximity import ProximityTarget
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
 from relaxgrip.validate import check_positive
 
@@ -649,6 +648,13 @@ def reference_force_n(loop: LoopResult) -> FloatArray:
     short = (t_ref[k] - t_ref[k - 1]) <= MAX_REFERENCE_GAP_S
     out[inside & short] = np.interp(t[inside & short], t_ref, f_ref)
     return out
+
+
+def _as_known(config: TwinConfig) -> ProximityTarget | None:
+    """The held object as the operator knows it: its width and colour (the rig's force ball's)."""
+    spec = config.object
+    return None if spec is None else ProximityTarget(spec.width_m, spec.color_rgb,
+                                                     grasp_position_m=config.contact_position_m)
 
 
 def _copy_at_onset(twin: GripperTwin, into: list[GripperTwin],

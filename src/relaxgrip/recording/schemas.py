@@ -101,8 +101,9 @@ SESSION = _obj("relaxgrip.Session", "Who recorded what: written once, first.", {
                      "description": "set by relaxgrip recover when the damage took the first "
                                     "chunk: the loop time the recording resumes at (s)"},
     "models": {"type": ["object", "null"],
-               "description": "the estimator's models: directory, sha256 of each model file "
-                              "and calibration_sha256 (null: built on bare models)"},
+               "description": "the estimator's models: directory, sha256 of each model file, "
+                              "hold_bias_sha256, and the observer's directory, sha256 and band "
+                              "scales (null: built on bare models)"},
 }, ("format", "format_version", "backend", "estimator", "rig", "t0_s"))
 
 OBSERVATION = _obj("relaxgrip.Observation",
