@@ -191,6 +191,8 @@ def test_the_dashboard_s_controls_check_the_session_s_limits(tmp_path: Path) -> 
     (["hold", "--temp-c", "66"], "outside the safe range 28-65 °C"),
     (["hold", "--temp-profile", "step:70:100"], "outside the safe range 28-65 °C"),
     (["hold", "--target-profile", "step:11:100"], "outside (0, 10] N"),
+    (["budget", "--seeds", "0", "--temp-c", "20"], "outside the safe range 28-65 °C"),
+    (["budget", "--seeds", "0", "--target-n", "10.5"], "outside (0, 10] N"),
 ])
 def test_the_command_line_checks_our_limits(monkeypatch, capsys, args, message) -> None:
     code, _, err = run_main(args, monkeypatch, capsys)

@@ -77,12 +77,12 @@ def test_the_scenarios_finding_says_whether_the_observer_is_ahead() -> None:
     from relaxgrip.reproduce import _scenarios_finding
 
     ahead = _scenarios_finding([12.6, 2.5, 44.4], 280.0)
-    assert "relax's MAE is 2.5–44.4 times the observer's" in ahead
+    assert "Eq. 10's MAE is 2.5–44.4 times the observer's" in ahead
     alike = _scenarios_finding([1.0, 1.04, 0.97], 280.0)
     assert "relax and the observer hold alike" in alike
     assert "1.0 times the observer's" in alike
     assert "Eq. 10 assumes" not in alike
-    assert "times the observer's; both" in _scenarios_finding([1.0, 1.3], 140.0)  # not alike
+    assert "branch states" in _scenarios_finding([1.0, 1.3], 140.0)  # one apart: not alike
 
 
 def test_reproduce_runs_on_the_twin_of_the_rig_given(monkeypatch, capsys, tmp_path: Path):

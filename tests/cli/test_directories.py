@@ -12,8 +12,12 @@ from tests.clitools import run_main
 @pytest.mark.parametrize(("args", "what"), [
     (["train", "--data", "{f}", "--out", "{d}/m"], "a dataset directory"),
     (["evaluate", "--data", "{f}"], "a dataset directory"),
+    (["fit-observer", "--data", "{f}", "--out", "{d}/o"], "a dataset directory"),
     (["hold", "--models", "{f}", "--duration-s", "5"], "a model directory"),
-    (["calibrate", "{f}", "--dry-run"], "a model directory"),
+    (["hold", "--estimator", "observer", "--observer", "{f}", "--duration-s", "5"],
+     "an observer model directory"),
+    (["calibrate-hold", "{f}", "--dry-run"], "a model directory"),
+    (["calibrate-band", "{f}", "--dry-run"], "an observer model directory"),
     (["evaluate", "--data", "{d}/none"], None),
 ])
 def test_a_file_where_a_directory_is_expected_is_named(monkeypatch, capsys, tmp_path: Path,

@@ -102,7 +102,7 @@ def test_seeds_report_each_seed_and_the_mean_over_them(monkeypatch, capsys):
     (["--seeds", "1,2", "--seed", "3"], "give one of them"),
     (["--seeds", "1,2", "--plot", "x.png"], "--seeds reports figures over seeds"),
     (["--seeds", "1,2", "--record", "x.mcap"], "--seeds reports figures over seeds"),
-    (["--seeds", "1,2", "--budget"], "--seeds reports figures over seeds"),
+    (["--seeds", "1,2", "--budget"], "relaxgrip budget --seeds"),
     (["--target-n", "12"], "target force"),
     (["--target-n", "0"], "target force"),
     (["--temp-c", "90"], "safe range"),
@@ -151,13 +151,18 @@ def test_budget_prints_the_parts_of_the_estimate_error(monkeypatch, capsys):
     assert code == 0, err
     d = json.loads(out)
     parts = d["error_budget"]
-    assert set(parts) == {"onset_n", "relaxation_n", "closure_n", "total_n"}
+    # The shipped models are calibrated (relaxgrip calibrate-hold): the calibration is a part,
+    # and so is the closed chain's reading blended in from 5 s of the hold on.
+    assert set(parts) == {"onset_n", "relaxation_n", "closure_n", "calibration_n", "chain_n",
+                          "total_n"}
     assert parts["total_n"] == pytest.approx(d["est_error_mean_n"], abs=1e-9)
     code, out, err = run_main(["hold", "--duration-s", "14", "--seed", "3", "--budget"],
                               monkeypatch, capsys)
     assert code == 0, err
     assert "error budget" in out
     assert f"= {parts['total_n']:+.3f} N" in " ".join(out.split())
+    assert f"calibration {parts['calibration_n']:+.3f} N" in " ".join(out.split())
+    assert f"closed chain {parts['chain_n']:+.3f} N" in " ".join(out.split())
 
 
 def test_missing_or_foreign_models_are_refused(monkeypatch, capsys, tmp_path: Path):
@@ -169,6 +174,50 @@ def test_missing_or_foreign_models_are_refused(monkeypatch, capsys, tmp_path: Pa
     code, _, err = run_main(["hold", "--models", tmp_path / "foreign"], monkeypatch, capsys)
     assert code == 2
     assert "error:" in err
+
+
+def test_budget_survey_prints_the_parts_over_seeds(monkeypatch, capsys):
+    code, out, err = run_main(["budget", "--seeds", "2,5", "--duration-s", "14", "--jobs", "1",
+                               "--json"], monkeypatch, capsys)
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["seeds"] == [2, 5]
+    assert [r["seed"] for r in d["runs"]] == [2, 5]
+    assert d["parts"]["total_n"]["mean"] == pytest.approx(
+        sum(r["total_n"] for r in d["runs"]) / 2)
+    assert set(d["runs"][0]["twin_scatter"]) >= {"relax_scale_0", "relax_scale_1"}
+    code, out, err = run_main(["budget", "--seeds", "2,5", "--duration-s", "14", "--jobs", "1"],
+                              monkeypatch, capsys)
+    assert code == 0, err
+    text = " ".join(out.split())
+    assert f"{d['parts']['total_n']['mean']:+.3f}" in text
+    assert f"taken off {d['bias_free_mae_n']:.3f} N" in text
+    # What relax reads of its run: each percept's row, and (two seeds) no correction fits.
+    seen = d["observability"]
+    assert seen["at_s"] == 5.0  # the steady state's start: 100 s of 280 s, 5 s of 14 s
+    assert seen["percepts"]
+    assert set(d["runs"][0]["percepts"]) >= set(seen["percepts"])
+    assert "What relax reads by 5 s of the hold (the steady state's start)" in text
+    assert all(name in text for name in seen["percepts"])
+    assert "would leave – N" in text
+    assert f"the bias alone {d['bias_free_mae_n']:.3f} N" in text
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--seeds", "3-1"], "ascending"),
+    (["--seeds", "a"], "seeds must look like"),
+    (["--target-n", "0"], "target force"),
+    (["--temp-c", "90"], "safe range"),
+    (["--duration-s", "-5"], "duration"),
+    (["--duration-s", "7200"], "at most 3600 s"),
+    (["--jobs", "0"], "--jobs"),
+])
+def test_budget_survey_refuses_bad_input(monkeypatch, capsys, args, message):
+    code, out, err = run_main(["budget", *args], monkeypatch, capsys)
+    assert code == 2
+    assert message in err
+    assert err.count("\n") == 1
+    assert out == ""
 
 
 @pytest.mark.parametrize(("args", "message"), [
@@ -193,13 +242,32 @@ def test_bare_command_shows_its_help(monkeypatch, capsys):
 
 @pytest.mark.parametrize(("command", "shown"), [
     (["hold"], "Twin seed (default: 0)."),
-    (["calibrate"], "(default 1000-1011"),
+    (["calibrate-band"], "(default: 3000-3035)"),
+    (["calibrate-hold"], "(default: 1000-1005)"),
 ])
 def test_help_shows_the_defaults_it_states(monkeypatch, capsys, command, shown):
     # rich read "[default: ...]" in a help text as markup and dropped it.
     code, out, _ = run_main([*command, "--help"], monkeypatch, capsys)
     assert code == 0
     assert shown in " ".join(out.replace("│", " ").split())
+
+
+def test_budget_survey_of_one_short_hold_reads_and_says_it(monkeypatch, capsys):
+    """A 1 s hold on one seed: the percepts were NaN (windows under a frame), the title's
+    steady state read 0–1 s for 0.3571–1 s, and the bias-free MAE of one seed printed nan."""
+    code, out, err = run_main(["budget", "--seeds", "3", "--duration-s", "1", "--jobs", "1",
+                               "--json"], monkeypatch, capsys)
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["observability"]["percepts"] == ["f_onset_n", "icfn_drift_n", "motor_travel_mm",
+                                              "k_n", "tau_s"]
+    code, out, err = run_main(["budget", "--seeds", "3", "--duration-s", "1", "--jobs", "1"],
+                              monkeypatch, capsys)
+    assert code == 0, err
+    text = " ".join(out.split())
+    assert "estimate − true force over 0.3571–1 s" in text
+    assert "taken off – N" in text
+    assert "nan" not in text
 
 
 def test_a_push_off_the_twin_is_refused_before_the_recording_opens(monkeypatch, capsys,

@@ -1,5 +1,4 @@
-"""``relaxgrip dataset build``, ``train``, ``evaluate`` end to end on a small dataset, and
-``calibrate``'s refusals."""
+"""``relaxgrip dataset build``, ``train``, ``evaluate`` end to end on a small dataset."""
 
 from __future__ import annotations
 
@@ -11,6 +10,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from relaxgrip.learning.observer import load_observer
 from tests.clitools import assert_one_error_line, run_cli, run_main
 
 
@@ -28,8 +28,35 @@ def trained(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     assert proc.returncode == 0, proc.stderr
     summary = json.loads(proc.stdout)
     assert summary["icfn"]["train_rows"] > 100
-    assert {p.name for p in models.iterdir()} == {"icfn.npz", "rcfn.npz", "manifest.json"}
+    # Beside the paper's ICFN, the unrelaxed one on the shipped observer's branches.
+    assert summary["icfn_unrelaxed"]["members"] == 5
+    assert 0.5 < summary["icfn_unrelaxed"]["retained_share_percentiles"]["p50"] <= 1.0
+    assert (models / "icfn_unrelaxed.npz").is_file()
     return data, models
+
+
+def test_fit_observer_reads_the_onset_with_the_given_models_icfn(
+        trained: tuple[Path, Path], tmp_path: Path) -> None:
+    # A lab's observer: its band's onset error is its own ICFN's, not the twin's.
+    data, models = trained
+    bands = {}
+    options: dict[str, list[str | Path]] = {"shipped": [], "own": ["--models", models]}
+    for name, extra in options.items():
+        proc = run_cli("fit-observer", "--data", data, "--out", tmp_path / name, *extra)
+        assert proc.returncode == 0, proc.stderr
+        record = json.loads((tmp_path / name / "manifest.json").read_text())["training"]
+        assert record["onset_icfn"] == ("shipped" if name == "shipped" else str(models))
+        bands[name] = load_observer(tmp_path / name).band_rel(0.0, 40.0)
+    # The tiny models' ICFN misses the onset by more than the shipped one does.
+    assert bands["own"] != bands["shipped"]
+
+
+def test_train_without_the_unrelaxed_icfn(trained: tuple[Path, Path], tmp_path: Path) -> None:
+    proc = run_cli("train", "--data", trained[0], "--out", tmp_path / "m", "--no-unrelaxed",
+                   "--json")
+    assert proc.returncode == 0, proc.stderr
+    assert "icfn_unrelaxed" not in json.loads(proc.stdout)
+    assert not (tmp_path / "m" / "icfn_unrelaxed.npz").exists()
 
 
 def test_evaluate_json_has_the_paper_metrics(trained: tuple[Path, Path], tmp_path: Path) -> None:
@@ -42,6 +69,11 @@ def test_evaluate_json_has_the_paper_metrics(trained: tuple[Path, Path], tmp_pat
     assert set(out["rcfn"]) >= {"nrmse_mean", "nrmse_median", "auc_rel_mean", "auc_rel_median",
                                 "corr_mean"}
     assert set(out["repeatability"]) == {"40", "50", "60"}
+    # The force relax reads: the unrelaxed ensemble times each sample's retained share.
+    history = out["icfn_history"]
+    assert history["samples"] == out["icfn"]["samples"]
+    assert set(history) == set(out["icfn"])
+    assert 0.0 < history["mae_n"] < float("inf")  # 200 training rows: accuracy is not the point
     for group in out["repeatability"].values():
         assert set(group) >= {"nrmse_mean", "nrmse_std", "auc_rel_mean", "corr_mean",
                               "gt_end_std_n", "gt_std_100s_n"}
@@ -56,6 +88,7 @@ def test_evaluate_table(
     code, out, _ = run_main(["evaluate", "--data", data, "--models", models], monkeypatch, capsys)
     assert code == 0
     assert "ICFN MAE" in out
+    assert "loading history" in out
     assert "repeatability 50 °C" in out
 
 
@@ -75,9 +108,17 @@ def test_evaluate_table(
         (["train", "--data", "{data}", "--out", "{data}"], "holds no relaxgrip-models output"),
         (["train", "--data", "{data}", "--out", "{tmp}/m", "--seed", "-1"],
          "--seed must be in 0 .. 2**31 - 1"),
+        (["fit-observer", "--data", "{data}", "--out", "{data}"],
+         "holds no relaxgrip-observer output"),
+        (["fit-observer", "--data", "{data}", "--out", "{tmp}/o", "--models", "{tmp}"],
+         "not a relaxgrip model directory"),
         (["reproduce", "--out", "{tmp}/manifest.json"], "exists and is not a directory"),
         (["reproduce", "--out", "/proc/rep"], "cannot write in /proc"),
         (["train", "--data", "{tmp}/none", "--out", "{tmp}/m"], "no such dataset directory"),
+        (["train", "--data", "{data}", "--out", "{tmp}/m", "--observer", "{tmp}/none"],
+         "not an observer model directory"),
+        (["train", "--data", "{data}", "--out", "{tmp}/m", "--observer", "{tmp}",
+          "--no-unrelaxed"], "drop --no-unrelaxed"),
         (["evaluate", "--data", "{tmp}/none"], "no such dataset directory"),
         (["evaluate", "--data", "{data}", "--models", "{tmp}"], "not a relaxgrip model directory"),
         (["evaluate", "--data", "{data}", "--split", "holdout"], "--split must be"),
@@ -164,7 +205,7 @@ def _force_as_text(d: Path) -> None:
     frame.to_parquet(d / "icfn.parquet", index=False)
 
 
-@pytest.mark.parametrize("command", ["evaluate", "train"])
+@pytest.mark.parametrize("command", ["evaluate", "train", "fit-observer"])
 @pytest.mark.parametrize(
     ("corrupt", "expected"),
     [
@@ -193,41 +234,35 @@ def test_a_damaged_dataset_is_one_line_before_any_work(
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize(("args", "expected"), [
-    (["--seeds", "1000-1012"], "13 seeds: a calibration takes at most 12 holds"),
-    (["--seeds", "1000,1001"], "2 seed(s): a calibration needs at least 4 holds"),
-    (["--seeds", "1000-1003", "--recordings", "{tmp}"], "--recordings calibrates on recorded"),
-    (["--jobs", "0"], "--jobs must be >= 1"),
-    (["--duration-s", "-1"], "duration"),
-])
-def test_calibrate_refuses_bad_input_and_writes_nothing(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
-        args: list[str], expected: str) -> None:
+def test_calibrate_hold_lists_the_recordings_once(tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """The models note and the calibration read the same files: the directory listed once
+    (the calibration was given the directory and listed it again)."""
+    from relaxgrip.errors import InputError
+    from relaxgrip.experiments import recorded_calibration
     from relaxgrip.learning.training import default_models_dir
+    from relaxgrip.recording import provenance
 
     models = tmp_path / "models"
     shutil.copytree(default_models_dir(), models)
-    before = (models / "manifest.json").read_bytes()
-    given = [a.replace("{tmp}", str(tmp_path)) for a in args]
-    code, out, err = run_main(["calibrate", models, *given], monkeypatch, capsys)
-    assert_one_error_line(code, out, err, expected)
-    assert (models / "manifest.json").read_bytes() == before
+    holds = tmp_path / "holds"
+    holds.mkdir()
+    for name in ("b.mcap", "a.mcap"):
+        (holds / name).write_bytes(b"")
+    seen: dict[str, list[Path]] = {}
 
+    def note(files: list[Path], *args: object, **kwargs: object) -> None:
+        seen["note"] = list(files)
 
-def test_calibrate_and_the_observer_refuse_older_or_uncalibrated_directories(
-        tmp_path: Path, trained: tuple[Path, Path], monkeypatch: pytest.MonkeyPatch,
-        capsys: pytest.CaptureFixture[str]) -> None:
-    from relaxgrip.learning.training import default_models_dir
+    def calibrate(paths: list[Path], *args: object) -> None:
+        seen["calibration"] = list(paths)
+        raise InputError("stop here")
 
-    old = tmp_path / "old"
-    shutil.copytree(default_models_dir(), old)
-    manifest = json.loads((old / "manifest.json").read_text())
-    manifest["hold_bias"] = {"relax": {}}
-    (old / "manifest.json").write_text(json.dumps(manifest))
-    code, out, err = run_main(["calibrate", old, "--dry-run"], monkeypatch, capsys)
-    assert_one_error_line(code, out, err, "models of an older relaxgrip")
-    _, models = trained  # trained, not calibrated
-    code, out, err = run_main(["hold", "--estimator", "observer", "--models", models,
-                               "--duration-s", "5"], monkeypatch, capsys)
-    assert_one_error_line(code, out, err, "has no calibration: the observer needs one "
-                                          f"(relaxgrip calibrate {models})")
+    monkeypatch.setattr(provenance, "differences_note", note)
+    monkeypatch.setattr(recorded_calibration, "calibration_from_recordings", calibrate)
+    code, _, err = run_main(["calibrate-hold", models, "--recordings", holds, "--dry-run"],
+                            monkeypatch, capsys)
+    assert code == 2
+    assert "stop here" in err
+    assert seen["note"] == seen["calibration"] == [holds / "a.mcap", holds / "b.mcap"]

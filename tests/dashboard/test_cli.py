@@ -111,7 +111,8 @@ def test_addresses_and_host_names_are_valid_hosts(host: str) -> None:
     assert check_host(host) == host
 
 
-@pytest.mark.parametrize(("flag", "expected"), [("--models", "no such model directory")])
+@pytest.mark.parametrize(("flag", "expected"), [("--observer", "not an observer model directory"),
+                                                ("--models", "no such model directory")])
 def test_a_missing_model_directory_is_named_and_the_port_freed(flag: str, expected: str,
                                                                tmp_path) -> None:
     port = _free_port()

@@ -449,30 +449,26 @@ def test_malformed_controls_get_a_reply_and_keep_the_viewer(served) -> None:
     assert session.alive
 
 
-def test_a_session_runs_the_models_it_is_given_and_the_observer_needs_a_calibration(
-        make_session, tmp_path) -> None:
-    """``--models``: a lab's own estimator on its own gripper; the observer refuses models
-    without a calibration."""
-    import dataclasses
+def test_a_session_runs_the_models_and_observer_it_is_given(make_session, tmp_path) -> None:
+    """``--models`` and ``--observer``: a lab's own estimator on its own gripper."""
     import shutil
 
     from relaxgrip.errors import InputError
-    from relaxgrip.learning.store import MANIFEST_NAME
+    from relaxgrip.learning.observer import default_observer_dir, load_observer, set_band_scale
     from relaxgrip.learning.training import default_models_dir
 
-    session = make_session(estimator="observer", models_dir=default_models_dir())
+    directory = tmp_path / "observer"
+    shutil.copytree(default_observer_dir(), directory)
+    set_band_scale(directory, 0.5, {"method": "a test's"})
+    session = make_session(estimator="observer", models_dir=default_models_dir(),
+                           observer_dir=directory)
     try:
-        assert session.controller.estimator.calibration is not None
+        assert session.controller.estimator.model.band_scale == 0.5
+        assert load_observer(default_observer_dir()).band_scale != 0.5
     finally:
         session.close()
-    directory = tmp_path / "models"
-    shutil.copytree(default_models_dir(), directory)
-    manifest = json.loads((directory / MANIFEST_NAME).read_text())
-    del manifest["calibration"]
-    (directory / MANIFEST_NAME).write_text(json.dumps(manifest))
-    with pytest.raises(InputError, match="has no calibration"):
-        make_session(estimator="observer", models_dir=directory)
-    assert dataclasses.is_dataclass(session.controller.estimator.calibration)
+    with pytest.raises(InputError, match="not an observer model directory"):
+        make_session(observer_dir=tmp_path / "none")
 
 
 def test_a_disk_too_full_to_start_a_recording_refuses_it_in_one_line(make_session,

@@ -97,3 +97,29 @@ def test_a_ramp_from_the_holds_values_moves_nothing_at_the_onset() -> None:
     before = hold.loop["setpoint_c"][~np.isfinite(hold.loop["hold_s"])]
     assert math.isclose(before[np.isfinite(before)][-1], 42.0)
     assert abs(hold.truth_n[hold.t_s < 7.0] - 4.0).max() < 0.3
+
+
+def test_the_other_finger_read_in_the_infrared_frame_takes_the_chain_over(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """By default (the object located, ``ChainParams.ir_weight`` 1) the estimate from 5 s
+    of the hold on is the chain's reading with finger 1 read in the infrared frames;
+    before, and with weight 0, it is the one-marker chain's."""
+    from functools import partial
+
+    from relaxgrip.control import chain
+
+    read = run_hold("relax", duration_s=12.0, seed=4)
+    monkeypatch.setattr(chain, "ChainParams", partial(chain.ChainParams, ir_weight=0.0))
+    shipped = run_hold("relax", duration_s=12.0, seed=4)
+    onset = read.loop.hold_onset_s()
+    assert onset is not None
+    hold_s = read.loop["t_s"] - onset
+    before = (hold_s >= 0.0) & (hold_s < 4.0)
+    after = hold_s >= 6.0
+    np.testing.assert_array_equal(read.loop["estimate_n"][before],
+                                  shipped.loop["estimate_n"][before])
+    assert not np.array_equal(read.loop["estimate_n"][after], shipped.loop["estimate_n"][after])
+    # At weight 1 the estimate is the reading: what the chain added is all of the change.
+    chain_n = read.loop["chain_n"][after]
+    assert np.all(np.isfinite(chain_n))
+    assert abs(float(np.mean(read.loop["estimate_n"][after])) - 5.0) < 0.05

@@ -4,11 +4,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from relaxgrip.learning.build import build_dataset
 from relaxgrip.learning.datasets import ICFN_SAMPLES, DatasetSpec
 from relaxgrip.learning.datastore import load_dataset
 from relaxgrip.learning.evaluation import evaluate
-from relaxgrip.learning.training import default_models_dir, load_default_models
+from relaxgrip.learning.history import UNRELAXED_FEATURES
+from relaxgrip.learning.observer import load_default_observer
+from relaxgrip.learning.training import (
+    UNRELAXED_MEMBERS,
+    default_models_dir,
+    load_default_models,
+)
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 from relaxgrip.twin import MODELS_FROM, SAME_RUNS_AS, TWIN_VERSION
 
@@ -24,11 +32,20 @@ def test_shipped_models_load_with_the_current_schemas() -> None:
     assert (default_models_dir() / "manifest.json").is_file()
 
 
-def test_shipped_models_carry_the_observers_calibration() -> None:
+def test_shipped_models_read_the_loading_history_with_the_shipped_observers_branches() -> None:
     bundle = load_default_models()
-    assert bundle.calibration is not None
-    assert bundle.calibration.record["source"] == "twin"
-    assert len(bundle.calibration.record["holds"]) <= 12
+    assert bundle.unrelaxed is not None
+    assert len(bundle.unrelaxed.members) == UNRELAXED_MEMBERS
+    # As relaxgrip train fits it: the pose and the warmest beams, which the object leaves clear.
+    assert bundle.unrelaxed.features == UNRELAXED_FEATURES
+    assert bundle.manifest["icfn_unrelaxed"]["features"] == list(UNRELAXED_FEATURES)
+    observer = load_default_observer()
+    for temp_c in (25.0, 40.0, 58.0):
+        got_e, got_i, got_tau = bundle.unrelaxed.model.parameters(temp_c)
+        want_e, want_i, want_tau = observer.parameters(temp_c)
+        assert got_e == want_e
+        np.testing.assert_array_equal(got_i, want_i)
+        np.testing.assert_array_equal(got_tau, want_tau)
 
 
 def test_shipped_models_meet_their_accuracy_on_a_fresh_dataset(tmp_path: Path) -> None:

@@ -18,7 +18,7 @@ import relaxgrip
 from relaxgrip.errors import InputError
 from relaxgrip.learning.icfn import ICFN
 from relaxgrip.learning.rcfn import RCFN
-from relaxgrip.learning.store import ModelFileError, load_models, model_checksums, save_models
+from relaxgrip.learning.store import ModelFileError, load_models, save_models
 from relaxgrip.perception.features import ICFN_SCHEMA, FeatureSchema
 from relaxgrip.twin.config import TWIN_VERSION
 
@@ -67,7 +67,7 @@ def test_round_trip(saved, models):
     np.testing.assert_array_equal(bundle.icfn.predict(X), icfn.predict(X))
     np.testing.assert_array_equal(bundle.rcfn.predict(Xr), rcfn.predict(Xr))
     assert bundle.icfn.predict_one(X[0]) == icfn.predict_one(X[0])
-    assert bundle.rcfn.relaxation(Xr[0]) == rcfn.relaxation(Xr[0])
+    assert bundle.rcfn.relaxation(Xr[0], 4.0) == rcfn.relaxation(Xr[0], 4.0)
     assert bundle.icfn.get_params() == icfn.get_params()
     assert bundle.rcfn.get_params() == rcfn.get_params()
     assert bundle.icfn_feature_schema == ICFN_SCHEMA
@@ -216,6 +216,11 @@ CORRUPTIONS: dict[str, tuple[Callable[[Path], object], str, str]] = {
         lambda d: edit_manifest(d, lambda m: m["rcfn"]["params"].update(temp_column=99)),
         "rcfn.npz",
         "temp_column must be a column of the",
+    ),
+    "rcfn time column text": (
+        lambda d: edit_manifest(d, lambda m: m["rcfn"]["params"].update(time_column="3")),
+        "rcfn.npz",
+        "time_column must be a column of the",
     ),
     "hidden size float": (
         lambda d: edit_manifest(d, lambda m: m["icfn"]["params"].update(
@@ -375,23 +380,17 @@ def test_crash_between_renames_is_detected_not_mixed(saved, models, monkeypatch)
 
 def test_provenance_names_the_calibration_the_bundle_takes_off(saved):
     """A bundle built without its directory's calibration (``replace(bundle,
-    calibration=None)``, the uncalibrated observer) is said to run without it."""
-    from relaxgrip.learning.calibration import Calibration
-    from relaxgrip.learning.store import set_calibration
+    hold_bias=None)``: the estimator takes none off) was said to run with it, from the
+    manifest; and one given another calibration, with the directory's."""
+    from relaxgrip.learning.hold_bias import HoldBias
+    from relaxgrip.learning.store import set_hold_bias
 
-    set_calibration(saved, Calibration((0.05, 0.0, 0.1), 0.02, {"seeds": [7]}))
+    bias = HoldBias(np.array([5.0]), np.array([40.0]), np.array([100.0]), np.full((1, 1, 1), 0.05))
+    set_hold_bias(saved, bias, {"seeds": [7]})
     bundle = load_models(saved)
-    assert bundle.calibration is not None
-    assert bundle.calibration.record["model_sha256"] == model_checksums(bundle.manifest)
-    calibrated = bundle.provenance()["calibration_sha256"]
+    calibrated = bundle.provenance()["hold_bias_sha256"]
     assert calibrated is not None
-    assert dataclasses.replace(bundle, calibration=None).provenance()["calibration_sha256"] \
-        is None
-
-
-def test_a_directory_of_an_older_calibration_is_refused_with_what_to_do(saved):
-    manifest = json.loads((saved / "manifest.json").read_text())
-    manifest["hold_bias"] = {"relax": {}}
-    (saved / "manifest.json").write_text(json.dumps(manifest))
-    with pytest.raises(ModelFileError, match=r"older relaxgrip.*relaxgrip calibrate"):
-        load_models(saved)
+    assert dataclasses.replace(bundle, hold_bias=None).provenance()["hold_bias_sha256"] is None
+    other = HoldBias(np.array([5.0]), np.array([40.0]), np.array([100.0]), np.full((1, 1, 1), 0.1))
+    assert dataclasses.replace(bundle, hold_bias=other).provenance()["hold_bias_sha256"] \
+        not in (None, calibrated)

@@ -36,7 +36,7 @@ def test_too_few_icfn_train_rows_is_one_line_not_a_traceback(tiny: Path) -> None
 
 def test_a_hold_whose_force_rose_is_left_out_of_the_rcfn(tiny: Path) -> None:
     """A recorded hold whose force rose has a whole-hold fit with K < 0, and its frames
-    no relaxing label: the RCFN leaves them out instead of failing."""
+    no relaxing label: the RCFN (log kappa) leaves them out instead of failing."""
     data = _split(tiny, 20)
     sequences, curves = data.sequences.copy(), data.curves.copy()
     rising = curves["sequence"] == 0

@@ -179,27 +179,53 @@ def test_bench_reports_the_issue_figures() -> None:
     assert result.headline["pose_err_deg_rms"] < 0.3
 
 
-def test_rcfn_features_are_the_papers_temperature_onset_pose_pose_and_velocity() -> None:
+def test_rcfn_features_onset_velocity_closure_ratio_and_hold_time() -> None:
     from relaxgrip.perception.features import RCFN_SCHEMA, RcfnFeatures
 
     builder = RcfnFeatures()
     assert builder.build(40.0) is None  # before the onset
-    for k in range(31):  # loading: the marker bends 0.5 mm/s from t = 1 s
+    # Loading: 2 mm/s of motor closure bends the marker 0.5 mm/s once in contact at t = 1 s.
+    for k in range(31):
         t = 0.1 * k
         dx = max(0.0, 0.5e-3 * (t - 1.0))
-        builder.observe(t, np.array([dx, 0, 0, 0, 0.1 * dx, 0]))
+        builder.observe(t, np.array([dx, 0, 0, 0, 0.1 * dx, 0]), 2.0 * t)
     onset = np.array([1.0e-3, 0, 0, 0, 1.0e-4, 0])
-    builder.start(3.0, onset)
-    builder.observe(4.0, onset + np.array([2e-5, 0, 0, 0, 0, 0]))
+    builder.start(3.0, onset, 6.0)
+    assert builder.closure_ratio == pytest.approx(4.0)  # 2 mm / 0.5 mm, contact frames only
+    builder.observe(4.0, onset + np.array([2e-5, 0, 0, 0, 0, 0]), 6.0)
     x = builder.build(40.0)
     assert x is not None
-    assert len(RCFN_SCHEMA) == 19
     f = dict(zip(RCFN_SCHEMA.names, x, strict=True))
     assert f["temp_c"] == 40.0
     assert f["onset_dx_m"] == pytest.approx(1.0e-3)
     assert f["dx_m"] == pytest.approx(1.02e-3)
     assert f["vdx_m_s"] == pytest.approx(2e-5)
-    assert builder.build(math.nan) is None  # no temperature read
+    assert f["hold_time_s"] == pytest.approx(1.0)
+    from_rest = RcfnFeatures()
+    from_rest.start(0.0, onset, 6.0)
+    assert from_rest.build(40.0) is None  # no loading seen: the ratio is unknown
+
+
+def test_rcfn_closure_ratio_of_a_loading_that_crept_in_at_the_end() -> None:
+    from relaxgrip.perception.features import RcfnFeatures
+
+    # A stiff object: 4 s at 1 mm/s bending the marker 0.25 mm/s, then 2 s of creeping
+    # (0.02 mm/s of motor, 5 µm/s of marker) before the onset: the last second alone
+    # bends the marker under the contact threshold.
+    builder = RcfnFeatures()
+    t_s, motor_mm, dx_m = 0.0, 0.0, 1e-4
+    for _ in range(41):
+        builder.observe(t_s, np.array([dx_m, 0, 0, 0, 0, 0]), motor_mm)
+        t_s, motor_mm, dx_m = t_s + 0.1, motor_mm + 0.1, dx_m + 0.25e-4
+    for _ in range(20):
+        builder.observe(t_s, np.array([dx_m, 0, 0, 0, 0, 0]), motor_mm)
+        t_s, motor_mm, dx_m = t_s + 0.1, motor_mm + 0.002, dx_m + 0.5e-6
+    builder.start(t_s, np.array([dx_m, 0, 0, 0, 0, 0]), motor_mm)
+    # The span reaches back to the latest sample bent 20 µm or more before the onset
+    # (motor over marker is 4 in the loading and in the creep alike); within the last
+    # second alone the ratio would be unknown and the RCFN silent.
+    assert builder.closure_ratio == pytest.approx(4.0, rel=0.05)
+    assert builder.build(40.0) is not None
 
 
 def test_a_frame_delivered_again_after_later_ones_is_not_processed() -> None:

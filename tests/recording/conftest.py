@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -87,11 +88,18 @@ def relax_hold(tmp_path_factory: pytest.TempPathFactory,
 
 
 @pytest.fixture(scope="session")
+def uncalibrated(models: ModelBundle) -> ModelBundle:
+    """The shipped models without their closed-loop calibration."""
+    return replace(models, hold_bias=None)
+
+
+@pytest.fixture(scope="session")
 def png_relax_hold(tmp_path_factory: pytest.TempPathFactory,
-                   models: ModelBundle) -> tuple[Path, HoldResult]:
-    """An 8 s relax hold at 5 N, 40 °C with lossless frames: it replays bit for bit."""
+                   uncalibrated: ModelBundle) -> tuple[Path, HoldResult]:
+    """An 8 s relax hold at 5 N, 40 °C, uncalibrated, with lossless frames and the object
+    located (the closed chain reads from 5 s of the hold on): it replays bit for bit."""
     return record_hold(tmp_path_factory.mktemp("png") / "relax.mcap", "relax", 5.0, 8.0, 40.0,
-                       3, models, rgb_format="png")
+                       3, uncalibrated, rgb_format="png", locate_object=True)
 
 
 @pytest.fixture(scope="session")

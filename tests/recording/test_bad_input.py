@@ -225,7 +225,7 @@ def test_calibrating_on_a_recording_without_a_force_reference(
     directory = tmp_path / "models"
     shutil.copytree(default_models_dir(), directory)
     before = (directory / "manifest.json").read_bytes()
-    code, out, err = run_main(["calibrate", directory, "--recordings", good,
+    code, out, err = run_main(["calibrate-hold", directory, "--recordings", good,
                                "--recordings", blind], monkeypatch, capsys)
     assert_one_error_line(code, out, err, f"{blind}: no force reference")
     assert (directory / "manifest.json").read_bytes() == before

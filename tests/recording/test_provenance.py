@@ -1,5 +1,10 @@
-"""A recording names the models it ran with; replay uses them, and says when it is told
-to use others."""
+"""A recording names the models it ran with; replay and the calibrations use them.
+
+Before, a recording did not name its models: ``replay`` and ``calibrate-band
+--recordings`` without ``--models`` fell back to the shipped ones, and a lab's
+band calibrated on its own recordings with the shipped models came out at a
+third of its scale, written without a word.
+"""
 
 from __future__ import annotations
 
@@ -10,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from relaxgrip.learning.observer import ObserverModel, default_observer_dir, load_observer
 from relaxgrip.learning.rcfn import RCFN
 from relaxgrip.learning.store import ModelBundle, load_models, save_models
 from relaxgrip.learning.training import default_models_dir
@@ -31,44 +37,53 @@ def _lab_models(directory: Path, models: ModelBundle) -> ModelBundle:
     rcfn = RCFN.from_arrays(arrays, models.rcfn.get_params())
     save_models(directory, models.icfn, rcfn, icfn_feature_schema=ICFN_SCHEMA,
                 rcfn_feature_schema=RCFN_SCHEMA, twin_version=TWIN_VERSION,
-                training={"test": "lab models"})
+                training={"test": "lab models"}, unrelaxed=models.unrelaxed)
     return load_models(directory, icfn_feature_schema=ICFN_SCHEMA,
                        rcfn_feature_schema=RCFN_SCHEMA)
 
 
 @pytest.fixture(scope="module")
 def lab(tmp_path_factory: pytest.TempPathFactory, models: ModelBundle
-        ) -> tuple[ModelBundle, Path]:
-    """A lab's models in a directory of their own (uncalibrated), and a relax hold recorded
-    with them."""
+        ) -> tuple[ModelBundle, ObserverModel, Path]:
+    """A lab's models and observer in directories of their own, and an observer hold
+    recorded with them."""
     root = tmp_path_factory.mktemp("lab")
     bundle = _lab_models(root / "models", models)
-    path, _ = record_hold(root / "relax.mcap", "relax", 5.0, HOLD_S, 40.0, 1, bundle)
-    return bundle, path
+    shutil.copytree(default_observer_dir(), root / "observer")
+    observer = load_observer(root / "observer")
+    path, _ = record_hold(root / "observer.mcap", "observer", 5.0, HOLD_S, 40.0, 1, bundle,
+                          observer=observer)
+    return bundle, observer, path
 
 
-def test_a_recording_names_its_models(lab: tuple[ModelBundle, Path]) -> None:
-    bundle, path = lab
+def test_a_recording_names_its_models_and_observer(
+        lab: tuple[ModelBundle, ObserverModel, Path]) -> None:
+    bundle, observer, path = lab
     named = read_session(path)["models"]
     assert named["directory"] == str(bundle.directory)
     assert named["sha256"] == bundle.provenance()["sha256"]
-    assert named["calibration_sha256"] is None  # the lab's models are not calibrated
-    assert model_differences(named, bundle.provenance()) == []
+    assert named["hold_bias_sha256"] is None  # the lab's models are not calibrated
+    assert named["observer"]["directory"] == str(observer.source[0] if observer.source else "")
+    assert model_differences(named, {**bundle.provenance(),
+                                     "observer": observer.provenance()}) == []
 
 
 def test_replay_runs_the_recorded_models_without_being_told(
-        lab: tuple[ModelBundle, Path], monkeypatch: pytest.MonkeyPatch,
+        lab: tuple[ModelBundle, ObserverModel, Path], monkeypatch: pytest.MonkeyPatch,
         capsys: pytest.CaptureFixture[str]) -> None:
-    _, path = lab
+    _, _, path = lab
     code, out, err = run_main(["replay", path, "--json"], monkeypatch, capsys)
     assert code == 0, err
     own = json.loads(out)
     assert own["models_differ"] == []
-    code, out, err = run_main(["replay", path, "--json", "--models", default_models_dir()],
-                              monkeypatch, capsys)
+    code, out, err = run_main(["replay", path, "--json", "--models", default_models_dir(),
+                               "--observer", default_observer_dir()], monkeypatch, capsys)
     assert code == 0, err
     shipped = json.loads(out)
     assert shipped["models_differ"] == ["rcfn", "calibration"]
+    # The shipped models take their calibration off the estimate; the lab's, as recorded, none.
+    assert own["calibration_valid_agreement"] == 1.0
+    assert shipped["calibration_valid_agreement"] < 1.0
     code, out, err = run_main(["replay", path, "--models", default_models_dir()],
                               monkeypatch, capsys)
     assert code == 0, err
@@ -76,7 +91,7 @@ def test_replay_runs_the_recorded_models_without_being_told(
 
 
 def test_replay_refuses_models_that_are_gone(
-        tmp_path: Path, lab: tuple[ModelBundle, Path], models: ModelBundle,
+        tmp_path: Path, lab: tuple[ModelBundle, ObserverModel, Path], models: ModelBundle,
         monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     moved = tmp_path / "models"
     _lab_models(moved, models)
@@ -95,24 +110,72 @@ def test_replay_refuses_models_that_are_gone(
 
 
 def test_recordings_of_different_models_need_models_given(
-        tmp_path: Path, lab: tuple[ModelBundle, Path],
+        tmp_path: Path, lab: tuple[ModelBundle, ObserverModel, Path],
         relax_hold: tuple[Path, object]) -> None:
     with pytest.raises(Exception, match="the recordings ran with different models: give "
                                         "the ones to use with --models"):
-        recorded_models([lab[1], relax_hold[0]])
+        recorded_models([lab[2], relax_hold[0]])
     # The shipped models are found from any install: by their checksums.
     assert recorded_models([relax_hold[0]]) is not None
 
 
-def test_differences_name_the_model_files_and_the_calibration() -> None:
-    recorded = {"sha256": {"icfn": "a", "rcfn": "b"}, "calibration_sha256": "c"}
+def test_band_calibration_on_recordings_takes_their_models(
+        lab: tuple[ModelBundle, ObserverModel, Path], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    _, _, path = lab
+    observer = tmp_path / "observer"
+    shutil.copytree(default_observer_dir(), observer)
+    args: list[str | Path] = ["calibrate-band", observer, "--recordings", path, "--dry-run",
+                              "--jobs", "1", "--json"]
+    code, out, err = run_main(args, monkeypatch, capsys)
+    assert code == 0, err
+    own = json.loads(out)
+    assert own["models_note"] is None
+    code, out, err = run_main([*args[:-1], "--models", default_models_dir()], monkeypatch,
+                              capsys)
+    assert code == 0, err
+    assert f"note: {path} ran with other models than these (rcfn differ)" in err
+
+
+def test_differences_name_the_calibration_and_the_band() -> None:
+    recorded = {"sha256": {"icfn": "a", "rcfn": "b"}, "hold_bias_sha256": "c",
+                "observer": {"sha256": "d", "band_scale": 0.25, "drift_scale": 1.0}}
     same = json.loads(json.dumps(recorded))
     assert model_differences(recorded, same) == []
-    same["calibration_sha256"] = None
-    assert model_differences(recorded, same) == ["calibration"]
+    same["observer"]["band_floor_n"] = 0.0  # recorded before the band had a floor: none
+    assert model_differences(recorded, same) == []
+    same["observer"]["band_floor_n"] = 0.02
+    assert model_differences(recorded, same) == ["observer band"]
+    same["observer"]["band_floor_n"] = 0.0
+    # Recorded before the band had temperature factors: none.
+    same["observer"].update(band_temps_c=[], band_temp_factors=[])
+    assert model_differences(recorded, same) == []
+    same["observer"].update(band_temps_c=[40.0, 55.0], band_temp_factors=[1.0, 1.5])
+    assert model_differences(recorded, same) == ["observer band"]
+    same["observer"].update(band_temps_c=[], band_temp_factors=[])
+    same["hold_bias_sha256"] = None
+    same["observer"]["band_scale"] = 0.3
+    assert model_differences(recorded, same) == ["calibration", "observer band"]
+    same["observer"]["sha256"] = "e"
     same["sha256"]["icfn"] = "f"
-    assert model_differences(recorded, same) == ["icfn", "calibration"]
-    assert model_differences(None, same) == []
+    assert model_differences(recorded, same) == ["icfn", "calibration", "observer"]
+    assert model_differences(None, same) == []  # recorded before sessions named models
+
+
+def test_hold_calibration_on_recordings_says_when_they_ran_other_models(
+        lab: tuple[ModelBundle, ObserverModel, Path], tmp_path: Path,
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    bundle = lab[0]
+    for seed in (3, 4):
+        record_hold(tmp_path / f"relax-{seed}.mcap", "relax", 5.0, HOLD_S, 40.0, seed, bundle)
+    shipped = tmp_path / "shipped"
+    shutil.copytree(default_models_dir(), shipped)
+    for directory, note in ((bundle.directory, None), (shipped, "(rcfn differ)")):
+        code, out, err = run_main(["calibrate-hold", directory or "", "--recordings", tmp_path,
+                                   "--dry-run", "--jobs", "1", "--json"], monkeypatch, capsys)
+        assert code == 0, err
+        said = json.loads(out)["models_note"]
+        assert said is None if note is None else note in said
 
 
 def test_replay_says_what_became_of_the_recorded_models(

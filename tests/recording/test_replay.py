@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import copy
 import importlib
 import json
+import shutil
 from dataclasses import replace
 from pathlib import Path
 
@@ -13,10 +15,12 @@ import pytest
 from relaxgrip.clock import VirtualClock
 from relaxgrip.control import GraspController, GraspPlan, make_estimator, run_loop
 from relaxgrip.experiments.controlled_hold import HoldResult, run_hold
+from relaxgrip.learning.observer import ObserverModel, default_observer_dir, load_default_observer
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.recording import McapRecorder, iter_messages, replay
+from relaxgrip.recording.replay import replay_periods
 from relaxgrip.twin import GripperTwin, TwinConfig
-from tests.clitools import run_main
+from tests.clitools import assert_one_error_line, run_main
 
 #: JPEG moves the marker corners by a fraction of a pixel: the replayed estimate differs from
 #: the recorded one by up to this (measured on a relax hold: max 0.076 N, mean 0.017 N).
@@ -43,13 +47,16 @@ def test_png_replay_is_exact(tmp_path: Path, models: ModelBundle) -> None:
     assert m["marker_status_agreement"] == 1.0
 
 
-def test_png_replay_of_a_relax_hold_replays_bit_for_bit(
-        png_relax_hold: tuple[Path, HoldResult], models: ModelBundle) -> None:
-    path, _ = png_relax_hold
+def test_png_replay_of_a_relax_hold_reads_where_the_ball_was_seen(
+        png_relax_hold: tuple[Path, HoldResult], uncalibrated: ModelBundle) -> None:
+    """The hold onset's event tells replay where the object sat: the chain replays exactly."""
+    path, result = png_relax_hold
     onsets = [m["detail"] for t, _, m in iter_messages(path)
               if t == "/relaxgrip/events" and m["kind"] == "hold_onset"]
     assert len(onsets) == 1
-    m = replay(path, models).metrics()
+    assert "object at" in onsets[0]
+    assert np.isfinite(result.loop["chain_n"]).sum() > 60  # the chain read for the last 3 s
+    m = replay(path, uncalibrated).metrics()
     assert m["estimate_compared"] > 200
     assert m["estimate_max_abs_diff_n"] == 0.0
 
@@ -119,7 +126,7 @@ def test_replay_tells_the_estimator_of_contact_onset_and_release(
                  GraspPlan(target_n=3.0, temp_c=40.0, hold_s=1.0), 30.0, recorder=rec)
     assert [c for c, _ in calls["live"]] == ["contact", "start_hold", "end_hold"]
     monkeypatch.setattr(replay_module, "bundle_estimator",
-                        lambda kind, bundle: spying(kind, "replay"))
+                        lambda kind, bundle, observer=None: spying(kind, "replay"))
     r = replay(path, models)
     assert calls["replay"] == calls["live"]
     assert r.metrics()["estimate_valid_agreement"] == 1.0
@@ -192,16 +199,50 @@ def test_a_dashboard_recording_replays_exactly_and_one_begun_mid_grasp_is_refuse
     assert min(times) >= first - 1 / 30
 
 
-def test_an_observer_recording_replays_with_its_calibration_and_names_another(
-        tmp_path: Path, models: ModelBundle) -> None:
-    """The observer's calibration is recorded with the estimate; replayed against models
-    calibrated otherwise (here none), the difference is named, not only seen."""
+def test_replay_shows_a_calibration_other_than_the_recordings(
+        relax_hold: tuple[Path, HoldResult], models: ModelBundle) -> None:
+    """The estimate's calibration is recorded; replayed against a directory calibrated
+    otherwise, the difference is named, not only seen in the estimate."""
+    from relaxgrip.learning.hold_bias import HoldBias
+
+    path, _ = relax_hold
+    same = replay(path, models).metrics()
+    assert same["calibration_valid_agreement"] == 1.0
+    other = (HoldBias(np.array([5.0]), np.array([40.0]), np.array([1.0]), np.full((1, 1, 1), 0.2))
+             if models.hold_bias is None else None)
+    changed = replay(path, replace(models, hold_bias=other)).metrics()
+    assert changed["calibration_valid_agreement"] < 1.0
+
+
+def test_an_observer_recording_replays_with_the_observer_it_ran_with(
+        tmp_path: Path, models: ModelBundle, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """The observer replays with the parameters it is given (an observer of another band
+    replays another band); ``--observer`` names the ones the recording ran with (here the
+    shipped ones, copied)."""
     path = tmp_path / "observer.mcap"
+    observer = load_default_observer()
     with McapRecorder(path) as rec:
-        run_hold("observer", 5.0, 3.0, 40.0, 2, models, recorder=rec)
-    same = replay(path, models)
-    assert same.metrics()["calibration_valid_agreement"] == 1.0
-    assert same.metrics()["estimate_max_abs_diff_n"] < JPEG_MAX_DIFF_N
-    changed = replay(path, replace(models, calibration=None))
-    assert changed.metrics()["calibration_valid_agreement"] < 1.0
-    assert changed.models_differ == ("calibration",)
+        run_hold("observer", 5.0, 3.0, 40.0, 2, models, recorder=rec, observer=observer)
+    other = copy.deepcopy(observer)
+    other.band_scale = 2.0 * observer.band_scale
+
+    def widths(model: ObserverModel) -> np.ndarray:
+        rows = [e.band_hi_n - e.band_lo_n
+                for _, _, e in replay_periods(path, models, observer=model)]
+        return np.array(rows)[np.isfinite(rows)]
+
+    narrow, wide = widths(observer), widths(other)
+    assert narrow.size > 50
+    # Twice the relative part, the same floor: each width 2 (floor + 2 r) = 2 W - 2 floor.
+    np.testing.assert_allclose(wide, 2.0 * narrow - 2.0 * observer.band_floor_n, rtol=1e-9)
+    assert observer.band_floor_n > 0  # the shipped band has one: the floor is in the test
+    directory = tmp_path / "observer-dir"
+    shutil.copytree(default_observer_dir(), directory)
+    code, out, err = run_main(["replay", path, "--observer", directory, "--json"], monkeypatch,
+                              capsys)
+    assert code == 0, err
+    assert json.loads(out)["estimate_max_abs_diff_n"] < JPEG_MAX_DIFF_N
+    code, out, err = run_main(["replay", path, "--observer", tmp_path / "none"], monkeypatch,
+                              capsys)
+    assert_one_error_line(code, out, err, "none")

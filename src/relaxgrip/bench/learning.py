@@ -46,17 +46,17 @@ def bench_estimation(repeat: int) -> BenchResult:
         builder = RcfnFeatures()
         # render_grasp's motor stops at 9 s: the loading before, the hold after.
         onset = next(i for i, frame in enumerate(frames) if frame[0] >= HOLD_ONSET_S)
-        for t_s, _, pose, _, _ in frames[:onset]:
-            builder.observe(t_s, pose)
-        builder.start(frames[onset][0], frames[onset][2])
-        for t_s, features, pose, temp_c, _ in frames[onset:]:
+        for t_s, _, pose, _, motor_mm in frames[:onset]:
+            builder.observe(t_s, pose, motor_mm)
+        builder.start(frames[onset][0], frames[onset][2], frames[onset][4])
+        for t_s, features, pose, temp_c, motor_mm in frames[onset:]:
             t0 = time.perf_counter()
-            icfn.predict_one(features)
+            f_inst = icfn.predict_one(features)
             t1 = time.perf_counter()
-            builder.observe(t_s, pose)
+            builder.observe(t_s, pose, motor_mm)
             x = builder.build(temp_c)
             assert x is not None
-            rcfn.relaxation(x)
+            rcfn.relaxation(x, f_inst)
             t2 = time.perf_counter()
             t_icfn.append(t1 - t0)
             t_rcfn.append(t2 - t1)

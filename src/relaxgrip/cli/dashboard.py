@@ -75,8 +75,8 @@ def dashboard(
         "--insecure-remote", help="With --allow-remote, serve plain http: the token and "
                                   "every control cross the network unencrypted.")] = False,
     estimator: Annotated[str, typer.Option(
-        "--estimator", help="fixed, icfn, relax or observer (the default: calibrated "
-                            "against a force reference, with a 95 % band).")
+        "--estimator", help="fixed, icfn, relax or observer (the default: it follows a "
+                            "mode switch while holding, which relax's Eq. 10 does not).")
     ] = "observer",
     seed: Annotated[int, int_option("--seed", help="Twin seed.")] = 0,
     record_dir: Annotated[Path, typer.Option(
@@ -84,6 +84,9 @@ def dashboard(
     models: Annotated[Path | None, typer.Option(
         "--models", help="Model directory (relaxgrip train; default: the shipped models).",
         show_default=False)] = None,
+    observer_dir: Annotated[Path | None, typer.Option(
+        "--observer", help="Observer directory (relaxgrip fit-observer; default: the shipped "
+                           "observer).", show_default=False)] = None,
     rig: RigOption = None,
     material: MaterialOption = None,
 ) -> None:
@@ -120,7 +123,8 @@ def dashboard(
     listener = _bind(address, host, port)  # a port in use is known before anything starts
     try:
         session = open_session(backend, clock=WallClock(), seed=seed, estimator=estimator,
-                               record_dir=record_dir, models_dir=models, config=config)
+                               record_dir=record_dir, models_dir=models,
+                               observer_dir=observer_dir, config=config)
     except BaseException:
         listener.close()
         raise

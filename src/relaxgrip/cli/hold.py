@@ -54,6 +54,10 @@ def hold(
     models: Annotated[Path | None, typer.Option(
         "--models", help="Model directory (default: the shipped models).", show_default=False)
     ] = None,
+    observer_dir: Annotated[Path | None, typer.Option(
+        "--observer", help="Observer directory for --estimator observer and --compare "
+                           "(relaxgrip fit-observer; default: the shipped one).",
+        show_default=False)] = None,
     compare: Annotated[bool, typer.Option(
         "--compare", help="Run fixed, icfn, relax and observer on the same seed.")] = False,
     plot: Annotated[Path | None, typer.Option(
@@ -89,8 +93,9 @@ def hold(
         show_default=False)] = None,
     budget: Annotated[bool, typer.Option(
         "--budget", help="Split relax's estimate error into the onset force, Eq. 10's "
-                         "relaxation and the controller's closure, against a copy of the twin "
-                         "held at the onset's aperture (relax, twin backend).")] = False,
+                         "relaxation and the added closure, against a copy of the twin held "
+                         "at the onset's aperture, and the calibration and closed chain of "
+                         "models that have them (relax, twin backend).")] = False,
     rig: RigOption = None,
     material: MaterialOption = None,
 ) -> None:
@@ -101,7 +106,6 @@ def hold(
     --json) and the exit code is 130.
     """
     from relaxgrip.control import EstimatorKind, check_target_n
-    from relaxgrip.experiments.calibration import require_calibration
     from relaxgrip.experiments.controlled_hold import (
         check_backend,
         check_hold_duration_s,
@@ -117,6 +121,7 @@ def hold(
         parse_target_profile,
         parse_temp_profile,
     )
+    from relaxgrip.learning.observer import load_observer
     from relaxgrip.learning.store import load_models
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
@@ -143,7 +148,8 @@ def hold(
             raise InputError("--seed runs one seed and --seeds several: give one of them")
         if record is not None or plot is not None or budget:
             raise InputError("--seeds reports figures over seeds: --record, --plot and --budget "
-                             "are for one run")
+                             "are for one run (relaxgrip budget --seeds gives the budget over "
+                             "seeds)")
     check_jobs(jobs)
     serial = backend.startswith("serial:")
     if backend not in ("twin", "emulator") and not serial:
@@ -183,10 +189,15 @@ def hold(
         plot = DEFAULT_COMPARE_PLOT
     if plot is not None:
         check_plot_path(plot)
+    if observer_dir is not None and not (compare or estimator == "observer"):
+        raise InputError("--observer sets the observer estimator's parameters: use it with "
+                         "--estimator observer or --compare")
     config = None if serial else twin_config(rig, material=material)
     bundle = load_default_models() if models is None else load_models(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
-    require_calibration(bundle, EstimatorKind.OBSERVER if compare else estimator)
+    if observer_dir is None and models is not None and (models / "observer").is_dir():
+        observer_dir = models / "observer"  # a bring-up's model directory carries its observer
+    observer = None if observer_dir is None else load_observer(observer_dir)
     start = time.perf_counter()
     if seed_list is not None:
         from relaxgrip.experiments.hold_survey import survey_holds
@@ -197,7 +208,7 @@ def hold(
         with console.status(f"{len(names) * len(seed_list)} holds …") if not json_out \
                 else nullcontext():
             survey = survey_holds(names, seed_list, target_n, temp_c, duration_s, bundle,
-                                  backend, temps, targets, push,
+                                  observer, backend, temps, targets, push,
                                   profile_text={k: v for k, v in given.items() if v is not None},
                                   n_jobs=jobs, config=config)
         if json_out:
@@ -210,7 +221,7 @@ def hold(
                 else nullcontext():
             comparison = compare_holds(target_n=target_n, duration_s=duration_s, temp_c=temp_c,
                                        seed=seed, models=bundle, n_jobs=jobs,
-                                       config=config)
+                                       observer=observer, config=config)
         figure = None
         if plot is not None:
             from relaxgrip.plots.holding import plot_hold_comparison
@@ -234,7 +245,7 @@ def hold(
             if record is None:
                 result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
                                   config=config, backend=backend, temp_profile=temps,
-                                  target_profile=targets, disturbance=push,
+                                  target_profile=targets, disturbance=push, observer=observer,
                                   budget=budget, mcu=mcu)
             else:
                 from relaxgrip.recording import McapRecorder
@@ -246,7 +257,8 @@ def hold(
                     result = run_hold(estimator, target_n, duration_s, temp_c, seed, bundle,
                                       config=config, backend=backend, recorder=recorder,
                                       temp_profile=temps, target_profile=targets,
-                                      disturbance=push, budget=budget, mcu=mcu)
+                                      disturbance=push, observer=observer, budget=budget,
+                                      mcu=mcu)
     except HoldInterrupted as stopped:
         _print_interrupted(stopped.result, json_out, record, time.perf_counter() - start)
         raise typer.Exit(130) from None
@@ -265,8 +277,12 @@ def hold(
         lo, hi = result.window
         console.print(f"error budget, estimate − true force over {lo:.4g}–{hi:.4g} s: onset "
                       f"{parts['onset_n']:+.3f} N, Eq. 10 relaxation "
-                      f"{parts['relaxation_n']:+.3f} N, closure {parts['closure_n']:+.3f} N"
-                      f" = {parts['total_n']:+.3f} N")
+                      f"{parts['relaxation_n']:+.3f} N, added closure {parts['closure_n']:+.3f} N"
+                      + (f", calibration {parts['calibration_n']:+.3f} N"
+                         if "calibration_n" in parts else "")
+                      + (f", closed chain {parts['chain_n']:+.3f} N"
+                         if "chain_n" in parts else "")
+                      + f" = {parts['total_n']:+.3f} N")
     if figure is not None:
         console.print(f"figure: {figure}")
 
@@ -396,27 +412,27 @@ def _print_interrupted(result: Any, json_out: bool, record: Path | None,
             signal.signal(sig, handler)
 
 
-@app.command("ablation")
-def ablation_command(
+@app.command("budget")
+def budget_survey(
     seeds: Annotated[str, typer.Option(
-        "--seeds", help="Twin seeds, paired across the variants (report on 5000 and up).")
-    ] = "5000-5011",
+        "--seeds", help="Twin seeds: 0-23, 3,5,8 or a mix.")] = "0-23",
     target_n: Annotated[float, float_option("--target-n", help="Target force (N), 0-10.")] = 5.0,
     temp_c: Annotated[float, float_option("--temp-c", help="Finger temperature (°C).")] = 40.0,
     duration_s: Annotated[float, float_option("--duration-s", help="Hold length (s).")] = 280.0,
     models: Annotated[Path | None, typer.Option(
-        "--models", help="Model directory, calibrated (default: the shipped models).",
-        show_default=False)] = None,
-    jobs: Annotated[int, int_option("--jobs", help="Holds in parallel.")] = 1,
+        "--models", help="Model directory (default: the shipped models).", show_default=False)
+    ] = None,
+    jobs: Annotated[int, int_option("--jobs", help="Holds in parallel.")] = 2,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
-    rig: RigOption = None,
 ) -> None:
-    """The observer with each of its parts removed, and relax, on the same seeds: each
-    part's MAE difference with its 95 % interval (paired over seeds)."""
-    from relaxgrip.control import EstimatorKind, check_target_n
-    from relaxgrip.experiments.ablation import run_ablation
-    from relaxgrip.experiments.calibration import require_calibration
-    from relaxgrip.experiments.controlled_hold import check_hold_duration_s, check_hold_temp_c
+    """relax's error budget over seeds: each part's bias and spread, what the draw explains."""
+    from relaxgrip.control import check_target_n
+    from relaxgrip.experiments.budget_survey import SCATTER_GROUPS, survey_budget
+    from relaxgrip.experiments.controlled_hold import (
+        check_hold_duration_s,
+        check_hold_temp_c,
+        steady_window_s,
+    )
     from relaxgrip.learning.store import load_models
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
@@ -427,24 +443,58 @@ def ablation_command(
     check_hold_temp_c(temp_c)
     check_hold_duration_s(duration_s, "--duration-s")
     check_jobs(jobs)
-    config = twin_config(rig)
     bundle = load_default_models() if models is None else load_models(
         models, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
-    require_calibration(bundle, EstimatorKind.OBSERVER)
-    with console.status("ablation holds …") if not json_out else nullcontext():
-        result = run_ablation(seed_list, target_n, temp_c, duration_s, bundle, n_jobs=jobs,
-                              config=config, rig=str(rig) if rig is not None else "ours")
+    start = time.perf_counter()
+    with console.status(f"{len(seed_list)} relax holds with their budgets …") if not json_out \
+            else nullcontext():
+        survey = survey_budget(seed_list, target_n, temp_c, duration_s, bundle, n_jobs=jobs)
     if json_out:
-        emit_json(result.to_dict())
+        emit_json(survey.to_dict())
         return
-    d = result.to_dict()
-    table = Table(title=f"observer ablation, {target_n:g} N at {temp_c:g} °C, "
-                        f"{duration_s:g} s holds, seeds {seeds}: observer MAE "
-                        f"{d['observer_mae_n']:.4f} N")
-    for col in ("variant", "MAE (N)", "MAE − observer's (N)", "95 % interval (N)", "earns"):
-        table.add_column(col, justify="left" if col == "variant" else "right")
-    for row in d["rows"]:
-        table.add_row(row["variant"], f"{row['mae_n']:.4f}", f"{row['diff_n']:+.4f}",
-                      f"{row['diff_lo_n']:+.4f} … {row['diff_hi_n']:+.4f}",
-                      "yes" if row["earns"] else "no")
+    parts, r2 = survey.parts(), survey.r2()
+    lo, hi = steady_window_s(duration_s)
+    table = Table(title=f"relax, {target_n:g} N, {temp_c:g} °C, seeds {seeds}: estimate − "
+                        f"true force over {lo:.4g}–{hi:.4g} s",
+                  caption="R²: share of the part's spread across seeds that the twin's draw "
+                          "predicts, each seed left out of its fit; f0 / f1: that finger's "
+                          "relaxing shares and times (the marker is on f0), run: contact "
+                          "position and ambient")
+    short = {"finger_0": "R² f0", "finger_1": "R² f1", "contact_ambient": "R² run",
+             "all": "R² all"}
+    for col in ("part", "mean (N)", "SD (N)", *(short[g] for g in SCATTER_GROUPS)):
+        table.add_column(col, justify="left" if col == "part" else "right")
+    for name, p in parts.items():
+        table.add_row(name.removesuffix("_n"), f"{p['mean']:+.3f}", _fmt(p['sd'], ".3f"),
+                      *(_fmt(r2[name][g], ".2f") for g in SCATTER_GROUPS))
     console.print(table)
+    console.print(f"MAE from the target {survey.column('mae_n').mean():.3f} N; with the bias "
+                  "measured on the other seeds taken off "
+                  f"{_fmt(survey.bias_free_mae_n(), '.3f')} N")
+    _print_observability(survey.observability())
+    console.print(f"{survey.twin_version}, {time.perf_counter() - start:.1f} s")
+
+
+def _fmt(value: float, spec: str) -> str:
+    """``value`` in ``spec``, or a dash where there is no figure (NaN)."""
+    return format(value, spec) if math.isfinite(value) else "–"
+
+
+def _print_observability(seen: dict[str, Any]) -> None:
+    """The budget survey's second table: what relax reads of its run, against the draw."""
+    table = Table(title=f"What relax reads by {seen['at_s']:.4g} s of the hold (the steady "
+                        "state's start), across seeds",
+                  caption="r: correlation with the log of finger 0's and finger 1's relaxing "
+                          "share (the twin's draw), and with the total")
+    for col in ("read", "r f0 share", "r f1 share", "r total"):
+        table.add_column(col, justify="left" if col == "read" else "right")
+    for name, r in seen["correlation"].items():
+        label = "total (estimate − true)" if name == "total_n" else name
+        table.add_row(label, *(_fmt(r[k], "+.2f") for k in ("finger_0", "finger_1", "total_n")))
+    console.print(table)
+    mae = seen["corrected_mae_n"]
+    console.print(f"A per-run correction fitted (each seed left out) on these reads would leave "
+                  f"{_fmt(mae['percepts'], '.3f')} N; on finger 0's true share "
+                  f"{_fmt(mae['finger_0_share'], '.3f')} N, on both fingers' "
+                  f"{_fmt(mae['both_shares'], '.3f')} N (the bias alone "
+                  f"{_fmt(mae['bias'], '.3f')} N)")

@@ -37,20 +37,28 @@ def replay_cmd(
         "--models", help="Model directory (default: the models the recording ran with, "
                          "if they are still where it names them, or the shipped ones).",
         show_default=False)] = None,
+    observer_dir: Annotated[Path | None, typer.Option(
+        "--observer", help="Observer directory for an observer recording (relaxgrip "
+                           "fit-observer; default: the one the recording ran with).",
+        show_default=False)] = None,
     plot: Annotated[Path | None, typer.Option(
         "--plot", help="Figure of recorded and replayed estimate (.png/.pdf/.svg).",
         show_default=False)] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print one JSON object.")] = False,
 ) -> None:
     """Re-run perception and estimation on a recording and compare with what it recorded."""
+    from relaxgrip.learning.observer import load_observer
     from relaxgrip.plots.common import check_plot_path
+    from relaxgrip.recording.provenance import recorded_observer
     from relaxgrip.recording.reader import read_replayable_session
     from relaxgrip.recording.replay import replay
 
     if plot is not None:
         check_plot_path(plot)
     read_replayable_session(recording)  # a file it cannot replay is said before its models
-    result = replay(recording, _models(models, [recording]))
+    observer = (recorded_observer([recording]) if observer_dir is None
+                else load_observer(observer_dir))
+    result = replay(recording, _models(models, [recording]), observer=observer)
     if plot is not None:
         _plot_replay(result, plot)
     if json_out:

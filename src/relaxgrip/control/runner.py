@@ -35,7 +35,8 @@ _STATUS = tuple(TrackStatus)
 _COLUMNS = (
     "t_s", "phase", "motor_mm", "arm_mm", "velocity_cmd_mm_s", "arm_cmd_mm_s", "duty_0", "duty_1",
     "estimate_n", "icfn_n", "f_onset_n", "k_n", "tau_s", "hold_s", "ir_temp_0_c", "ir_temp_1_c",
-    "setpoint_c", "band_lo_n", "band_hi_n", "calibration_n", "marker_status",
+    "setpoint_c", "band_lo_n", "band_hi_n", "band_drift_n", "calibration_n", "chain_n",
+    "marker_status",
     "truth_force_n", "truth_temp_0_c", "truth_temp_1_c", "truth_aperture_mm", "truth_lifted",
     "force_ref_n", "force_ref_t_s",
 )
@@ -240,5 +241,6 @@ def _row(obs: Observation, c: GraspController, command: Command) -> tuple[float,
         command.motor_velocity_mm_s, command.arm_velocity_mm_s, *command.heater_duty,
         est.force_n, est.f_icfn_n, est.f_onset_n, est.k_n, est.tau_s, est.hold_s, *temps,
         math.nan if setpoint is None else setpoint, est.band_lo_n, est.band_hi_n,
-        est.calibration_n, status, *_truth_row(obs), *_force_ref_row(obs),
+        est.band_drift_n, est.calibration_n, est.chain_n, status,
+        *_truth_row(obs), *_force_ref_row(obs),
     )

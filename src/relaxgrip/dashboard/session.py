@@ -471,6 +471,7 @@ class LiveSession:
 def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
                  estimator: str = "observer", object_name: str = "force_ball",
                  record_dir: Path = Path("."), models_dir: Path | None = None,
+                 observer_dir: Path | None = None,
                  config: TwinConfig | None = None) -> LiveSession:
     """A session on the twin, the MCU emulator (twin behind a pty) or a rig file's gripper.
 
@@ -483,15 +484,17 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
     seed : int
         Twin seed.
     estimator : str
-        ``fixed``, ``icfn``, ``relax`` or ``observer`` (the default: calibrated
-        against a force reference, with a 95 % band; it needs a calibrated
-        model directory).
+        ``fixed``, ``icfn``, ``relax`` or ``observer`` (the default: the
+        dashboard changes the temperature while holding, which Eq. 10 of
+        ``relax`` does not follow).
     object_name : str
         Twin object between the fingers at the start.
     record_dir : Path
         Where recordings go.
     models_dir : Path, optional
         Model directory (default: the shipped models).
+    observer_dir : Path, optional
+        The ``observer`` estimator's directory (default: the shipped one).
     config : TwinConfig, optional
         The twin of ``twin`` and ``emulator`` (default: our gripper); a serial rig
         is its rig file's gripper.
@@ -501,7 +504,7 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
     LiveSession
         Not yet started.
     """
-    from relaxgrip.experiments.calibration import require_calibration
+    from relaxgrip.learning.observer import load_observer
     from relaxgrip.learning.store import load_models
     from relaxgrip.learning.training import load_default_models
     from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
@@ -528,7 +531,7 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
     check_writable(record_dir / "relaxgrip-recording.mcap", InputError)
     bundle = load_default_models() if models_dir is None else load_models(
         models_dir, icfn_feature_schema=ICFN_SCHEMA, rcfn_feature_schema=RCFN_SCHEMA)
-    require_calibration(bundle, kind)
+    observer = None if observer_dir is None else load_observer(observer_dir)
     if backend.startswith("serial:"):
         from relaxgrip.hardware.gripper import open_rig_gripper
         from relaxgrip.hardware.rig_file import load_rig
@@ -537,7 +540,7 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
         gripper = open_rig_gripper(rig, clock)
         try:
             gripper.reset()
-            controller = GraspController(rig.geometry, bundle_estimator(kind, bundle),
+            controller = GraspController(rig.geometry, bundle_estimator(kind, bundle, observer),
                                          heat=rig.heat, limits=rig.limits)
         except BaseException:  # the port and the camera threads are not left open
             gripper.close()
@@ -546,7 +549,7 @@ def open_session(backend: str = "twin", *, clock: Clock, seed: int = 0,
                            rearm=gripper.reset)
     cfg = replace(config if config is not None else TwinConfig(), object_name=object_name)
     virtual = VirtualClock(clock.now())
-    controller = GraspController(cfg.rig, bundle_estimator(kind, bundle),
+    controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
                                  heat=cfg.heat, limits=twin_limits(cfg))
     if backend == "emulator":
         from relaxgrip.hardware.emulator import ready_emulated_gripper

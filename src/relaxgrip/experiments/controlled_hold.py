@@ -3,9 +3,7 @@
 The gripper closes on the force-measurement ball to the target force and
 holds it for ``duration_s`` under one of the estimators (``fixed``: no
 holding control; ``icfn``: instantaneous estimate only; ``relax``: ICFN +
-RCFN, Eq. 10; ``observer``: Eq. 10 with the parts of
-:mod:`relaxgrip.control.observer`).  The controller never reads the truth;
-this experiment does, to score
+RCFN).  The controller never reads the truth; this experiment does, to score
 the hold over the steady-state interval (100–280 s of a 280 s hold, scaled
 with the duration): the true force against the target, and the estimate
 against the true force.
@@ -21,8 +19,7 @@ For ``relax`` it can also say where the estimate's error comes from
 is held at the onset's aperture, with the loop's heater duties, and its true
 force is the curve Eq. 10 predicts.  The estimate's mean error over the steady
 state then splits exactly into the onset force ``F_inst``, Eq. 10's relaxation
-and the force of the closure the controller adds after the onset (which Eq. 10
-does not see).
+and the force of the closure the controller adds after the onset.
 """
 
 from __future__ import annotations
@@ -53,10 +50,12 @@ from relaxgrip.control import (
 from relaxgrip.control.runner import LoopRecorder
 from relaxgrip.errors import InputError
 from relaxgrip.experiments.profiles import Profile, band_coverage
+from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import reconstruct
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.learning.training import load_default_models
 from relaxgrip.limits import OUR_LIMITS
+from relaxgrip.perception.proximity import ProximityTarget
 from relaxgrip.twin import TWIN_VERSION, GripperTwin, TwinConfig
 from relaxgrip.validate import check_positive
 
@@ -277,9 +276,13 @@ class HoldResult:
         * ``relaxation_n``: the true fixed-aperture relaxation
           ``F_fix(0) - F_fix(t)`` less Eq. 10's ``K (1 - exp(-t / tau))``
           (negative when Eq. 10 predicts more relaxation than the twin shows);
-        * ``closure_n``: what the estimator adds to Eq. 10 (nothing, for
-          ``relax``) less what the controller's closure since the onset adds to
-          the true force, ``F_true - F_fix``.
+        * ``closure_n``: what the estimator adds to Eq. 10 (the closure since the
+          onset) less what that closure adds to the true force, ``F_true - F_fix``;
+        * ``calibration_n``, with a calibrated model directory only: the
+          calibrated closed-loop error taken off the estimate (negative when
+          the calibration found the estimate high);
+        * ``chain_n``, when the closed chain's reading was blended in
+          (:mod:`relaxgrip.control.chain`): what it added to the estimate.
 
         ``total_n`` is their sum, the mean estimate error.
 
@@ -301,10 +304,19 @@ class HoldResult:
         hold_s, f_inst, k_n, tau_s = columns[:, ok]
         eq10 = reconstruct(hold_s, f_inst, k_n, tau_s)
         est, truth, fixed = est[ok], truth[ok], fixed[ok]
+        calibrated = self.series("calibration_n")[mask][ok]
+        calibration = np.nan_to_num(calibrated)
+        chained = self.series("chain_n")[mask][ok]
+        chain = np.nan_to_num(chained)
         f_fix0 = self.fixed_aperture_n[0]
         out = {"onset_n": float(np.mean(f_inst - f_fix0)),
                "relaxation_n": float(np.mean((f_fix0 - fixed) - (f_inst - eq10))),
-               "closure_n": float(np.mean((est - eq10) - (truth - fixed)))}
+               "closure_n": float(np.mean((est - chain + calibration - eq10)
+                                          - (truth - fixed)))}
+        if np.isfinite(calibrated).any():
+            out["calibration_n"] = -float(np.mean(calibration))
+        if np.isfinite(chained).any():
+            out["chain_n"] = float(np.mean(chain))
         out["total_n"] = sum(out.values())
         return out
 
@@ -441,15 +453,16 @@ def run_hold(
     temp_profile: Profile | None = None,
     target_profile: Profile | None = None,
     disturbance: Profile | None = None,
+    observer: ObserverModel | None = None,
     budget: bool = False,
+    locate_object: bool = True,
     mcu: str = "python",
-    without: tuple[str, ...] = (),
 ) -> HoldResult:
     """Close on the force ball to ``target_n`` at ``temp_c`` and hold it for ``duration_s``.
 
     Parameters
     ----------
-    estimator : {"fixed", "icfn", "relax", "observer"}
+    estimator : {"fixed", "icfn", "relax"}
         Force estimator (and, for ``fixed``, no regulation during the hold).
     target_n : float
         Target force (N), in (0, 10].
@@ -461,7 +474,7 @@ def run_hold(
     seed : int
         Twin seed (the run's scatter and noise).
     models : ModelBundle, optional
-        ICFN, RCFN and the observer's calibration (default: the shipped models).
+        ICFN and RCFN (default: the shipped models).
     config : TwinConfig, optional
         Twin (default: our gripper, the force ball at its usual contact, cameras on;
         :func:`relaxgrip.hardware.rig_twin.twin_config_for_rig` gives any rig's).
@@ -478,15 +491,21 @@ def run_hold(
     temp_profile, target_profile, disturbance : Profile, optional
         Temperature setpoint (°C), force target (N) and push on the object (N,
         twin backend only) over the hold time (:mod:`relaxgrip.experiments.profiles`).
+    observer : ObserverModel, optional
+        The ``observer`` estimator's parameters (default: the shipped ones).
     budget : bool
         Also hold a copy of the twin at the onset's aperture, for
         :meth:`HoldResult.error_budget` (``relax`` on the twin backend only).
+    locate_object : bool
+        Have perception find the object (its catalogue width and colour) while
+        the motor settles before the hold, the closed chain take its marker
+        share from where it sits and read the other finger in the infrared
+        frame there (beyond the paper; ``ChainParams.ir_weight``).  False:
+        the operator does not say what is grasped, and the chain guesses the
+        other finger from the marker's.
     mcu : {"python", "firmware"}
         The emulator's MCU: the protocol's Python state machine, or the compiled
         firmware in simavr (``backend="emulator"`` only).
-    without : tuple of str
-        The ``observer``'s parts to leave out (:data:`relaxgrip.control.observer.PARTS`;
-        the ablation's variants).
 
     Returns
     -------
@@ -516,15 +535,16 @@ def run_hold(
                              "(serial:RIG.toml): no twin config with it")
         return _serial_hold(kind, target_n, duration_s, temp_c, seed, bundle,
                             backend.removeprefix(SERIAL_PREFIX), recorder, temp_profile,
-                            target_profile, without)
+                            target_profile, observer, locate_object)
     base = config if config is not None else TwinConfig()
     cfg = replace(base, initial_temp_c=temp_c)
     clock = VirtualClock()
     twin = _make_backend(backend, cfg, seed, clock, mcu)
     try:  # closed however it ends: the emulator's thread and pty with it
-        controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, without),
+        controller = GraspController(cfg.rig, bundle_estimator(kind, bundle, observer),
                                      heat=cfg.heat, limits=twin_limits(cfg))
-        plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False)
+        plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False,
+                         grasped=_as_known(cfg) if locate_object else None)
         on_step = _scenario(twin, temp_profile, target_profile, disturbance, temp_c, target_n)
         frozen: list[GripperTwin] = []
         if budget:
@@ -572,7 +592,7 @@ def run_hold(
 def _serial_hold(kind: EstimatorKind, target_n: float, duration_s: float, temp_c: float,
                  seed: int, bundle: ModelBundle, rig_path: str, recorder: LoopRecorder | None,
                  temp_profile: Profile | None, target_profile: Profile | None,
-                 without: tuple[str, ...]) -> HoldResult:
+                 observer: ObserverModel | None, locate_object: bool) -> HoldResult:
     """:func:`run_hold` on the gripper of a rig file, scored against its force reference."""
     from relaxgrip.clock import WallClock
     from relaxgrip.hardware.gripper import open_rig_gripper
@@ -584,7 +604,7 @@ def _serial_hold(kind: EstimatorKind, target_n: float, duration_s: float, temp_c
     rig.limits.check_setpoint_c(temp_c)
     clock = WallClock()
     # Everything slow first: once enabled, the MCU's watchdog wants a command every 200 ms.
-    controller = GraspController(rig.geometry, bundle_estimator(kind, bundle, without),
+    controller = GraspController(rig.geometry, bundle_estimator(kind, bundle, observer),
                                  heat=rig.heat, limits=rig.limits)
     warm_up()
     gripper = open_rig_gripper(rig, clock)
@@ -595,7 +615,7 @@ def _serial_hold(kind: EstimatorKind, target_n: float, duration_s: float, temp_c
         grasped = ProximityTarget(ball.width_m, ball.color_rgb,
                                   grasp_position_m=rig.finger.contact_m)
         plan = GraspPlan(target_n=target_n, temp_c=temp_c, hold_s=duration_s, release=False,
-                         grasped=grasped)
+                         grasped=grasped if locate_object else None)
         on_step = _scenario(gripper, temp_profile, target_profile, None, temp_c, target_n)
         try:
             loop = run_loop(gripper, controller, clock, plan,
@@ -763,10 +783,11 @@ def map_holds(run: Callable[[_Job], _Out], jobs: Sequence[_Job],
     return [_one_thread(run, job) for job in jobs]
 
 
-def _run_one(args: tuple[str, float, float, float, int, ModelBundle, TwinConfig | None]
-             ) -> HoldResult:
-    kind, target, duration, temp, seed, models, config = args
-    return run_hold(kind, target, duration, temp, seed, models, config=config)
+def _run_one(args: tuple[str, float, float, float, int, ModelBundle, ObserverModel | None,
+                         TwinConfig | None]) -> HoldResult:
+    kind, target, duration, temp, seed, models, observer, config = args
+    return run_hold(kind, target, duration, temp, seed, models, config=config,
+                    observer=observer)
 
 
 def compare_holds(
@@ -777,6 +798,7 @@ def compare_holds(
     seed: int = 0,
     models: ModelBundle | None = None,
     n_jobs: int = 1,
+    observer: ObserverModel | None = None,
     config: TwinConfig | None = None,
 ) -> HoldComparison:
     """Run each estimator (every one by default) on the same seed (in parallel with
@@ -784,6 +806,7 @@ def compare_holds(
     for kind in estimators:
         check_hold(kind, target_n, temp_c, duration_s)
     bundle = models if models is not None else load_default_models()
-    jobs = [(k, target_n, duration_s, temp_c, seed, bundle, config) for k in estimators]
+    jobs = [(k, target_n, duration_s, temp_c, seed, bundle, observer, config)
+            for k in estimators]
     results = map_holds(_run_one, jobs, n_jobs)
     return HoldComparison({r.estimator: r for r in results})

@@ -4,9 +4,9 @@ Eq. 10 assumes one step of displacement at one temperature.  Each scenario
 here breaks that while the gripper holds (the paper's own integrated demo
 heats the fingers mid-grasp), and :func:`compare_scenarios` runs ``relax``
 and ``observer`` through each on one seed: how much Eq. 10 degrades, how
-the observer's parts fare, and whether its band covers the truth.  The
-profiles are stated for a 280 s hold and scaled in time with the hold's
-length.
+much the online viscoelastic observer keeps, and whether its band covers
+the truth.  The profiles are stated for a 280 s hold and scaled in time with
+the hold's length.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ from relaxgrip.experiments.profiles import (
     parse_target_profile,
     parse_temp_profile,
 )
+from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.twin import TwinConfig
 
@@ -137,6 +138,7 @@ def check_scenarios(names: Sequence[str]) -> list[str]:
 
 def scenario_hold(estimator: str, name: str, seed: int = 0,
                   duration_s: float = PAPER_DURATION_S, models: ModelBundle | None = None,
+                  observer: ObserverModel | None = None,
                   config: TwinConfig | None = None) -> HoldResult:
     """One estimator's closed-loop hold through a scenario (its target and temperature before
     it acts), on the twin ``config`` (our gripper by default)."""
@@ -144,7 +146,7 @@ def scenario_hold(estimator: str, name: str, seed: int = 0,
     p = scenario.profiles(duration_s)
     return run_hold(estimator, target_n=scenario.target_n, duration_s=duration_s,
                     temp_c=scenario.temp_c, seed=seed, models=models, config=config,
-                    temp_profile=p["temp_profile"],
+                    observer=observer, temp_profile=p["temp_profile"],
                     target_profile=p["target_profile"], disturbance=p["disturbance"])
 
 
@@ -188,27 +190,29 @@ class ScenarioComparison:
 Run = tuple[str, str, int]
 
 
-def _one(args: tuple[Run, float, ModelBundle | None, TwinConfig | None]) -> HoldResult:
-    (estimator, name, seed), duration_s, models, config = args
-    return scenario_hold(estimator, name, seed, duration_s, models, config)
+def _one(args: tuple[Run, float, ModelBundle | None, ObserverModel | None, TwinConfig | None]
+         ) -> HoldResult:
+    (estimator, name, seed), duration_s, models, observer, config = args
+    return scenario_hold(estimator, name, seed, duration_s, models, observer, config)
 
 
 def scenario_holds(runs: Sequence[Run], duration_s: float = PAPER_DURATION_S,
-                   models: ModelBundle | None = None,
+                   models: ModelBundle | None = None, observer: ObserverModel | None = None,
                    n_jobs: int = 1, config: TwinConfig | None = None) -> list[HoldResult]:
     """Each run's :func:`scenario_hold`, in order, ``n_jobs`` at once."""
-    return map_holds(_one, [(run, duration_s, models, config) for run in runs], n_jobs)
+    return map_holds(_one, [(run, duration_s, models, observer, config) for run in runs],
+                     n_jobs)
 
 
 def compare_scenarios(names: Sequence[str] = ("ramp", "step", "push"), seed: int = 0,
                       duration_s: float = PAPER_DURATION_S,
                       estimators: Sequence[str] = ("relax", "observer"),
-                      models: ModelBundle | None = None,
+                      models: ModelBundle | None = None, observer: ObserverModel | None = None,
                       n_jobs: int = 1, config: TwinConfig | None = None) -> ScenarioComparison:
     """Run every estimator through every scenario on ``seed`` (``n_jobs`` holds at once), on
     the twin ``config`` (our gripper by default)."""
     runs = [(est, name, seed) for name in check_scenarios(names) for est in estimators]
-    holds = scenario_holds(runs, duration_s, models, n_jobs, config)
+    holds = scenario_holds(runs, duration_s, models, observer, n_jobs, config)
     out: dict[str, dict[str, HoldResult]] = {}
     for (est, name, _), hold in zip(runs, holds, strict=True):
         out.setdefault(name, {})[est] = hold

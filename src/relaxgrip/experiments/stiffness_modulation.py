@@ -25,7 +25,16 @@ estimated, the estimate's noise floor and whether the contact was detected.
 **(b) Closed-loop grasps** (Fig. "grasp" d–f): the grasp controller runs
 Open, Close, Hold, Lift and Sustain on a hammer at 5 N (stiff), an orange at
 6 N (medium) and a balloon at 0.3 N (compliant).  The estimator is ``relax``
-(:data:`GRASP_ESTIMATOR`): the ICFN before the hold, Eq. 10 through it.
+(:data:`GRASP_ESTIMATOR`): before the hold it reads each frame's force as
+the unrelaxed ICFN times the share the loading history retains
+(:mod:`relaxgrip.learning.history`), through the hold Eq. 10.  The paper's
+per-frame ``icfn``, trained on samples up to 11 N, reads the balloon's 0.3 N
+fingertip pinch (at 105 mm, beyond the datasets' 45-100 mm contacts) 0.1 N
+high: the true force in Sustain was 0.19 N on seed 0, outside the band, and
+the grasp failed on seeds 0-2, where ``relax`` holds 0.238 / 0.252 / 0.276 N
+in Sustain.  The hammer and the orange are held with either, on seeds 0-2.
+(With the ICFN's samples up to 8 N, ``icfn`` held the balloon at 0.243 /
+0.244 / 0.257 N.)
 
 The balloon (110 mm across) is pinched at the fingertips
 (:data:`BALLOON_CONTACT_M`): held mid-finger it hides the outer beams from the

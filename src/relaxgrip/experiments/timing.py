@@ -13,6 +13,7 @@ relaxation-compensated (plus RCFN).
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -215,8 +216,7 @@ def run_timing(seed: int = 0, quick: bool = False,
                 t0 = time.perf_counter()
                 p = perception.update(rgb, grasp.ir[i - i % 30], grasp.motor_mm[i])
                 t1 = time.perf_counter()
-                if p.features is not None:
-                    models.icfn.predict_one(p.features)
+                f_inst = models.icfn.predict_one(p.features) if p.features is not None else math.nan
                 t2 = time.perf_counter()
                 if p.thermal is None or i < perception.tracker.zero_frames:
                     continue
@@ -229,14 +229,14 @@ def run_timing(seed: int = 0, quick: bool = False,
                 if onset is None:
                     if rgb.t_s >= HOLD_ONSET_S:
                         onset = i
-                        builder.start(rgb.t_s, pose)
+                        builder.start(rgb.t_s, pose, grasp.motor_mm[i])
                     else:
-                        builder.observe(rgb.t_s, pose)
+                        builder.observe(rgb.t_s, pose, grasp.motor_mm[i])
                     continue
-                builder.observe(rgb.t_s, pose)
+                builder.observe(rgb.t_s, pose, grasp.motor_mm[i])
                 x = builder.build(finger_temperature_c(p.thermal))
                 if x is not None:
-                    models.rcfn.relaxation(x)
+                    models.rcfn.relaxation(x, f_inst)
                 t3 = time.perf_counter()
                 samples["rcfn"].append(t3 - t2)
                 samples["compensated"].append(t3 - t0)

@@ -546,7 +546,7 @@ def run_rcfn_sequence(seq: RcfnSequence, config: TwinConfig | None = None) -> Un
             percept, _ = h.perceive()
             pose = marker_pose(percept.marker)
             if pose is not None:
-                builder.observe(h.twin.time_s, pose)
+                builder.observe(h.twin.time_s, pose, h.motor_mm)
     out = UnitResult("rcfn", seq.index)
     if onset is None or marker_pose(onset[0].marker) is None or onset[0].features is None:
         out.dropped = 1
@@ -555,7 +555,7 @@ def run_rcfn_sequence(seq: RcfnSequence, config: TwinConfig | None = None) -> Un
     f0 = onset[1].contact_force_n
     pose0 = marker_pose(onset[0].marker)
     assert pose0 is not None
-    builder.start(t0, pose0)
+    builder.start(t0, pose0, h.motor_mm)
     curve_t, curve_f = [0.0], [f0]
     feats: dict[str, list[Any]] = {"sequence": [], "t_s": []}
     feats.update({name: [] for name in RCFN_SCHEMA.names})
@@ -564,7 +564,7 @@ def run_rcfn_sequence(seq: RcfnSequence, config: TwinConfig | None = None) -> Un
         pose = marker_pose(percept.marker)
         if pose is None or percept.thermal is None:
             return
-        builder.observe(t + t0, pose)
+        builder.observe(t + t0, pose, h.motor_mm)
         x = builder.build(finger_temperature_c(percept.thermal))
         if x is None:
             return

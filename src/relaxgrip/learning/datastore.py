@@ -34,7 +34,7 @@ from relaxgrip.errors import InputError
 from relaxgrip.fileio import check_input_dir, check_output_dir, one_line, read_manifest
 from relaxgrip.interrupts import deferred
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA, FeatureSchema
-from relaxgrip.physics.fitting import MAX_FORCE_N
+from relaxgrip.physics.fitting import MAX_FORCE_N, osculating_reduced
 from relaxgrip.validate import ABSOLUTE_ZERO_C
 
 FloatArray = NDArray[np.float64]
@@ -261,21 +261,32 @@ class Dataset:
                 rows["force_n"].to_numpy(np.float64))
 
     def rcfn_xy(self, split: str) -> tuple[FloatArray, FloatArray]:
-        """RCFN features along the holds of a split and their ``[K, log tau]`` labels.
+        """RCFN features along the holds of a split and their per-frame ``[kappa, log tau]`` labels.
 
-        Every feature row of a hold is labelled with the hold's own Eq. 9 fit
-        (``K = kappa f0_n`` and ``tau_s`` of the sequences table), as the
-        paper's RCFN learns the effective relaxation parameters of each
-        sequence: asked at any frame of the hold, it should give that curve.
+        Each feature row is labelled with the Eq. 10 curve that touches its
+        hold's force curve at the row's time (same force and slope,
+        :func:`relaxgrip.physics.fitting.osculating_reduced`): the curve the
+        estimator should follow from that frame on.  Where the force is not
+        relaxing at that instant (it rises), the sequence's whole-hold fit
+        (``kappa``, ``tau_s`` of the sequences table) stands in.
         """
         labels = self.sequences.set_index("sequence")
         rows = self.rcfn_features
         if split != "all":
             rows = rows[rows["sequence"].map(labels["split"]) == split]
-        k_n = rows["sequence"].map(labels["kappa"] * labels["f0_n"]).to_numpy(np.float64)
-        tau = rows["sequence"].map(labels["tau_s"]).to_numpy(np.float64)
+        kappa = rows["sequence"].map(labels["kappa"]).to_numpy(np.float64, copy=True)
+        tau = rows["sequence"].map(labels["tau_s"]).to_numpy(np.float64, copy=True)
+        curves = self.curves.groupby("sequence")
+        times = rows["t_s"].to_numpy(np.float64)
+        for seq_id, idx in rows.groupby("sequence").indices.items():
+            curve = curves.get_group(seq_id)
+            k, t = osculating_reduced(curve["t_s"].to_numpy(np.float64),
+                                      curve["force_n"].to_numpy(np.float64),
+                                      float(labels.at[seq_id, "f0_n"]), times[idx])
+            ok = np.isfinite(k) & (k > 0)
+            kappa[idx[ok]], tau[idx[ok]] = k[ok], t[ok]
         return rows[list(RCFN_SCHEMA.names)].to_numpy(np.float64), np.column_stack(
-            [k_n, np.log(tau)])
+            [kappa, np.log(tau)])
 
 
 #: The splits a row may belong to.
@@ -304,6 +315,7 @@ _UNIT_RANGES: dict[str, tuple[float, float]] = {
     "degC": (ABSOLUTE_ZERO_C, 1000.0),  # past any infrared camera's range
     "K": (0.0, 1000.0),  # a spread of temperatures
     "K/m": (-1e6, 1e6),  # a thousand kelvin over a millimetre
+    "s": (0.0, math.inf),  # hold_time_s: time since the hold onset
     "N": (-MAX_FORCE_N, MAX_FORCE_N),  # what a relaxation fit takes
 }
 

@@ -2,12 +2,15 @@
 
 * ICFN: MAE, RMSE, R², and the median absolute error per force range.
 * RCFN: every held-out hold is reconstructed online as the estimator would:
-  at each feature time the RCFN predicts ``(K, tau)`` from the features
+  at each feature time the RCFN predicts ``(kappa, tau)`` from the features
   seen so far, and until the next one the force is
-  ``F0 - K (1 - exp(-t / tau))`` (Eq. 10).
+  ``F0 (1 - kappa (1 - exp(-t / tau)))`` (Eq. 10 with ``K = kappa F0``).
   ``F0`` is the true onset force, which isolates the RCFN as the paper's
   curve metrics do; the same curves started from the ICFN's estimate of the
   onset force are scored too.  NRMSE, AUC_rel, correlation and Amp per curve.
+* The force ``relax`` and ``observer`` read (beyond the paper), where the
+  models have an unrelaxed ICFN: its ensemble times each sample's retained
+  share (:mod:`relaxgrip.learning.history`), scored like the ICFN.
 * Repeatability: the 40, 50 and 60 °C groups of six holds from the same start
   force: mean and spread of the curve metrics, and the spread of the true force
   at the hold's end and at 100 s since the onset, where the paper's sequences
@@ -31,6 +34,7 @@ from relaxgrip.learning.datasets import (
     REPEATS_PER_GROUP,
 )
 from relaxgrip.learning.datastore import Dataset
+from relaxgrip.learning.history import retained_shares
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.metrics import (
     amplitude,
@@ -100,6 +104,9 @@ class Evaluation:
         Every reconstructed hold.
     repeat_groups : dict
         Temperature (``"40"``…) to the curves of its repeatability group.
+    history_predicted_n : ndarray or None
+        The force read from the loading history on the ICFN samples (the
+        unrelaxed ICFN times the retained share); None without one.
     """
 
     split: str
@@ -107,10 +114,17 @@ class Evaluation:
     icfn_predicted_n: FloatArray
     curves: list[CurveScore]
     repeat_groups: dict[str, list[CurveScore]] = field(default_factory=dict)
+    history_predicted_n: FloatArray | None = None
 
     def icfn_summary(self) -> dict[str, Any]:
         """ICFN figures."""
         return _force_scores(self.icfn_predicted_n, self.icfn_truth_n)
+
+    def history_summary(self) -> dict[str, Any] | None:
+        """The same figures for the force read from the loading history (None without it)."""
+        if self.history_predicted_n is None:
+            return None
+        return _force_scores(self.history_predicted_n, self.icfn_truth_n)
 
     def rcfn_summary(self) -> dict[str, Any]:
         """RCFN figures over the held-out curves."""
@@ -158,6 +172,8 @@ class Evaluation:
         """The ``relaxgrip evaluate --json`` object."""
         out = {"split": self.split, "icfn": self.icfn_summary(), "rcfn": self.rcfn_summary(),
                "repeatability": self.repeatability_summary()}
+        if (history := self.history_summary()) is not None:
+            out["icfn_history"] = history
         return out
 
 
@@ -177,12 +193,12 @@ def _force_scores(predicted: FloatArray, truth: FloatArray) -> dict[str, Any]:
 
 
 def reconstruct_online(
-    t_s: FloatArray, f_inst_n: float, feature_t_s: FloatArray, k_n: FloatArray,
+    t_s: FloatArray, f_inst_n: float, feature_t_s: FloatArray, kappa: FloatArray,
     tau_s: FloatArray,
 ) -> FloatArray:
     """Eq. 10 with the latest RCFN prediction at each time (held until the next one)."""
     idx = np.clip(np.searchsorted(feature_t_s, t_s, side="right") - 1, 0, feature_t_s.size - 1)
-    out: FloatArray = f_inst_n - k_n[idx] * -np.expm1(-t_s / tau_s[idx])
+    out: FloatArray = f_inst_n * (1.0 - kappa[idx] * -np.expm1(-t_s / tau_s[idx]))
     return out
 
 
@@ -216,10 +232,10 @@ def evaluate(data: Dataset, models: ModelBundle, split: str = "test") -> Evaluat
         t = c["t_s"].to_numpy(np.float64)
         truth = c["force_n"].to_numpy(np.float64)
         ft = f["t_s"].to_numpy(np.float64)
-        k_n, tau = pred[:, 0], np.exp(pred[:, 1])
+        kappa, tau = pred[:, 0], np.exp(pred[:, 1])
         f0 = float(row.f0_n)
-        predicted = reconstruct_online(t, f0, ft, k_n, tau)
-        from_icfn = reconstruct_online(t, float(f_hat), ft, k_n, tau)
+        predicted = reconstruct_online(t, f0, ft, kappa, tau)
+        from_icfn = reconstruct_online(t, float(f_hat), ft, kappa, tau)
         try:
             scores = (nrmse(t, predicted, truth), auc_rel(t, predicted, truth),
                       curve_correlation(predicted, truth), nrmse(t, from_icfn, truth))
@@ -240,5 +256,10 @@ def evaluate(data: Dataset, models: ModelBundle, split: str = "test") -> Evaluat
         chosen = [by_id[int(s)] for s in members["sequence"][:REPEATS_PER_GROUP]]
         if chosen:
             groups[f"{temp:g}"] = chosen
-    return Evaluation(split, y, models.icfn.predict(x), curves, groups)
+    history = None
+    if models.unrelaxed is not None:
+        # Splits are by episode, so each sample's history lies within its split.
+        history = models.unrelaxed.predict(x) * retained_shares(data.icfn_rows(split),
+                                                               models.unrelaxed.model)
+    return Evaluation(split, y, models.icfn.predict(x), curves, groups, history)
 

@@ -1,25 +1,38 @@
-"""Relaxation compensation force network, RCFN (paper §IV-B).
+"""Relaxation compensation model, RCFN (paper §IV-B, Eq. 10).
 
-During holding the force follows the reduced model (Eq. 9)::
+During holding the force follows the reduced model of Eq. 9::
 
     F(t) = F_inst - K (1 - exp(-t / tau))
 
-and the RCFN predicts the effective relaxation magnitude ``K`` (N) and the
-logarithm of the relaxation time ``tau`` (s) from the paper's inputs
-(:data:`relaxgrip.perception.features.RCFN_SCHEMA`): the current finger
-temperature, the marker pose at the contact onset, the current pose and the
-pose velocity.  It is two Ridge regressors on one feature expansion; the
-estimator (:class:`relaxgrip.control.estimators.RelaxEstimator`) asks it at
-every infrared frame of the hold and reconstructs the force by Eq. 10.
+and the paper's RCFN is two Ridge regressors predicting the relaxation
+magnitude ``K`` and ``log tau`` from the thermal and kinematic context
+(:data:`relaxgrip.perception.features.RCFN_SCHEMA`: temperature, pose at
+contact onset, current pose, pose velocity).  By Eq. 7, ``K = X0 sum k_i`` and
+``F_inst = X0 (k_e + sum k_i)``, so the relaxing share
+``kappa = K / F_inst = sum k_i / (k_e + sum k_i)`` is a property of the
+material state, independent of the load: the first regressor predicts
+``kappa`` and ``K_hat = kappa_hat * F_inst_hat``.
 
-Temperature acts on relaxation strongly and non-polynomially (slowly in the
-glassy state, steeply through the transition), so the temperature column is
-first replaced by a piecewise-linear ("hat") basis over the training range;
-the features are then standardised, expanded into a polynomial of the chosen
-degree, standardised again, and fitted by scikit-learn's
+The estimator asks the RCFN again at every frame of the hold, so it need not
+predict one curve for the whole hold.  Several modes relax at once in the
+finger, and one exponential cannot follow the fast start and the slow tail of
+a 280 s hold together (fitted to the whole hold it correlates 0.98 with it):
+the RCFN is trained on per-frame labels, the Eq. 10 curve that touches the
+hold at that frame (:meth:`relaxgrip.learning.datastore.Dataset.rcfn_xy`),
+and the time since the onset enters also as ``log(1 + t)``
+(``time_column``), the scale on which relaxation proceeds.
+
+Both regressors read the same features.  Temperature acts on relaxation
+strongly and non-polynomially (slowly in the glassy state, steeply through
+the transition), so the temperature column is first replaced by a
+piecewise-linear ("hat") basis over the training range; the features are
+then standardised, expanded into a polynomial of the chosen degree,
+standardised again, and fitted by scikit-learn's
 :class:`~sklearn.linear_model.Ridge`, one per target with its own penalty.
-Coefficients are copied into arrays; prediction is NumPy only, and
-:meth:`RCFN.relaxation` is a preplanned per-frame fast path.
+The relaxing share scatters multiplicatively (material, object, contact), so
+its regressor fits ``log kappa``.  Coefficients are copied into arrays;
+prediction is NumPy only, and :meth:`RCFN.relaxation` is a preplanned
+per-frame fast path.
 """
 
 from __future__ import annotations
@@ -45,8 +58,8 @@ FloatArray = NDArray[np.float64]
 
 __all__ = ["RCFN", "RCFN_ALPHAS", "RCFN_TARGETS", "n_poly_features", "reconstruct", "select_rcfn"]
 
-#: The two targets, in column order of ``Y``: relaxation magnitude and log relaxation time.
-RCFN_TARGETS = ("k_n", "log_tau_s")
+#: The two targets, in column order of ``Y``: relaxing share and log relaxation time.
+RCFN_TARGETS = ("kappa", "log_tau_s")
 #: Default penalties :func:`select_rcfn` tries for each target.
 RCFN_ALPHAS = (1e-3, 1e-2, 1e-1, 1.0, 10.0, 100.0, 1000.0)
 #: Inputs and ``log tau`` are clipped to their training range widened by this share of it.
@@ -207,6 +220,13 @@ def _basis(X: FloatArray, knots: FloatArray, column: int) -> FloatArray:
     return np.hstack([_hat_weights(X[:, column], knots), rest])
 
 
+def _with_log_time(X: FloatArray, Z: FloatArray, column: int | None) -> FloatArray:
+    """``Z`` with ``log(1 + t)`` of ``X``'s time column appended (``column`` None: ``Z``)."""
+    if column is None:
+        return Z
+    return np.hstack([Z, np.log1p(np.maximum(X[:, column], 0.0))[:, None]])
+
+
 def _ranges(X: FloatArray, Y: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Training ranges of the features and of the ``log tau`` labels, widened by a margin."""
     lo, hi = X.min(axis=0), X.max(axis=0)
@@ -247,8 +267,8 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
 
     Parameters
     ----------
-    alpha_k : float
-        Ridge penalty of the ``K`` regressor (on standardised features).
+    alpha_kappa : float
+        Ridge penalty of the ``kappa`` regressor (on standardised features).
     alpha_log_tau : float
         Ridge penalty of the ``log tau`` regressor.
     degree : int
@@ -259,6 +279,12 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         (0: temperature enters as it is).
     temp_column : int
         Which feature is the temperature.
+    time_column : int or None
+        Which feature is the time since the hold onset: ``log(1 + t)`` is
+        appended to the features, the scale on which relaxation proceeds
+        (None: no such column).
+    log_kappa : bool
+        Fit ``log kappa`` rather than ``kappa`` (predictions are ``kappa`` either way).
 
     Attributes
     ----------
@@ -277,7 +303,7 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
     log_tau_range_ : ndarray, shape (2,)
         Range of the ``log tau`` labels in training (predictions are clipped to it).
     coef_ : ndarray, shape (n_output_features_, 2)
-        Ridge coefficients, one column per target (``k_n``, ``log_tau_s``).
+        Ridge coefficients, one column per target (``kappa``, ``log_tau_s``).
     intercept_ : ndarray, shape (2,)
         Ridge intercepts.
 
@@ -285,24 +311,29 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
     -----
     A polynomial extrapolates wildly: every feature is clipped to the range
     it had in training (widened by :data:`RANGE_MARGIN` of it) before the
-    expansion, ``K`` to be ``>= 0`` and ``log tau`` to the training labels' range (widened alike).
+    expansion, ``kappa`` to ``[0, 1]`` (a hold cannot lose more than its
+    force) and ``log tau`` to the training labels' range (widened alike).
     :meth:`relaxation` reuses buffers owned by the estimator and is not
     re-entrant; give each thread its own copy.
     """
 
     def __init__(
         self,
-        alpha_k: float = 1.0,
+        alpha_kappa: float = 1.0,
         alpha_log_tau: float = 1.0,
         degree: int = 2,
         temp_knots: int = 5,
         temp_column: int = 0,
+        log_kappa: bool = True,
+        time_column: int | None = None,
     ) -> None:
-        self.alpha_k = alpha_k
+        self.alpha_kappa = alpha_kappa
         self.alpha_log_tau = alpha_log_tau
         self.degree = degree
         self.temp_knots = temp_knots
         self.temp_column = temp_column
+        self.log_kappa = log_kappa
+        self.time_column = time_column
 
     def fit(self, X: ArrayLike, Y: ArrayLike) -> RCFN:
         """Fit both regressors.
@@ -312,8 +343,8 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         X : array_like, shape (n_samples, n_features)
             Feature vectors (units of the feature schema), finite.
         Y : array_like, shape (n_samples, 2)
-            Columns ``k_n`` (relaxation magnitude ``K``, N) and ``log_tau_s``
-            (natural log of the relaxation time in s).
+            Columns ``kappa`` (relaxing share ``K / F_inst``, dimensionless)
+            and ``log_tau_s`` (natural log of the relaxation time in s).
 
         Returns
         -------
@@ -329,17 +360,20 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         X_arr, Y_arr = _check_targets(X, Y)
         knots = self._knots_for(X_arr)
         design, phi = _Design.of(self._transform(X_arr, knots), self.degree)
+        targets = self._internal_targets(Y_arr)
         fits = [
-            _ridge(phi, Y_arr[:, k], alpha)
-            for k, alpha in enumerate((self.alpha_k, self.alpha_log_tau))
+            _ridge(phi, targets[:, k], alpha)
+            for k, alpha in enumerate((self.alpha_kappa, self.alpha_log_tau))
         ]
         self._set_learned(design, np.column_stack([c for c, _ in fits]), [b for _, b in fits],
                           knots, X_arr.shape[1], _ranges(X_arr, Y_arr))
         return self
 
     def _transform(self, X: FloatArray, knots: FloatArray) -> FloatArray:
-        """Features after the temperature basis."""
-        return _basis(X, knots, self.temp_column)
+        """Features after the temperature basis and the log-time column."""
+        if self.time_column is not None and not 0 <= self.time_column < X.shape[1]:
+            raise ValueError(f"time_column {self.time_column} is not a column of X")
+        return _with_log_time(X, _basis(X, knots, self.temp_column), self.time_column)
 
     def _knots_for(self, X: FloatArray) -> FloatArray:
         """Knots spread over the training range of the temperature column."""
@@ -353,6 +387,14 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         if not hi > lo:
             raise ValueError("the temperature column is constant: no basis to spread over it")
         return np.linspace(lo, hi, self.temp_knots)
+
+    def _internal_targets(self, Y: FloatArray) -> FloatArray:
+        """What the regressors fit: ``log kappa`` (if chosen) and ``log tau``."""
+        if not self.log_kappa:
+            return Y
+        if (Y[:, 0] <= 0).any():
+            raise ValueError("kappa must be > 0 to fit log kappa")
+        return np.column_stack([np.log(Y[:, 0]), Y[:, 1]])
 
     def _set_learned(
         self,
@@ -387,7 +429,7 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
             )
 
     def predict(self, X: ArrayLike) -> FloatArray:
-        """Relaxation magnitude and log relaxation time of each feature vector.
+        """Relaxing share and log relaxation time of each feature vector.
 
         Parameters
         ----------
@@ -397,7 +439,7 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         Returns
         -------
         ndarray, shape (n_samples, 2)
-            Columns ``k_n`` (N) and ``log_tau_s`` (log of s).
+            Columns ``kappa`` (dimensionless) and ``log_tau_s`` (log of s).
 
         Raises
         ------
@@ -414,7 +456,9 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         phi -= self.phi_mean_
         phi /= self.phi_scale_
         result: FloatArray = phi @ self.coef_ + self.intercept_
-        np.maximum(result[:, 0], 0.0, out=result[:, 0])
+        if self.log_kappa:
+            result[:, 0] = np.exp(np.minimum(result[:, 0], 0.0))
+        np.clip(result[:, 0], 0.0, 1.0, out=result[:, 0])
         np.clip(result[:, 1], *self.log_tau_range_, out=result[:, 1])
         return result
 
@@ -428,18 +472,20 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         )
         return self._plan
 
-    def relaxation(self, x: ArrayLike) -> tuple[float, float]:
+    def relaxation(self, x: ArrayLike, f_inst_n: float) -> tuple[float, float]:
         """Relaxation magnitude and time for one feature vector: the per-frame fast path.
 
         Parameters
         ----------
         x : array_like, shape (n_features_in_,)
             One feature vector.
+        f_inst_n : float
+            Instantaneous force at the hold onset (N), e.g. from the ICFN.
 
         Returns
         -------
         k_n : float
-            Relaxation magnitude ``K`` (N, ``>= 0``).
+            Relaxation magnitude ``K = kappa * f_inst_n`` (N).
         tau_s : float
             Relaxation time ``exp(log_tau)`` (s).
 
@@ -459,18 +505,19 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
             if x.shape != (n,):
                 raise ValueError(f"x must have shape ({n},), got {x.shape}; use predict for 2-D")
         if plan is None:
-            k, log_tau = self.predict(np.asarray(x, dtype=np.float64)[None, :])[0].tolist()
-            return k, math.exp(log_tau)
+            kappa, log_tau = self.predict(np.asarray(x, dtype=np.float64)[None, :])[0].tolist()
+            return kappa * f_inst_n, math.exp(log_tau)
         clipped = np.minimum(x, self.x_max_, out=self._clipped)
         np.maximum(clipped, self.x_min_, out=clipped)
-        k, log_tau = plan(self._expand_one(clipped))
+        kappa, log_tau = plan(self._expand_one(clipped))
+        kappa = math.exp(min(kappa, 0.0)) if self.log_kappa else min(max(kappa, 0.0), 1.0)
         lo, hi = self._log_tau_bounds
-        return max(k, 0.0), math.exp(min(max(log_tau, lo), hi))
+        return kappa * f_inst_n, math.exp(min(max(log_tau, lo), hi))
 
     def _expand_one(self, x: FloatArray) -> FloatArray:
-        """One (clipped) vector through the temperature basis."""
+        """One (clipped) vector through the temperature basis and the log-time column."""
         knots = self._knots_list
-        if not knots:
+        if not knots and self.time_column is None:
             return x
         out = self._expanded
         k = len(knots)
@@ -481,10 +528,14 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
             w = (t - knots[i]) / (knots[i + 1] - knots[i])
             out[i] = 1.0 - w
             out[i + 1] = w
-        # every feature but the temperature, in order: two slices
-        c = self.temp_column
-        out[k : k + c] = x[:c]
-        out[k + c : k + x.size - 1] = x[c + 1 :]
+        if k:  # every feature but the temperature, in order: two slices
+            c = self.temp_column
+            out[k : k + c] = x[:c]
+            out[k + c : k + x.size - 1] = x[c + 1 :]
+        else:
+            out[: x.size] = x
+        if self.time_column is not None:
+            out[-1] = math.log1p(max(x.item(self.time_column), 0.0))
         return out
 
     def __getstate__(self) -> dict[str, Any]:
@@ -568,12 +619,14 @@ class RCFN(BaseEstimator):  # type: ignore[misc]
         if knots.size and not (np.diff(knots) > 0).all():
             raise ValueError("array 'temp_knots' must be increasing")
         design = _Design(got["x_mean"], got["x_scale"], got["phi_mean"], got["phi_scale"])
-        n_features = d - knots.size + 1 if knots.size else d
-        column = est.temp_column
-        if (isinstance(column, bool) or not isinstance(column, int | np.integer)
-                or not 0 <= column < n_features):
-            raise ValueError(f"temp_column must be a column of the {n_features} inputs, "
-                             f"got {column!r}")
+        n_features = (d - knots.size + 1 if knots.size else d) - (est.time_column is not None)
+        for name, column in (("temp_column", est.temp_column), ("time_column", est.time_column)):
+            if column is None and name == "time_column":
+                continue
+            if (isinstance(column, bool) or not isinstance(column, int | np.integer)
+                    or not 0 <= column < n_features):
+                raise ValueError(f"{name} must be a column of the {n_features} inputs, "
+                                 f"got {column!r}")
         for name, shape in (("x_min", (n_features,)), ("x_max", (n_features,)),
                             ("log_tau_range", (2,))):
             if got[name].shape != shape:
@@ -594,22 +647,24 @@ def select_rcfn(
     *,
     degree: int = 2,
     temp_knots: int = 5,
+    log_kappa: bool = True,
+    time_column: int | None = None,
 ) -> tuple[RCFN, list[dict[str, Any]]]:
     """Choose each target's Ridge penalty by validation RMSE.
 
     The two regressors are independent, so each target takes the ``alpha``
     with the lowest validation RMSE of that target (the first, on a tie); the
-    returned model equals ``RCFN(best_k, best_log_tau, degree).fit(X_train, Y_train)``.
+    returned model equals ``RCFN(best_kappa, best_log_tau, degree).fit(X_train, Y_train)``.
 
     Parameters
     ----------
     X_train, Y_train : array_like, shapes (n, d) and (n, 2)
-        Training features and targets (``k_n``, ``log_tau_s``).
+        Training features and targets (``kappa``, ``log_tau_s``).
     X_val, Y_val : array_like, shapes (m, d) and (m, 2)
         Validation features and targets.
     alphas : sequence of float
         Penalties to try, each ``> 0``.
-    degree, temp_knots : int
+    degree, temp_knots, log_kappa, time_column : int, int, bool, int or None
         The other hyperparameters, see :class:`RCFN`.
 
     Returns
@@ -617,7 +672,7 @@ def select_rcfn(
     best : RCFN
         The fitted model with the chosen penalties.
     table : list of dict
-        Per alpha, in order: ``alpha``, ``val_rmse_k_n``, ``val_rmse_log_tau``
+        Per alpha, in order: ``alpha``, ``val_rmse_kappa``, ``val_rmse_log_tau``
         and ``fit_s`` (wall time of both fits, s).
     """
     _check_degree(degree)
@@ -627,15 +682,17 @@ def select_rcfn(
     X_va, Y_va = _check_targets(X_val, Y_val)
     if X_va.shape[1] != X_tr.shape[1]:
         raise ValueError(f"X_val has {X_va.shape[1]} features but X_train has {X_tr.shape[1]}")
-    probe = RCFN(degree=degree, temp_knots=temp_knots)
+    probe = RCFN(degree=degree, temp_knots=temp_knots, log_kappa=log_kappa,
+                 time_column=time_column)
     knots = probe._knots_for(X_tr)
     design, phi = _Design.of(probe._transform(X_tr, knots), degree)
+    targets = probe._internal_targets(Y_tr)
     ranges = _ranges(X_tr, Y_tr)
     fits: list[list[tuple[FloatArray, float]]] = []
     table: list[dict[str, Any]] = []
     for alpha in alphas:
         start = time.perf_counter()
-        pair = [_ridge(phi, Y_tr[:, k], float(alpha)) for k in range(2)]
+        pair = [_ridge(phi, targets[:, k], float(alpha)) for k in range(2)]
         fit_s = time.perf_counter() - start
         probe._set_learned(design, np.column_stack([c for c, _ in pair]), [b for _, b in pair],
                            knots, X_tr.shape[1], ranges)
@@ -643,15 +700,15 @@ def select_rcfn(
         fits.append(pair)
         table.append({
             "alpha": float(alpha),
-            "val_rmse_k_n": float(rmse[0]),
+            "val_rmse_kappa": float(rmse[0]),
             "val_rmse_log_tau": float(rmse[1]),
             "fit_s": fit_s,
         })
-    best_k = int(np.argmin([row["val_rmse_k_n"] for row in table]))
+    best_k = int(np.argmin([row["val_rmse_kappa"] for row in table]))
     best_t = int(np.argmin([row["val_rmse_log_tau"] for row in table]))
     best = RCFN(
-        alpha_k=float(alphas[best_k]), alpha_log_tau=float(alphas[best_t]), degree=degree,
-        temp_knots=temp_knots,
+        alpha_kappa=float(alphas[best_k]), alpha_log_tau=float(alphas[best_t]), degree=degree,
+        temp_knots=temp_knots, log_kappa=log_kappa, time_column=time_column,
     )
     coef = np.column_stack([fits[best_k][0][0], fits[best_t][1][0]])
     best._set_learned(design, coef, [fits[best_k][0][1], fits[best_t][1][1]], knots,

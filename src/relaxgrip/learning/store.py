@@ -6,9 +6,7 @@ A model directory holds three files::
     rcfn.npz        the RCFN's learned arrays (RCFN.to_arrays)
     manifest.json   format and version, hyperparameters, the feature schemas
                     the models read, each npz file's size and sha256, software
-                    versions, twin version, creation time, training record,
-                    and the observer's calibration once ``relaxgrip calibrate``
-                    has measured it (:mod:`relaxgrip.learning.calibration`)
+                    versions, twin version, creation time, training record
 
 :func:`save_models` writes every file to a temporary name in the directory
 first and renames them into place only when all are written (manifest last),
@@ -45,8 +43,10 @@ from relaxgrip.fileio import (
     read_npz_entry,
     write_files_atomically,
 )
-from relaxgrip.learning.calibration import Calibration
+from relaxgrip.learning.history import UnrelaxedIcfn
+from relaxgrip.learning.hold_bias import HoldBias
 from relaxgrip.learning.icfn import ICFN
+from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.rcfn import RCFN
 from relaxgrip.perception.features import FeatureSchema
 
@@ -59,7 +59,7 @@ __all__ = [
     "load_models",
     "model_checksums",
     "save_models",
-    "set_calibration",
+    "set_hold_bias",
 ]
 
 #: Written as the manifest's ``format``; a manifest without it is not ours.
@@ -70,8 +70,8 @@ FORMAT_VERSION = 1
 MANIFEST_NAME = "manifest.json"
 ICFN_FILE = "icfn.npz"
 RCFN_FILE = "rcfn.npz"
-#: The manifest section ``relaxgrip calibrate`` writes.
-CALIBRATION_KEY = "calibration"
+UNRELAXED_FILE = "icfn_unrelaxed.npz"
+HISTORY_FILE = "history.npz"
 
 
 class ModelFileError(InputError):
@@ -90,9 +90,14 @@ class ModelBundle:
         Fitted relaxation model.
     manifest : dict
         The parsed ``manifest.json``.
-    calibration : Calibration or None
-        The ``observer``'s calibration against a force reference
-        (``relaxgrip calibrate``); None in directories not calibrated.
+    unrelaxed : UnrelaxedIcfn or None
+        The ICFN ensemble on unrelaxed forces and the branch parameters of its labels
+        (:mod:`relaxgrip.learning.history`); None in directories without them,
+        where every estimator reads the paper's ICFN.
+    hold_bias : HoldBias or None
+        ``relax``'s closed-loop error as ``relaxgrip calibrate-hold`` measured
+        it with these models (:mod:`relaxgrip.learning.hold_bias`); None in
+        directories not calibrated, where ``relax`` is the paper's Eq. 10.
     directory : Path or None
         Where they were loaded from (absolute); None for models built in memory.
     """
@@ -100,16 +105,19 @@ class ModelBundle:
     icfn: ICFN
     rcfn: RCFN
     manifest: dict[str, Any]
-    calibration: Calibration | None = None
+    unrelaxed: UnrelaxedIcfn | None = None
+    hold_bias: HoldBias | None = None
     directory: Path | None = None
 
     def provenance(self) -> dict[str, Any]:
         """What a recording says of these models: where they were loaded from, the sha256
-        of each model file, and a digest of the calibration (None without one)."""
-        cal = self.calibration
+        of each model file, and a digest of the calibration taken off the estimate (None
+        when there is none: :attr:`hold_bias`, not the manifest's, which a bundle built
+        without it still holds)."""
+        bias = self.hold_bias
         return {"directory": None if self.directory is None else str(self.directory),
                 "sha256": model_checksums(self.manifest),
-                "calibration_sha256": None if cal is None else json_digest(cal.to_dict())}
+                "hold_bias_sha256": None if bias is None else json_digest(bias.to_dict())}
 
     @property
     def icfn_feature_schema(self) -> FeatureSchema:
@@ -148,7 +156,7 @@ def check_models_out(directory: Path) -> Path:
         A file there, a directory of something else (a dataset), one of
         earlier models with files that are not theirs, or not writable.
     """
-    own = (ICFN_FILE, RCFN_FILE, MANIFEST_NAME)
+    own = (ICFN_FILE, RCFN_FILE, UNRELAXED_FILE, HISTORY_FILE, MANIFEST_NAME)
     return check_output_dir(Path(directory), FORMAT_NAME, own, InputError)
 
 
@@ -161,6 +169,7 @@ def save_models(
     rcfn_feature_schema: FeatureSchema,
     twin_version: str,
     training: Mapping[str, Any],
+    unrelaxed: UnrelaxedIcfn | None = None,
 ) -> Path:
     """Save both fitted estimators and their manifest to ``directory``.
 
@@ -182,6 +191,10 @@ def save_models(
         JSON-serialisable record of the training: metrics, dataset sizes and
         seeds, selection tables (NumPy scalars and arrays are converted; NaN
         and infinity are not allowed).
+    unrelaxed : UnrelaxedIcfn, optional
+        The ICFN on unrelaxed forces (reading the ICFN's feature vector, all of
+        it or the features it names) and its branch parameters, saved beside
+        them.
 
     Returns
     -------
@@ -211,6 +224,27 @@ def save_models(
         )
     icfn_data = npz_bytes(icfn_arrays)
     rcfn_data = npz_bytes(rcfn_arrays)
+    extra: list[tuple[str, bytes]] = []
+    sections: dict[str, Any] = {}
+    if unrelaxed is not None:
+        missing = [f for f in unrelaxed.features if f not in icfn_feature_schema.names]
+        if missing:
+            raise ValueError(f"the unrelaxed ICFN reads features the ICFN schema does not "
+                             f"have: {', '.join(missing)}")
+        unrelaxed_data = npz_bytes({f"member{i}/{name}": value
+                                    for i, member in enumerate(unrelaxed.members)
+                                    for name, value in member.to_arrays().items()})
+        history_data = npz_bytes(unrelaxed.model.to_arrays())
+        sections = {
+            "icfn_unrelaxed": {"estimator": "ICFN ensemble", "params": {
+                "members": [member.get_params() for member in unrelaxed.members]},
+                               "feature_schema": icfn_feature_schema.to_dict(),
+                               "features": list(unrelaxed.features),
+                               **file_entry(UNRELAXED_FILE, unrelaxed_data)},
+            "history": {"estimator": "ObserverModel", "params": unrelaxed.model.get_params(),
+                        **file_entry(HISTORY_FILE, history_data)},
+        }
+        extra = [(UNRELAXED_FILE, unrelaxed_data), (HISTORY_FILE, history_data)]
     manifest = {
         "format": FORMAT_NAME,
         "format_version": FORMAT_VERSION,
@@ -231,13 +265,14 @@ def save_models(
             "feature_schema": rcfn_feature_schema.to_dict(),
             **file_entry(RCFN_FILE, rcfn_data),
         },
+        **sections,
         "training": dict(training),
     }
     text = _manifest_bytes(manifest, "training")
     with made_directory(directory):
         write_files_atomically(
             directory,
-            [(ICFN_FILE, icfn_data), (RCFN_FILE, rcfn_data), (MANIFEST_NAME, text)],
+            [(ICFN_FILE, icfn_data), (RCFN_FILE, rcfn_data), *extra, (MANIFEST_NAME, text)],
         )
     return directory / MANIFEST_NAME
 
@@ -266,10 +301,21 @@ def _read_manifest(path: Path) -> dict[str, Any]:
             and len(schema["names"]) == len(schema["units"])
         ):
             raise ModelFileError(f"{path}: manifest '{key}.feature_schema' is malformed")
-    if "hold_bias" in manifest or "icfn_unrelaxed" in manifest:
-        raise ModelFileError(f"{path}: models of an older relaxgrip (an unrelaxed ICFN or "
-                             "calibrate-hold's table): retrain with relaxgrip train and "
-                             "calibrate with relaxgrip calibrate")
+    if ("icfn_unrelaxed" in manifest) != ("history" in manifest):
+        raise ModelFileError(f"{path}: manifest has one of 'icfn_unrelaxed' and 'history' "
+                             "but not the other")
+    for key in ("icfn_unrelaxed", "history"):
+        section = manifest.get(key)
+        if section is None:
+            continue
+        if not (isinstance(section, dict) and isinstance(section.get("params"), dict)):
+            raise ModelFileError(f"{path}: manifest '{key}' lacks its params")
+        for field in ("file", "bytes", "sha256"):
+            if field not in section:
+                raise ModelFileError(f"{path}: manifest lacks '{key}.{field}'")
+    if "icfn_unrelaxed" in manifest and (
+            manifest["icfn_unrelaxed"].get("feature_schema") != manifest["icfn"]["feature_schema"]):
+        raise ModelFileError(f"{path}: the unrelaxed ICFN's features differ from the ICFN's")
     return manifest
 
 
@@ -378,23 +424,30 @@ def load_models(
             f"the manifest names {n_rcfn}"
         )
     return ModelBundle(icfn=icfn, rcfn=rcfn, manifest=manifest,
-                       calibration=_load_calibration(manifest_path, manifest),
+                       unrelaxed=_load_unrelaxed(directory, manifest),
+                       hold_bias=_load_hold_bias(manifest_path, manifest),
                        directory=directory.resolve())
 
 
-def _load_calibration(path: Path, manifest: Mapping[str, Any]) -> Calibration | None:
-    """The observer's calibration, when the manifest has one."""
-    section = manifest.get(CALIBRATION_KEY)
+#: The manifest section ``relaxgrip calibrate-hold`` writes.
+HOLD_BIAS_KEY = "hold_bias"
+
+
+def _load_hold_bias(path: Path, manifest: Mapping[str, Any]) -> HoldBias | None:
+    """``relax``'s calibrated closed-loop error, when the manifest has one."""
+    section = manifest.get(HOLD_BIAS_KEY)
     if section is None:
         return None
+    if not (isinstance(section, dict) and isinstance(section.get("relax"), dict)):
+        raise ModelFileError(f"{path}: manifest '{HOLD_BIAS_KEY}' lacks its 'relax' grid")
     try:
-        return Calibration.from_dict(section)
+        return HoldBias.from_dict(section["relax"])
     except InputError as exc:
         raise ModelFileError(f"{path}: {exc}") from None
 
 
 #: The manifest sections whose files a calibration belongs to.
-_MODEL_SECTIONS = ("icfn", "rcfn")
+_MODEL_SECTIONS = ("icfn", "rcfn", "icfn_unrelaxed", "history")
 
 
 def model_checksums(manifest: Mapping[str, Any]) -> dict[str, str]:
@@ -403,22 +456,33 @@ def model_checksums(manifest: Mapping[str, Any]) -> dict[str, str]:
             if isinstance(manifest.get(key), dict) and "sha256" in manifest[key]}
 
 
-def set_calibration(directory: Path, calibration: Calibration,
-                    measured_on: Mapping[str, Any] | None = None) -> Path:
-    """Store the observer's calibration in a model directory, atomically.
+def set_hold_bias(directory: Path, bias: HoldBias, record: Mapping[str, Any],
+                  measured_on: Mapping[str, Any] | None = None) -> Path:
+    """Store ``relax``'s calibrated closed-loop error in a model directory, atomically.
 
     Only the manifest is rewritten: the model files, their checksums and the
-    training record stay; the calibration's record keeps the checksums of the
-    models it was measured with.  ``measured_on`` (the manifest the holds ran
-    with): if the directory's models are not those any more, nothing is
-    written.
+    training record stay.  ``record`` (how the calibration was measured) is
+    kept beside the grid, with the checksums of the models it was measured
+    on.  Training new models writes a manifest without it.
+
+    Parameters
+    ----------
+    measured_on : mapping, optional
+        The manifest of the models the holds ran with
+        (:attr:`ModelBundle.manifest`); if the directory's models are not
+        those any more (trained anew while the holds ran), nothing is written.
+
+    Returns
+    -------
+    Path
+        The manifest's path.
 
     Raises
     ------
     ModelFileError
         The directory is not a loadable model directory.
     InputError
-        Its models changed meanwhile, or it cannot be written.
+        It cannot be written.
     """
     directory = Path(directory)
     manifest = load_models(directory).manifest  # every file checked before it is rewritten
@@ -428,8 +492,59 @@ def set_calibration(directory: Path, calibration: Calibration,
         raise InputError(f"{directory}: its models changed while the calibration ran; "
                          "nothing written")
     check_writable(path, InputError)
-    section = calibration.to_dict()
-    section["record"] = {**section["record"], "model_sha256": checksums}
-    manifest[CALIBRATION_KEY] = section
+    manifest[HOLD_BIAS_KEY] = {"relax": bias.to_dict(),
+                               "record": {**record, "model_sha256": checksums}}
     write_files_atomically(directory, [(MANIFEST_NAME, _manifest_bytes(manifest, "calibration"))])
     return path
+
+
+def _load_unrelaxed(directory: Path, manifest: Mapping[str, Any]) -> UnrelaxedIcfn | None:
+    """The unrelaxed ICFN and its branch parameters, when the manifest names them.
+
+    It reads the ICFN features its section names under ``features``; a
+    directory saved before the section named them read all of them.
+    """
+    if "icfn_unrelaxed" not in manifest:
+        return None
+    schema = manifest["icfn"]["feature_schema"]["names"]
+    features = manifest["icfn_unrelaxed"].get("features", schema)
+    if not (isinstance(features, list) and features
+            and all(isinstance(f, str) for f in features)):
+        raise ModelFileError(f"{directory / MANIFEST_NAME}: manifest 'icfn_unrelaxed.features' "
+                             "is not a list of feature names")
+    n_features = len(features)
+    path, arrays = read_npz_entry(directory, manifest["icfn_unrelaxed"], ModelFileError)
+    params = manifest["icfn_unrelaxed"]["params"].get("members")
+    if not (isinstance(params, list) and params and all(isinstance(p, dict) for p in params)):
+        raise ModelFileError(f"{path}: manifest 'icfn_unrelaxed.params.members' is not a "
+                             "list of parameter objects")
+    unclaimed = sorted({k.split("/", 1)[0] for k in arrays}
+                       - {f"member{i}" for i in range(len(params))})
+    if unclaimed:  # a member the manifest lost would be dropped from the ensemble unseen
+        raise ModelFileError(f"{path}: {len(params)} member(s) in the manifest, but the file "
+                             f"also holds {', '.join(unclaimed)}")
+    members = []
+    for i, member_params in enumerate(params):
+        prefix = f"member{i}/"
+        member_arrays = {k.removeprefix(prefix): v for k, v in arrays.items()
+                         if k.startswith(prefix)}
+        _check_hidden_layer_sizes(directory / MANIFEST_NAME, member_params,
+                                  f"icfn_unrelaxed.params.members[{i}]")
+        try:
+            member = ICFN.from_arrays(member_arrays, member_params)
+        except (TypeError, ValueError) as exc:
+            raise ModelFileError(f"{path}: member {i}: {one_line(exc)}") from exc
+        if member.n_features_in_ != n_features:
+            raise ModelFileError(f"{path}: array shape wrong: member {i} reads "
+                                 f"{member.n_features_in_} features, the manifest names "
+                                 f"{n_features}")
+        members.append(member)
+    path, arrays = read_npz_entry(directory, manifest["history"], ModelFileError)
+    try:
+        model = ObserverModel.from_arrays(arrays, manifest["history"]["params"])
+    except (TypeError, ValueError) as exc:
+        raise ModelFileError(f"{path}: {one_line(exc)}") from exc
+    try:
+        return UnrelaxedIcfn(tuple(members), model, tuple(features))
+    except ValueError as exc:
+        raise ModelFileError(f"{directory / MANIFEST_NAME}: {one_line(exc)}") from exc

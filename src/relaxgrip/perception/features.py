@@ -42,6 +42,10 @@ __all__ = [
 
 #: Beam temperatures read per finger (regions of interest along it).
 N_BEAMS = 5
+#: Marker deflection that counts as contact: twenty times the tracking noise (m).
+_CONTACT_DEFLECTION_M = 2e-5
+#: How much of the loading before a hold onset the RCFN features keep (s).
+LOADING_HISTORY_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -153,12 +157,20 @@ def _rcfn_schema() -> FeatureSchema:
         for axis, unit in pose:
             names.append(f"{prefix}{axis}_{unit}{suffix}")
             units.append(f"{unit}/s" if suffix else unit)
-    return FeatureSchema("relaxgrip-rcfn-features-v5", tuple(names), tuple(units))
+    names += ["closure_ratio", "hold_time_s"]
+    units += ["", "s"]
+    # v4: temp_c weighs the beams by the finger's bending (FingerGeometry.bending_weights).
+    return FeatureSchema("relaxgrip-rcfn-features-v4", tuple(names), tuple(units))
 
 
-#: The RCFN input, the paper's (§IV-B): the current finger temperature, the marker
-#: pose at the contact onset, the current marker pose and its velocity over the last
-#: second.
+#: The RCFN input: the paper's (§IV-B) current finger temperature, marker pose at
+#: contact onset, current marker pose and its velocity over the last second; and two
+#: more.  ``closure_ratio``, the motor's closure per unit of marker deflection over
+#: the last second of loading, tells a soft object from a stiff one (the fingers and
+#: the object share the closure in inverse proportion to their stiffness): for a
+#: soft object the marker's drift during the hold is then a calibrated measure of
+#: the relaxation.  ``hold_time_s``, the time since the onset, tells how much of it
+#: has happened yet.
 RCFN_SCHEMA = _rcfn_schema()
 
 
@@ -186,9 +198,9 @@ def finger_temperature_c(thermal: ThermalFeatures) -> float:
 
 
 class RcfnFeatures:
-    """Build RCFN features (:data:`RCFN_SCHEMA`) from a stream of marker poses.
+    """Build RCFN features from a stream of poses and encoder readings.
 
-    Keeps the onset pose and the last two velocity windows of poses.
+    Keeps the onset pose, the loading that led to it and a short history.
 
     Parameters
     ----------
@@ -200,16 +212,21 @@ class RcfnFeatures:
         if not velocity_window_s > 0:
             raise ValueError(f"velocity window must be > 0 s, got {velocity_window_s}")
         self.velocity_window_s = velocity_window_s
-        self._history: deque[tuple[float, FloatArray]] = deque()
+        self._history: deque[tuple[float, FloatArray, float]] = deque()
         self.onset_pose: FloatArray | None = None
         self.onset_t_s: float | None = None
+        self.closure_ratio = math.nan
 
-    def observe(self, t_s: float, pose: FloatArray) -> None:
-        """Record a pose (before or after the onset); a time not after the last is ignored."""
+    def observe(self, t_s: float, pose: FloatArray, motor_position_mm: float) -> None:
+        """Record a pose and the encoder (before or after the onset)."""
         if self._history and t_s <= self._history[-1][0]:
             return
-        self._history.append((t_s, np.asarray(pose, dtype=np.float64)))
-        horizon = t_s - 2.0 * self.velocity_window_s
+        self._history.append((t_s, np.asarray(pose, dtype=np.float64), motor_position_mm))
+        # Before the onset the loading is kept long enough for the closure ratio of a slow
+        # approach; in the hold, two velocity windows suffice.
+        keep_s = 2.0 * self.velocity_window_s if self.onset_t_s is not None else max(
+            2.0 * self.velocity_window_s, LOADING_HISTORY_S)
+        horizon = t_s - keep_s
         while len(self._history) > 2 and self._history[1][0] <= horizon:
             self._history.popleft()
 
@@ -218,20 +235,43 @@ class RcfnFeatures:
         """The latest pose observed, if any."""
         return self._history[-1][1] if self._history else None
 
-    def start(self, t_s: float, pose: FloatArray) -> None:
-        """Mark the hold onset at ``pose``."""
-        self.observe(t_s, pose)
+    def start(self, t_s: float, pose: FloatArray, motor_position_mm: float) -> None:
+        """Mark the hold onset; the loading history before it gives the closure ratio."""
+        self.observe(t_s, pose, motor_position_mm)
         self.onset_pose = np.asarray(pose, dtype=np.float64)
         self.onset_t_s = t_s
+        self.closure_ratio = self._closure_ratio()
+
+    def _closure_ratio(self) -> float:
+        """Motor closure per marker deflection over the loading's last window.
+
+        The span is the last velocity window (its earliest usable sample).  A
+        loading that crept in at the end (a stiff object approached slowly)
+        may bend the marker too little within it; the span then reaches back
+        to the latest sample the marker has measurably bent since, within
+        :data:`LOADING_HISTORY_S`.
+        """
+        t_now, now, motor_now = self._history[-1]
+        ratio = math.nan  # no loading seen (a hold started from rest): unknown
+        for t, pose, motor in itertools.islice(reversed(self._history), 1, None):
+            if t < t_now - self.velocity_window_s and math.isfinite(ratio):
+                break
+            bent = now[0] - pose[0]
+            in_contact = pose[0] > _CONTACT_DEFLECTION_M  # closure before contact would count
+            if in_contact and bent > _CONTACT_DEFLECTION_M and motor_now > motor:
+                ratio = (motor_now - motor) * 1e-3 / bent  # the earliest in the window wins
+                if t < t_now - self.velocity_window_s:
+                    break  # beyond the window: the first measurable bend is the span
+        return ratio
 
     def velocity(self) -> FloatArray:
         """Pose change over the last window, per second (over what history there is)."""
         if len(self._history) < 2:
             return np.zeros(6)
-        t_now, now = self._history[-1]
+        t_now, now, _ = self._history[-1]
         target = t_now - self.velocity_window_s
-        t_then, then = self._history[0]
-        for t, pose in itertools.islice(reversed(self._history), 1, None):
+        t_then, then, _ = self._history[0]
+        for t, pose, _ in itertools.islice(reversed(self._history), 1, None):
             if t <= target:
                 t_then, then = t, pose
                 break
@@ -239,9 +279,11 @@ class RcfnFeatures:
         return out
 
     def build(self, temp_c: float) -> FloatArray | None:
-        """The feature vector in :data:`RCFN_SCHEMA` order; ``None`` before the onset or
-        without a temperature."""
-        if self.onset_pose is None or not self._history or not math.isfinite(temp_c):
+        """The feature vector in :data:`RCFN_SCHEMA` order; ``None`` before the onset."""
+        if self.onset_pose is None or self.onset_t_s is None or not self._history:
             return None
-        return np.concatenate([[temp_c], self.onset_pose, self._history[-1][1],
-                               self.velocity()])
+        if not (math.isfinite(temp_c) and math.isfinite(self.closure_ratio)):
+            return None
+        t_now, pose, _ = self._history[-1]
+        return np.concatenate([[temp_c], self.onset_pose, pose, self.velocity(),
+                               [self.closure_ratio, t_now - self.onset_t_s]])

@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 
 from relaxgrip.backend import Frame
 from relaxgrip.errors import InputError
+from relaxgrip.perception.face_bend import FaceBendReader, FaceMidline
 from relaxgrip.perception.frames import check_ir_frame
 from relaxgrip.rig import RigGeometry, bend_profile_m, transform_points
 from relaxgrip.validate import ABSOLUTE_ZERO_C, check_finite
@@ -149,6 +150,10 @@ class ThermalFeatures:
         Each beam's weight in the finger's temperature
         (:attr:`relaxgrip.rig.FingerGeometry.bending_weights`); None weighs
         them alike.
+    midlines : (FaceMidline, FaceMidline), optional
+        Each finger's bend along its top face, row by row
+        (:class:`relaxgrip.perception.face_bend.FaceBendReader`); None if not
+        read.
     """
 
     t_s: float
@@ -156,6 +161,7 @@ class ThermalFeatures:
     background_c: float
     objects: tuple[ThermalObject, ...]
     beam_weights: tuple[float, ...] | None = None
+    midlines: tuple[FaceMidline, FaceMidline] | None = None
 
     @cached_property
     def finger_temperature_c(self) -> float:
@@ -301,6 +307,7 @@ class ThermalPerception:
         self._along_m = np.linspace(0.0, rig.finger.length_m,
                                     max(1, math.ceil(rig.finger.length_m / _SEGMENT_M)) + 1)
         self._cache: dict[tuple[int, int, int], _Regions] = {}
+        self._faces = FaceBendReader(rig)
 
     def extract(self, frame: Frame, motor_position_mm: float,
                 bend: tuple[float, float] | None = None) -> ThermalFeatures:
@@ -326,8 +333,9 @@ class ThermalPerception:
         Returns
         -------
         ThermalFeatures
-            Finger temperatures (emissivity-corrected, the loaded fingers
-            looked for where ``bend`` puts them), background, objects.
+            Finger temperatures (emissivity-corrected), background, objects,
+            and the fingers' face midlines (looked for where ``bend`` puts the
+            loaded fingers).
 
         Raises
         ------
@@ -367,6 +375,7 @@ class ThermalPerception:
             background_c=background_c,
             objects=self._objects(img, regions.search, background_c),
             beam_weights=self.rig.finger.bending_weights,
+            midlines=self._faces.read(img, aperture, bend, self.loaded_fingers),
         )
 
     def _correct(self, apparent_c: NDArray[np.float32], background_c: float) -> FloatArray:

@@ -17,11 +17,11 @@ __all__ = ["plot_hold", "plot_hold_comparison"]
 
 _TITLES = {"fixed": "without holding control (fixed)",
            "icfn": "without relaxation compensation (icfn)",
-           "relax": "the paper's ICFN + RCFN, Eq. 10 (relax)",
-           "observer": "Eq. 10, calibrated (observer)"}
+           "relax": "ours: ICFN + RCFN (relax)",
+           "observer": "viscoelastic observer (observer)"}
 _COLORS = {"fixed": "tab:gray", "icfn": "tab:red", "relax": "tab:green",
            "observer": "tab:purple"}
-#: The observer builds on ``relax``'s estimate: dashed, so both show where they meet.
+#: The observer is ``relax``'s estimate through a standard hold: dashed, so both show.
 _LINESTYLES = {"observer": (0, (4, 3))}
 
 

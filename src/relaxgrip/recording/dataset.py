@@ -239,13 +239,13 @@ def _one(index: int, path: Path, split: str, models: ModelBundle, icfn_every_s: 
                 rows[name].append(value)
         if onset is None:
             if pose is not None:
-                builder.observe(t, pose)
+                builder.observe(t, pose, motor)
             started = [e for e in period.events if e["kind"] == "hold_onset"]
             if started and pose is not None and percept.features is not None \
                     and math.isfinite(force):
                 onset = {"t_s": float(started[0]["t_s"]), "motor": motor, "f0": force,
                          "features": percept.features, "truth": truth}
-                builder.start(onset["t_s"], pose)
+                builder.start(onset["t_s"], pose, motor)
                 hold_t, hold_f = [0.0], [force]
                 next_curve = 1.0 / curve_rate_hz
                 next_feature = 0.0
@@ -264,7 +264,7 @@ def _one(index: int, path: Path, split: str, models: ModelBundle, icfn_every_s: 
         if since >= next_feature - 1e-9:
             next_feature += 1.0 / feature_rate_hz
             if pose is not None and percept.thermal is not None:
-                builder.observe(t, pose)
+                builder.observe(t, pose, onset["motor"])
                 x = builder.build(finger_temperature_c(percept.thermal))
                 if x is not None:
                     feats["sequence"].append(index)

@@ -1,16 +1,18 @@
 """Which models a recording ran with, and which to replay or calibrate it with.
 
 A recording's session names its estimator's models (``models``: the
-directory they were loaded from, the sha256 of each model file and a digest
-of the observer's calibration; :meth:`ModelBundle.provenance`).
+directory they were loaded from, the sha256 of each model file, a digest of
+the calibration taken off the estimate, and for the ``observer`` its
+directory, file sha256 and band scales; :meth:`ModelBundle.provenance`).
 Replaying a recording, or calibrating on it, with other models than it ran
 with measures those models on frames another loop made: legitimate when it
 is meant (a lab's new models on its old recordings), a silent error when the
 user only forgot ``--models``.  So:
 
-* without ``--models`` the recordings' own models are used: the shipped ones,
-  or the directory they were loaded from if it still holds them; anything
-  else is an error naming that directory (:func:`recorded_models`);
+* without ``--models`` (``--observer``) the recordings' own models are used:
+  the shipped ones, or the directory they were loaded from if it still holds
+  them; anything else is an error naming that directory
+  (:func:`recorded_models`, :func:`recorded_observer`);
 * with them, every difference is said (:func:`differences_note`).
 
 Recordings made before sessions named their models name none: the shipped
@@ -25,24 +27,35 @@ from typing import Any, TypeVar
 
 from relaxgrip.errors import InputError
 from relaxgrip.fileio import one_line
+from relaxgrip.learning.observer import (
+    ObserverFileError,
+    ObserverModel,
+    default_observer_dir,
+    load_observer,
+)
 from relaxgrip.learning.store import ModelBundle, ModelFileError, load_models, model_checksums
 from relaxgrip.learning.training import default_models_dir
 from relaxgrip.perception.features import ICFN_SCHEMA, RCFN_SCHEMA
 from relaxgrip.recording.reader import read_session
 
-__all__ = ["differences_note", "model_differences", "recorded_models"]
+__all__ = ["differences_note", "model_differences", "recorded_models", "recorded_observer"]
 
 _T = TypeVar("_T")
 
 
-def _named(paths: Sequence[Path]) -> dict[str, tuple[dict[str, Any], Path]]:
-    """The models the recordings name, by checksum, with the first recording naming each."""
+def _named(paths: Sequence[Path], part: str | None) -> dict[str, tuple[dict[str, Any], Path]]:
+    """The models (``part`` None) or observers the recordings name, by checksum, with the
+    first recording naming each."""
     named: dict[str, tuple[dict[str, Any], Path]] = {}
     for path in paths:
         models = read_session(Path(path)).get("models")
         if not isinstance(models, dict):
             continue
-        named.setdefault(str(models.get("sha256")), (models, Path(path)))
+        entry = models if part is None else models.get(part)
+        if not isinstance(entry, dict):
+            continue
+        key = str(entry.get("sha256"))
+        named.setdefault(key, (entry, Path(path)))
     return named
 
 
@@ -87,7 +100,7 @@ def recorded_models(paths: Sequence[Path]) -> ModelBundle | None:
         The recordings name different models, or models that are neither the
         shipped ones nor still in the directory they were loaded from.
     """
-    found = _one(_named(paths), "models", "--models")
+    found = _one(_named(paths, None), "models", "--models")
     if found is None:
         return None
     entry, path = found
@@ -104,19 +117,55 @@ def recorded_models(paths: Sequence[Path]) -> ModelBundle | None:
         f"{f' ({why})' if why else ''}: give a copy of them with --models")
 
 
+def recorded_observer(paths: Sequence[Path]) -> ObserverModel | None:
+    """The observer the recordings ran with, loaded; None when they name none.
+
+    Raises
+    ------
+    InputError
+        As :func:`recorded_models`, for the observer.
+    """
+    found = _one(_named(paths, "observer"), "observers", "--observer")
+    if found is None:
+        return None
+    entry, path = found
+    observer, why = _first_holding(
+        entry, default_observer_dir(), load_observer, ObserverFileError,
+        lambda o: o.source is not None and o.source[1] == entry.get("sha256"))
+    if observer is not None:
+        return observer
+    raise InputError(
+        f"{path}: it ran with the observer in {entry.get('directory')} "
+        f"(sha256 {str(entry.get('sha256'))[:12]}…), which is not there now"
+        f"{f' ({why})' if why else ''}: give a copy of it with --observer")
+
+
 def model_differences(recorded: Mapping[str, Any] | None, used: Mapping[str, Any]) -> list[str]:
     """What of a recording's models (its session's ``models``) ``used`` does not have.
 
-    Model files by their section (``icfn``, ``rcfn``), then ``calibration``
-    (the observer's).  Nothing for a recording that names no models.
+    Model files by their section (``icfn``, ``rcfn``, ``icfn_unrelaxed``,
+    ``history``), then ``calibration`` (the closed-loop error taken off the
+    estimate), ``observer`` (its file) and ``observer band`` (its scales).
+    Nothing for a recording that names no models.
     """
     if not isinstance(recorded, Mapping):
         return []
     out: list[str] = []
     files, now = recorded.get("sha256") or {}, used.get("sha256") or {}
     out += [k for k in sorted(set(files) | set(now)) if files.get(k) != now.get(k)]
-    if recorded.get("calibration_sha256") != used.get("calibration_sha256"):
+    if recorded.get("hold_bias_sha256") != used.get("hold_bias_sha256"):
         out.append("calibration")
+    observer, observer_now = recorded.get("observer"), used.get("observer")
+    if isinstance(observer, Mapping) and isinstance(observer_now, Mapping):
+        if observer.get("sha256") != observer_now.get("sha256"):
+            out.append("observer")
+        elif any(observer.get(k, default) != observer_now.get(k, default)
+                 for k, default in (("band_scale", None), ("drift_scale", None),
+                                    # recorded before the floor and the temperature
+                                    # factors: none
+                                    ("band_floor_n", 0.0), ("band_temps_c", []),
+                                    ("band_temp_factors", []))):
+            out.append("observer band")
     return out
 
 

@@ -356,7 +356,7 @@ class McapRecorder:
         self._write("/relaxgrip/estimate", t, {
             "t_s": t, "force_n": est.force_n, "f_icfn_n": est.f_icfn_n,
             "f_onset_n": est.f_onset_n, "k_n": est.k_n, "tau_s": est.tau_s,
-            "hold_s": est.hold_s, "calibration_n": est.calibration_n,
+            "hold_s": est.hold_s, "calibration_n": est.calibration_n, "chain_n": est.chain_n,
             "valid": est.valid,
         })
         if math.isfinite(est.hold_s):

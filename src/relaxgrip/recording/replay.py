@@ -34,6 +34,7 @@ from relaxgrip.control.estimators import (
     estimator_provenance,
 )
 from relaxgrip.errors import InputError
+from relaxgrip.learning.observer import ObserverModel
 from relaxgrip.learning.store import ModelBundle
 from relaxgrip.perception.pipeline import Percept, Perception
 from relaxgrip.recording.provenance import model_differences
@@ -52,7 +53,7 @@ __all__ = ["ReplayResult", "replay", "replay_periods"]
 
 
 def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
-                   estimator: str | None = None
+                   estimator: str | None = None, observer: ObserverModel | None = None
                    ) -> Iterator[tuple[Period, Percept, ForceEstimate]]:
     """Each period of a recording with the replayed percept and estimate.
 
@@ -66,6 +67,8 @@ def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
         Read a killed recording up to its last complete chunk.
     estimator : str, optional
         Estimator to replay (default: the recorded one).
+    observer : ObserverModel, optional
+        The ``observer`` estimator's parameters (default: the shipped ones).
 
     Raises
     ------
@@ -78,7 +81,7 @@ def replay_periods(path: Path, models: ModelBundle, tolerant: bool = False,
         raise InputError(f"{path}: cannot replay estimator {name!r} "
                          "(fixed, icfn, relax or observer)")
     perception = Perception(rig_from_dict(session["rig"]))
-    est = bundle_estimator(name, models)
+    est = bundle_estimator(name, models, observer)
     perception.reset()
     est.reset()
     with malformed_fields(path):
@@ -160,9 +163,9 @@ class ReplayResult:
     truth_n : ndarray
         True contact force where the recording has it (N; nan otherwise).
     recorded_calibration_n, replayed_calibration_n : ndarray
-        The observer's calibrated error taken off the estimate, recorded and
-        replayed (N; nan: none): a model directory calibrated since the
-        recording shows here.
+        The calibrated closed-loop error taken off the estimate, recorded and
+        replayed (N; nan: none, and in recordings from before it was recorded):
+        a model directory calibrated since the recording shows here.
     models_differ : tuple of str
         What of the models the recording ran with the replay's are not
         (:func:`~relaxgrip.recording.provenance.model_differences`; empty for
@@ -211,8 +214,12 @@ def _f(value: Any) -> float:
     return math.nan if value is None else float(value)
 
 
-def replay(path: Path, models: ModelBundle, tolerant: bool = False) -> ReplayResult:
+def replay(path: Path, models: ModelBundle, tolerant: bool = False,
+           observer: ObserverModel | None = None) -> ReplayResult:
     """Re-run perception and estimation on a recording and compare with what it recorded.
+
+    ``observer``: the parameters an ``observer`` recording ran with (default:
+    the shipped ones).
 
     Raises
     ------
@@ -223,7 +230,8 @@ def replay(path: Path, models: ModelBundle, tolerant: bool = False) -> ReplayRes
     rec_status: list[str] = []
     rep_status: list[str] = []
     with malformed_fields(path):
-        for period, percept, estimate in replay_periods(path, models, tolerant):
+        for period, percept, estimate in replay_periods(path, models, tolerant,
+                                                        observer=observer):
             rec = period.messages["/relaxgrip/estimate"]
             truth = period.get("/relaxgrip/truth")
             perception = period.get("/relaxgrip/perception")
@@ -236,7 +244,7 @@ def replay(path: Path, models: ModelBundle, tolerant: bool = False) -> ReplayRes
     session = read_session(path, tolerant)
     name = str(session.get("estimator"))
     differ = model_differences(session.get("models"),
-                               estimator_provenance(name, models))
+                               estimator_provenance(name, models, observer))
     cols = np.array(rows, dtype=np.float64).reshape(-1, 8)
     return ReplayResult(str(path), name, cols[:, 0], cols[:, 1], cols[:, 2], cols[:, 3],
                         cols[:, 4], rec_status, rep_status, cols[:, 5], cols[:, 6], cols[:, 7],

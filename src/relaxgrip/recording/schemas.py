@@ -133,7 +133,8 @@ PERCEPTION = _obj("relaxgrip.Perception", "Perception's output this period.", {
 
 ESTIMATE = _obj("relaxgrip.ForceEstimate", "The force estimator's output (N, s).", {
     "t_s": {"type": "number"},
-    **_nums("force_n", "f_icfn_n", "f_onset_n", "k_n", "tau_s", "hold_s", "calibration_n"),
+    **_nums("force_n", "f_icfn_n", "f_onset_n", "k_n", "tau_s", "hold_s", "calibration_n",
+            "chain_n"),
     "valid": {"type": "boolean"},
 }, ("t_s", "force_n", "f_icfn_n"))
 
