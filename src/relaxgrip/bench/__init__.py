@@ -11,6 +11,7 @@ from relaxgrip.bench.control import bench_control_hold
 from relaxgrip.bench.core import BenchResult
 from relaxgrip.bench.firmware import bench_firmware
 from relaxgrip.bench.learning import bench_estimation, bench_learning_pipeline
+from relaxgrip.bench.material import bench_material
 from relaxgrip.bench.perception import bench_perception
 from relaxgrip.bench.twin import bench_twin_hold, bench_twin_step
 
@@ -26,6 +27,7 @@ BENCHMARKS: dict[str, Callable[[int], BenchResult]] = {
     "control-hold": bench_control_hold,
     "firmware": bench_firmware,
     "bringup": bench_bringup,
+    "material": bench_material,
 }
 #: What ``relaxgrip bench`` runs without names: everything that takes seconds, not minutes.
 DEFAULT_BENCHMARKS: tuple[str, ...] = ("twin-hold", "twin-step", "perception", "estimation")
