@@ -427,6 +427,25 @@ def check_output_dir(directory: Path, format_name: str, own: Collection[str],
     return directory
 
 
+def read_text_csv(path: Path, error: type[Exception]) -> str:
+    """The text of a CSV file already checked as an input file (UTF-8, a BOM allowed).
+
+    Raises
+    ------
+    error
+        The file is not UTF-8 text, holds NUL bytes (binary content), or cannot be read.
+    """
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        raise error(f"{path}: not a text CSV file (not UTF-8)") from None
+    except OSError as exc:
+        raise error(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if "\0" in text:
+        raise error(f"{path}: not a text CSV file (binary content)")
+    return text
+
+
 def write_text_atomically(path: Path, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` through a temporary file and a rename."""
     path = Path(path)

@@ -43,7 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import check_input_file
+from relaxgrip.fileio import check_input_file, read_text_csv
 from relaxgrip.physics.material import SHIFT_PARAMS, Material, log10_shift
 from relaxgrip.physics.material_fit import (
     MIN_OVERLAP_POINTS,
@@ -91,14 +91,7 @@ def _read_rows(path: Path) -> list[tuple[int, list[str]]]:
     if path.stat().st_size > _MAX_BYTES:
         raise InputError(f"{path}: larger than {_MAX_BYTES // (1024 * 1024)} MB, "
                          "not a measurement CSV")
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a text CSV file (not UTF-8)") from None
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    if "\0" in text:
-        raise InputError(f"{path}: not a text CSV file (binary content)")
+    text = read_text_csv(path, InputError)
     first = text.lstrip().split("\n", 1)[0]
     delimiter = next((d for d in (";", "\t") if "," not in first and d in first), ",")
     reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)

@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from relaxgrip.errors import InputError
-from relaxgrip.fileio import check_input_file
+from relaxgrip.fileio import check_input_file, read_text_csv
 from relaxgrip.metrics import auc_rel, nrmse
 from relaxgrip.physics.fitting import (
     WEIGHTINGS,
@@ -192,14 +192,7 @@ def load_relaxation_csv(path: str | Path) -> RelaxationRecord:
         :data:`MIN_ROWS` data rows.
     """
     path = check_input_file(Path(path), "file", InputError)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a text CSV file (not UTF-8)") from None
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    if "\0" in text:
-        raise InputError(f"{path}: not a text CSV file (binary content)")
+    text = read_text_csv(path, InputError)
 
     rows: list[tuple[int, list[str]]] = []
     # A European spreadsheet's export: semicolons between fields, commas in numbers.
