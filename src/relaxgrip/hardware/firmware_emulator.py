@@ -193,7 +193,6 @@ class FirmwareEndpoint:
         self._mcu_frames = FrameDecoder()
         self._waiting: list[int | None] = []  # host frames not answered yet: seq, or None
         self._observed = False  # a GetStatus (the host's observe) came since the last tick
-        self._sent = FrameDecoder()  # everything the firmware sent, for its latest Status
         #: What the firmware drives, at each change: ``(time (s), (motor velocity setpoint
         #: (mm/s, 0 when disabled), heater duties from the pins))``.
         self.output_log: list[tuple[float, tuple[float, tuple[float, ...]]]] = []
@@ -287,11 +286,16 @@ class FirmwareEndpoint:
                 self._observed |= isinstance(item.message, GetStatus)
 
     def _answered(self, out: bytes) -> None:
-        """Strike off the host frames that ``out`` answers."""
+        """Note the fault flags of each Status in ``out`` (the firmware's bytes, each once)
+        and strike off the host frames it answers."""
         for item in self._mcu_frames.feed(out):
-            if not isinstance(item, Packet) or not self._waiting:
+            if not isinstance(item, Packet):
                 continue
             msg = item.message
+            if isinstance(msg, Status):
+                self.fault_flags = msg.fault_flags
+            if not self._waiting:
+                continue
             if isinstance(msg, Status) and msg.unsolicited:
                 continue
             if isinstance(msg, ErrorReply) and msg.offending_type == 0:
@@ -332,10 +336,9 @@ class FirmwareEndpoint:
                     self._answered(more)
                     out += more
                 self._waiting.clear()  # an MCU that did not answer: the host's timeout says so
-        out += self.sim.read()
-        for item in self._sent.feed(out):
-            if isinstance(item, Packet) and isinstance(item.message, Status):
-                self.fault_flags = item.message.fault_flags
+        rest = self.sim.read()
+        self._answered(rest)
+        out += rest
         # The host reads frames and truth after its GetStatus (SerialGripper.observe): in
         # lockstep a tick then is all it needs; in wall-clock time every poll sends one.
         if self._observed or not self._lockstep:
